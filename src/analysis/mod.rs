@@ -1,0 +1,4 @@
+//! Signal analysis for tests and figures: spectra, partial tracking, envelopes.
+
+pub mod figures;
+pub mod spectral;

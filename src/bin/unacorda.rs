@@ -1,0 +1,148 @@
+//! `unacorda`: command-line front end (render, figures, soundboard).
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::PathBuf;
+use unacorda::engine::plate::{generate_asset, PlateParams};
+use unacorda::engine::Strike;
+use unacorda::preset::Preset;
+use unacorda::render::simulate;
+
+#[derive(Parser)]
+#[command(name = "unacorda", version, about = "Physical-modelling piano: the una-corda effect")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render one strike of a preset to a WAV file (32-bit float), without any audio device.
+    Render {
+        /// Render offline (the only mode of this command for now; no audio device is opened).
+        #[arg(long)]
+        offline: bool,
+        /// Built-in preset name (c2) or path to a preset .toml file.
+        #[arg(long, default_value = "c2")]
+        preset: String,
+        /// Soft pedal: the hammer strikes one string of two (two of three).
+        #[arg(long)]
+        una_corda: bool,
+        /// Hammer speed at the strings (m/s), 0.01–10; default: the preset's.
+        #[arg(long, value_name = "M/S")]
+        velocity: Option<f64>,
+        /// Length of the render (s), 0.001–600.
+        #[arg(long, default_value_t = 4.0, value_name = "S")]
+        seconds: f64,
+        /// Output WAV file.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Regenerate the paper's Figures 3–6 (PNG + CSV) for a preset, una corda vs normal.
+    Figures {
+        #[arg(long, default_value = "figures")]
+        out_dir: PathBuf,
+        #[arg(long, default_value = "c2")]
+        preset: String,
+        /// Simulated length of each case (s), 0.1–20; the paper's spectrograms span 4 s.
+        #[arg(long, default_value_t = 4.0)]
+        seconds: f64,
+    },
+    /// Generate the reduced soundboard asset (simply-supported orthotropic plate, Table 1).
+    Soundboard {
+        #[arg(long, default_value = "assets/soundboard_modes/plate_ss.txt")]
+        out: PathBuf,
+    },
+}
+
+fn progress_bar(seconds: f64, label: &str) -> ProgressBar {
+    // Anything that simulates more than a second shows progress.
+    if seconds <= 1.0 {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new(1000);
+    pb.set_style(
+        ProgressStyle::with_template("{msg:>12} [{bar:40}] {percent:>3}% eta {eta}")
+            .expect("static template")
+            .progress_chars("=> "),
+    );
+    pb.set_message(label.to_owned());
+    pb
+}
+
+fn main() -> Result<()> {
+    match Cli::parse().command {
+        Command::Render {
+            offline,
+            preset,
+            una_corda,
+            velocity,
+            seconds,
+            out,
+        } => {
+            if !offline {
+                bail!("live playback is not available yet: use `render --offline`");
+            }
+            if !(0.001..=600.0).contains(&seconds) {
+                bail!("--seconds {seconds}: expected a duration in [0.001, 600] s");
+            }
+            let loaded = Preset::resolve(&preset)?;
+            let velocity_m_s = velocity.unwrap_or(loaded.preset.hammer.velocity_m_s);
+            if !(0.01..=10.0).contains(&velocity_m_s) {
+                bail!("--velocity {velocity_m_s}: expected a hammer speed in [0.01, 10] m/s");
+            }
+            let pb = progress_bar(seconds, "rendering");
+            let rec = simulate(&loaded, Strike { velocity_m_s, una_corda }, seconds, |f| {
+                pb.set_position((f * 1000.0) as u64)
+            })?;
+            pb.finish_and_clear();
+            let full_scale = loaded.preset.radiation.full_scale_pa;
+            let samples: Vec<f32> = rec.frames.iter().map(|f| (f.pressure_pa / full_scale) as f32).collect();
+            let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
+            unacorda::audio::wav::write_f32(&out, rec.rate_hz as u32, &samples)
+                .with_context(|| format!("writing {}", out.display()))?;
+            eprintln!(
+                "wrote {} ({:.2} s at {} Hz, peak {:.1} dBFS, {})",
+                out.display(),
+                seconds,
+                rec.rate_hz,
+                20.0 * peak.max(1e-12).log10(),
+                if una_corda { "una corda" } else { "normal" }
+            );
+        }
+        Command::Figures {
+            out_dir,
+            preset,
+            seconds,
+        } => {
+            if !(0.1..=20.0).contains(&seconds) {
+                bail!("--seconds {seconds}: expected a duration in [0.1, 20] s");
+            }
+            let loaded = Preset::resolve(&preset)?;
+            std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+            let v = loaded.preset.hammer.velocity_m_s;
+            let mut runs = Vec::new();
+            for una_corda in [true, false] {
+                let label = if una_corda { "una corda" } else { "normal" };
+                let pb = progress_bar(seconds, label);
+                let rec = simulate(&loaded, Strike { velocity_m_s: v, una_corda }, seconds, |f| {
+                    pb.set_position((f * 1000.0) as u64)
+                })?;
+                pb.finish_and_clear();
+                runs.push(rec);
+            }
+            let written = unacorda::analysis::figures::write_all(&out_dir, &runs[0], &runs[1])?;
+            for w in written {
+                eprintln!("wrote {}", w.display());
+            }
+        }
+        Command::Soundboard { out } => {
+            let command = format!("cargo run --release -- soundboard --out {}", out.display());
+            let (reduced, text) = generate_asset(&PlateParams::default(), &command);
+            std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
+            eprintln!("wrote {} ({} modes)", out.display(), reduced.len());
+        }
+    }
+    Ok(())
+}

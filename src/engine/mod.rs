@@ -1,0 +1,27 @@
+//! Pure physics: no I/O, no threads, no allocation after a [`Unison`] is built.
+//!
+//! One module per physical part of the paper's model, one for their assembly:
+//! - [`string`]: stiff-string modes in T, P and L (Eq. 1–3),
+//! - [`duplex`]: the distributed damper on the duplex segment (Eq. 13),
+//! - [`soundboard`]: the reduced modal soundboard (Eq. 4–5) and its asset format,
+//! - [`plate`]: the generator of that asset from an orthotropic plate,
+//! - [`contact`]: the string–bridge contact springs and dampers (Eq. 6–7),
+//! - [`hammer`]: the nonlinear felt hammer (Eq. 8–9),
+//! - [`system`]: the state-space assembly (Eq. 10–19) advanced with classical RK4.
+
+pub mod contact;
+pub mod duplex;
+pub mod hammer;
+pub mod plate;
+pub mod soundboard;
+pub mod string;
+pub mod system;
+
+pub use system::{Observation, Strike, Unison};
+
+/// Directions at the bridge, in the paper's order (Eq. 5–6): transverse to the
+/// board (T), longitudinal along the string (L), parallel to the board (P).
+pub const DIRECTIONS: [&str; 3] = ["T", "L", "P"];
+
+/// The most strings a unison can hold (a treble trichord).
+pub const MAX_STRINGS: usize = 3;

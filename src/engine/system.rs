@@ -1,0 +1,604 @@
+//! The assembled state-space system of one unison (paper Eq. 10–19), advanced with classical RK4.
+//!
+//! The state `x = (q_1 .. q_n, q_b, qdot_1 .. qdot_n, qdot_b, y_H, ydot_H)` is held as two flat
+//! arrays `q`, `v` over all modes, laid out per string as `[T | P | L]` and then the board. Every
+//! block of the paper's `A` (Eq. 11) is diagonal except the duplex damping, and all coupling passes
+//! through rank-3 bridge projections and the rank-1 hammer projection (Eq. 14–18), so one
+//! evaluation of the right-hand side costs O(modes) plus the dense duplex product (Eq. 13):
+//! ```text
+//! qdd_i = -Omega_i^2 q_i - (C_i + C_d) qdot_i - Phi_s^T F_i + [struck] psi_e F_e,i
+//! qdd_b = -Omega_b^2 q_b - C_b qdot_b + Phi_b^T sum_i F_i
+//! ydd_H = -(1/m_H) sum_i F_e,i
+//! ```
+
+use super::contact::Contact;
+use super::duplex::duplex_damping_matrix;
+use super::hammer::HammerParams;
+use super::soundboard::SoundboardModes;
+use super::string::{ModeSet, StringParams};
+use super::MAX_STRINGS;
+use std::f64::consts::PI;
+use std::ops::Range;
+
+/// Everything needed to build a [`Unison`]; plain data, every field public.
+#[derive(Debug, Clone)]
+pub struct UnisonSpec {
+    /// The strings of the unison (1 to 3), which differ only in tension.
+    pub strings: Vec<StringParams>,
+    pub modes: ModeSet,
+    /// Damping per unit length on the duplex segment, c_d (N s/m^2) (Eq. 13).
+    pub duplex_damping_n_s_m2: f64,
+    pub hammer: HammerParams,
+    pub contact: Contact,
+    /// The reduced soundboard and the index of the bridge point where this unison rests.
+    pub board: SoundboardModes,
+    pub bridge_point: usize,
+    /// Internal (integration) rate (Hz).
+    pub sample_rate_hz: f64,
+}
+
+impl UnisonSpec {
+    /// Highest natural frequency among the retained modes (Hz), the paper's `f_max`.
+    pub fn max_mode_freq_hz(&self) -> f64 {
+        let strings = self.strings.iter().map(|s| {
+            let t = s.transverse_omega(self.modes.modes_t.max(self.modes.modes_p));
+            let l = s.longitudinal_omega(self.modes.modes_l);
+            t.max(l) / (2.0 * PI)
+        });
+        let board = self.board.freq_hz.iter().copied();
+        strings.chain(board).fold(0.0, f64::max)
+    }
+}
+
+/// How the hammer meets the unison.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Strike {
+    /// Hammer speed when it reaches the strings (m/s).
+    pub velocity_m_s: f64,
+    /// Soft pedal: the hammer misses the last string of the unison (one of two, two of three).
+    pub una_corda: bool,
+}
+
+/// Physical outputs read from the state (Eq. 19).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Observation {
+    /// Felt force on each string (N), zero for strings the hammer does not touch (Eq. 8).
+    pub hammer_force_n: [f64; MAX_STRINGS],
+    /// Force each string exerts on the bridge, per direction T, L, P (N) (Eq. 6).
+    pub bridge_force_n: [[f64; 3]; MAX_STRINGS],
+    /// Total force on the soundboard per direction (N): the sum over strings.
+    pub total_force_n: [f64; 3],
+    /// Velocity of the bridge point per direction (m/s).
+    pub bridge_velocity_m_s: [f64; 3],
+    /// Net volume velocity of the board (m^3/s), the source of the radiated sound (DESIGN.md §1.7).
+    pub volume_velocity_m3_s: f64,
+}
+
+/// Mechanical energy split by part (J).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Energy {
+    pub strings_j: f64,
+    pub board_j: f64,
+    pub contact_j: f64,
+    pub hammer_j: f64,
+}
+
+impl Energy {
+    pub fn total_j(&self) -> f64 {
+        self.strings_j + self.board_j + self.contact_j + self.hammer_j
+    }
+}
+
+/// Fixed coefficients, computed once when the unison is built.
+#[derive(Debug, Clone)]
+struct Model {
+    n_strings: usize,
+    /// `ranges[s][d]`: modes of string `s` in direction `d` (T, L, P) within the flat arrays.
+    ranges: [[Range<usize>; 3]; MAX_STRINGS],
+    board: Range<usize>,
+    omega2: Vec<f64>,
+    /// `2 zeta omega` per mode (1/s).
+    damp: Vec<f64>,
+    /// String modes: `psi_n(L_s)` in the mode's own direction; zero over the board block.
+    bridge_shape: Vec<f64>,
+    /// Board modes: `phi_T`, `phi_L`, `phi_P` at the bridge point (Eq. 5).
+    board_shape: [Vec<f64>; 3],
+    board_volume: Vec<f64>,
+    /// `psi_n(L_e)` of the T modes (identical for every string: same length).
+    hammer_shape: Vec<f64>,
+    /// Dense duplex matrix, `duplex_n × duplex_n` (Eq. 13).
+    duplex: Vec<f64>,
+    duplex_n: usize,
+    hammer: HammerParams,
+    contact: Contact,
+    h: f64,
+}
+
+/// One unison of 1–3 strings on the shared bridge point, with its hammer (paper Eq. 10).
+#[derive(Debug, Clone)]
+pub struct Unison {
+    model: Model,
+    q: Vec<f64>,
+    v: Vec<f64>,
+    hammer_y: f64,
+    hammer_v: f64,
+    hammer_on: bool,
+    struck: [bool; MAX_STRINGS],
+    // RK4 scratch, sized once.
+    qs: Vec<f64>,
+    vs: Vec<f64>,
+    acc: Vec<f64>,
+    sum_q: Vec<f64>,
+    sum_v: Vec<f64>,
+    fast_path: bool,
+    time_s: f64,
+}
+
+/// Why a [`UnisonSpec`] cannot be built.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum BuildError {
+    #[error("a unison holds 1 to {MAX_STRINGS} strings, got {0}")]
+    StringCount(usize),
+    #[error("bridge point index {0} is not in the soundboard model")]
+    BridgePoint(usize),
+    #[error(
+        "RK4 would be unstable: the stiffest coupled mode (≈{freq_hz:.0} Hz) gives omega h = {omega_h:.2} \
+         above the limit 2.78 at {rate_hz:.0} Hz; raise the internal rate or soften the contact"
+    )]
+    Unstable {
+        freq_hz: f64,
+        omega_h: f64,
+        rate_hz: f64,
+    },
+}
+
+impl Unison {
+    /// Precompute every coefficient and allocate all state and scratch.
+    pub fn new(spec: &UnisonSpec) -> Result<Unison, BuildError> {
+        let ns = spec.strings.len();
+        if ns == 0 || ns > MAX_STRINGS {
+            return Err(BuildError::StringCount(ns));
+        }
+        let point = spec
+            .board
+            .points
+            .get(spec.bridge_point)
+            .ok_or(BuildError::BridgePoint(spec.bridge_point))?;
+        let ModeSet {
+            modes_t: nt,
+            modes_p: np,
+            modes_l: nl,
+            ..
+        } = spec.modes;
+        let per_string = nt + np + nl;
+        let nb = spec.board.len();
+        let n = ns * per_string + nb;
+        let mut ranges: [[Range<usize>; 3]; MAX_STRINGS] = Default::default();
+        let mut omega2 = vec![0.0; n];
+        let mut damp = vec![0.0; n];
+        let mut bridge_shape = vec![0.0; n];
+        for (s, string) in spec.strings.iter().enumerate() {
+            let base = s * per_string;
+            // Flat layout [T | P | L]; direction index d is T = 0, L = 1, P = 2.
+            ranges[s] = [base..base + nt, base + nt + np..base + per_string, base + nt..base + nt + np];
+            let ls = string.speaking_length_m;
+            let fill = |range: &Range<usize>, zeta: f64, omega: &dyn Fn(usize) -> f64,
+                        omega2: &mut [f64], damp: &mut [f64], shape: &mut [f64]| {
+                for (k, i) in range.clone().enumerate() {
+                    let w = omega(k + 1);
+                    omega2[i] = w * w;
+                    damp[i] = 2.0 * zeta * w;
+                    shape[i] = string.mode_shape(k + 1, ls);
+                }
+            };
+            let t = |k| string.transverse_omega(k);
+            let l = |k| string.longitudinal_omega(k);
+            fill(&ranges[s][0], spec.modes.damping_ratio_t, &t, &mut omega2, &mut damp, &mut bridge_shape);
+            fill(&ranges[s][2], spec.modes.damping_ratio_p, &t, &mut omega2, &mut damp, &mut bridge_shape);
+            fill(&ranges[s][1], spec.modes.damping_ratio_l, &l, &mut omega2, &mut damp, &mut bridge_shape);
+        }
+        let board = ns * per_string..n;
+        for (k, i) in board.clone().enumerate() {
+            let w = 2.0 * PI * spec.board.freq_hz[k];
+            omega2[i] = w * w;
+            damp[i] = 2.0 * spec.board.damping_ratio[k] * w;
+        }
+        let s0 = &spec.strings[0];
+        let strike_x = spec.hammer.strike_ratio * s0.speaking_length_m;
+        let hammer_shape = (1..=nt).map(|k| s0.mode_shape(k, strike_x)).collect();
+        let duplex_n = nt.max(np);
+        let duplex = duplex_damping_matrix(
+            duplex_n,
+            s0.length_m(),
+            s0.speaking_length_m,
+            spec.duplex_damping_n_s_m2,
+            s0.linear_density_kg_m,
+        );
+        let h = 1.0 / spec.sample_rate_hz;
+        // The stiffest coupled mode: a string's bridge point on its contact spring, with the
+        // effective point mass of the retained modes, 1 / sum psi_n(L_s)^2 (DESIGN.md §5).
+        let inv_mass: f64 = ranges[0][0].clone().map(|i| bridge_shape[i].powi(2)).sum();
+        let k_max = spec.contact.stiffness_n_m.iter().copied().fold(0.0, f64::max);
+        let w_contact = (k_max * inv_mass + omega2.iter().copied().fold(0.0, f64::max)).sqrt();
+        let omega_h = w_contact * h;
+        if omega_h > 2.78 {
+            return Err(BuildError::Unstable {
+                freq_hz: w_contact / (2.0 * PI),
+                omega_h,
+                rate_hz: spec.sample_rate_hz,
+            });
+        }
+        let model = Model {
+            n_strings: ns,
+            ranges,
+            board,
+            omega2,
+            damp,
+            bridge_shape,
+            board_shape: point.shape.clone(),
+            board_volume: spec.board.volume_m2_per_sqrt_kg.clone(),
+            hammer_shape,
+            duplex,
+            duplex_n,
+            hammer: spec.hammer,
+            contact: spec.contact,
+            h,
+        };
+        Ok(Unison {
+            model,
+            q: vec![0.0; n],
+            v: vec![0.0; n],
+            hammer_y: 0.0,
+            hammer_v: 0.0,
+            hammer_on: false,
+            struck: [false; MAX_STRINGS],
+            qs: vec![0.0; n],
+            vs: vec![0.0; n],
+            acc: vec![0.0; n],
+            sum_q: vec![0.0; n],
+            sum_v: vec![0.0; n],
+            fast_path: has_avx2_fma(),
+            time_s: 0.0,
+        })
+    }
+
+    /// Number of strings.
+    pub fn n_strings(&self) -> usize {
+        self.model.n_strings
+    }
+
+    /// Total number of modes (strings and board).
+    pub fn n_modes(&self) -> usize {
+        self.q.len()
+    }
+
+    /// Integration step (s).
+    pub fn step_s(&self) -> f64 {
+        self.model.h
+    }
+
+    /// Simulated time since the unison was built (s).
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Flat-array range of string `s`'s modes in direction `d` (0 = T, 1 = L, 2 = P).
+    pub fn string_range(&self, s: usize, d: usize) -> Range<usize> {
+        self.model.ranges[s][d].clone()
+    }
+
+    /// Flat-array range of the board's modes.
+    pub fn board_range(&self) -> Range<usize> {
+        self.model.board.clone()
+    }
+
+    /// Modal displacements and velocities, for setting initial conditions.
+    pub fn state_mut(&mut self) -> (&mut [f64], &mut [f64]) {
+        (&mut self.q, &mut self.v)
+    }
+
+    /// Modal displacements and velocities.
+    pub fn state(&self) -> (&[f64], &[f64]) {
+        (&self.q, &self.v)
+    }
+
+    /// Whether the hammer is still part of the system.
+    pub fn hammer_engaged(&self) -> bool {
+        self.hammer_on
+    }
+
+    /// Launch the hammer at the strings (Eq. 14–15): it starts touching the struck strings at
+    /// their current displacement and moves towards them at `velocity_m_s`.
+    pub fn strike(&mut self, strike: Strike) {
+        let ns = self.model.n_strings;
+        let n_struck = if strike.una_corda && ns > 1 { ns - 1 } else { ns };
+        self.struck = [false; MAX_STRINGS];
+        let mut contact_y = f64::NEG_INFINITY;
+        for s in 0..n_struck {
+            self.struck[s] = true;
+            let r = self.model.ranges[s][0].clone();
+            contact_y = contact_y.max(dot(&self.model.hammer_shape, &self.q[r]));
+        }
+        self.hammer_y = contact_y;
+        self.hammer_v = strike.velocity_m_s;
+        self.hammer_on = true;
+    }
+
+    /// Advance one RK4 step; never allocates.
+    pub fn step(&mut self) {
+        #[cfg(target_arch = "x86_64")]
+        if self.fast_path {
+            // SAFETY: `fast_path` is set only when the CPU reports AVX2 and FMA.
+            unsafe { self.step_avx2() };
+            return;
+        }
+        self.step_impl();
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn step_avx2(&mut self) {
+        self.step_impl();
+    }
+
+    /// Classical RK4 over `(q, v, y_H, ydot_H)`, stage sums accumulated in place.
+    #[inline(always)]
+    fn step_impl(&mut self) {
+        let h = self.model.h;
+        let hammer_on = self.hammer_on;
+        let (q0, v0, yh0, vh0) = (&self.q, &self.v, self.hammer_y, self.hammer_v);
+        let (qs, vs, acc) = (&mut self.qs, &mut self.vs, &mut self.acc);
+        let (sum_q, sum_v) = (&mut self.sum_q, &mut self.sum_v);
+        // Stage 1 at the current state.
+        let ah1 = evaluate(&self.model, &self.struck, hammer_on, q0, v0, yh0, acc);
+        for i in 0..q0.len() {
+            sum_q[i] = v0[i];
+            sum_v[i] = acc[i];
+            qs[i] = q0[i] + 0.5 * h * v0[i];
+            vs[i] = v0[i] + 0.5 * h * acc[i];
+        }
+        let (mut yh_s, mut vh_s) = (yh0 + 0.5 * h * vh0, vh0 + 0.5 * h * ah1);
+        let (mut sum_yh, mut sum_vh) = (vh0, ah1);
+        // Stages 2 and 3: weights 2, next stage at h/2 then h.
+        for c in [0.5, 1.0] {
+            let ah = evaluate(&self.model, &self.struck, hammer_on, qs, vs, yh_s, acc);
+            for i in 0..q0.len() {
+                let vsi = vs[i];
+                sum_q[i] += 2.0 * vsi;
+                sum_v[i] += 2.0 * acc[i];
+                qs[i] = q0[i] + c * h * vsi;
+                vs[i] = v0[i] + c * h * acc[i];
+            }
+            sum_yh += 2.0 * vh_s;
+            sum_vh += 2.0 * ah;
+            yh_s = yh0 + c * h * vh_s;
+            vh_s = vh0 + c * h * ah;
+        }
+        // Stage 4 and the combination.
+        let ah4 = evaluate(&self.model, &self.struck, hammer_on, qs, vs, yh_s, acc);
+        let w = h / 6.0;
+        let (q, v) = (&mut self.q, &mut self.v);
+        for i in 0..q.len() {
+            q[i] += w * (sum_q[i] + vs[i]);
+            v[i] += w * (sum_v[i] + acc[i]);
+        }
+        if hammer_on {
+            self.hammer_y += w * (sum_yh + vh_s);
+            self.hammer_v += w * (sum_vh + ah4);
+            self.release_hammer_if_clear();
+        }
+        self.time_s += h;
+    }
+
+    /// The hammer leaves the system once it recedes and is clear of every string by the release gap.
+    fn release_hammer_if_clear(&mut self) {
+        if self.hammer_v >= 0.0 {
+            return;
+        }
+        for s in 0..self.model.n_strings {
+            if self.struck[s] {
+                let ye = dot(&self.model.hammer_shape, &self.q[self.model.ranges[s][0].clone()]);
+                if ye - self.hammer_y < self.model.hammer.release_gap_m {
+                    return;
+                }
+            }
+        }
+        self.hammer_on = false;
+    }
+
+    /// Forces, bridge velocity and volume velocity at the current state (Eq. 19).
+    pub fn observe(&self) -> Observation {
+        let mut obs = Observation::default();
+        evaluate_outputs(&self.model, &self.struck, self.hammer_on, &self.q, &self.v, self.hammer_y, &mut obs);
+        obs
+    }
+
+    /// Mechanical energy of strings, board, contact springs and hammer (J).
+    pub fn energy(&self) -> Energy {
+        let m = &self.model;
+        let modal = |r: Range<usize>| -> f64 {
+            r.map(|i| 0.5 * (self.v[i] * self.v[i] + m.omega2[i] * self.q[i] * self.q[i])).sum()
+        };
+        let ns = m.n_strings;
+        let strings_j = modal(0..m.board.start);
+        let board_j = modal(m.board.clone());
+        let qb = &self.q[m.board.clone()];
+        let mut contact_j = 0.0;
+        for s in 0..ns {
+            for d in 0..3 {
+                let r = m.ranges[s][d].clone();
+                let rs = dot(&m.bridge_shape[r.clone()], &self.q[r]);
+                let rb = dot(&m.board_shape[d], qb);
+                contact_j += 0.5 * m.contact.stiffness_n_m[d] * (rs - rb).powi(2);
+            }
+        }
+        let mut hammer_j = 0.0;
+        if self.hammer_on {
+            hammer_j = 0.5 * m.hammer.mass_kg * self.hammer_v.powi(2);
+            for s in 0..ns {
+                if self.struck[s] {
+                    let ye = dot(&m.hammer_shape, &self.q[m.ranges[s][0].clone()]);
+                    hammer_j += m.hammer.felt_energy_j(self.hammer_y - ye);
+                }
+            }
+        }
+        Energy {
+            strings_j,
+            board_j,
+            contact_j,
+            hammer_j,
+        }
+    }
+}
+
+/// Right-hand side of Eq. 10: writes the modal accelerations into `acc` and returns the hammer's.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn evaluate(
+    m: &Model,
+    struck: &[bool; MAX_STRINGS],
+    hammer_on: bool,
+    q: &[f64],
+    v: &[f64],
+    hammer_y: f64,
+    acc: &mut [f64],
+) -> f64 {
+    // Uncoupled modal oscillators: -Omega^2 q - C qdot (diagonal blocks of Eq. 11).
+    for i in 0..q.len() {
+        acc[i] = -m.omega2[i] * q[i] - m.damp[i] * v[i];
+    }
+    // Bridge point of the board in T, L, P (Eq. 5).
+    let qb = &q[m.board.clone()];
+    let vb = &v[m.board.clone()];
+    let mut rb = [0.0; 3];
+    let mut rb_dot = [0.0; 3];
+    for d in 0..3 {
+        (rb[d], rb_dot[d]) = dot2(&m.board_shape[d], qb, vb);
+    }
+    // Contact forces (Eq. 6) and their modal projections on each string (Eq. 17).
+    let mut total = [0.0; 3];
+    for s in 0..m.n_strings {
+        for d in 0..3 {
+            let r = m.ranges[s][d].clone();
+            let shape = &m.bridge_shape[r.clone()];
+            let (rs, rs_dot) = dot2(shape, &q[r.clone()], &v[r.clone()]);
+            let f = m.contact.stiffness_n_m[d] * (rs - rb[d]) + m.contact.damping_n_s_m[d] * (rs_dot - rb_dot[d]);
+            total[d] += f;
+            axpy(&mut acc[r], shape, -f);
+        }
+        // Duplex damping on both transverse polarisations (Eq. 13).
+        for d in [0, 2] {
+            let r = m.ranges[s][d].clone();
+            sym_matvec_sub(&m.duplex, m.duplex_n, &v[r.clone()], &mut acc[r]);
+        }
+    }
+    // The board receives the sum of the strings' forces (Eq. 17).
+    let ab = &mut acc[m.board.clone()];
+    for d in 0..3 {
+        axpy(ab, &m.board_shape[d], total[d]);
+    }
+    // Hammer (Eq. 8, 14): felt force on each struck string, reaction on the hammer mass.
+    if !hammer_on {
+        return 0.0;
+    }
+    let mut felt_total = 0.0;
+    for s in 0..m.n_strings {
+        if struck[s] {
+            let r = m.ranges[s][0].clone();
+            let ye = dot(&m.hammer_shape, &q[r.clone()]);
+            let f = m.hammer.felt_force_n(hammer_y - ye);
+            felt_total += f;
+            axpy(&mut acc[r], &m.hammer_shape, f);
+        }
+    }
+    -felt_total / m.hammer.mass_kg
+}
+
+/// The output equation (Eq. 19): physical forces and velocities from the state.
+fn evaluate_outputs(
+    m: &Model,
+    struck: &[bool; MAX_STRINGS],
+    hammer_on: bool,
+    q: &[f64],
+    v: &[f64],
+    hammer_y: f64,
+    obs: &mut Observation,
+) {
+    let qb = &q[m.board.clone()];
+    let vb = &v[m.board.clone()];
+    let mut rb = [0.0; 3];
+    for d in 0..3 {
+        (rb[d], obs.bridge_velocity_m_s[d]) = dot2(&m.board_shape[d], qb, vb);
+    }
+    for s in 0..m.n_strings {
+        for d in 0..3 {
+            let r = m.ranges[s][d].clone();
+            let (rs, rs_dot) = dot2(&m.bridge_shape[r.clone()], &q[r.clone()], &v[r]);
+            let f = m.contact.stiffness_n_m[d] * (rs - rb[d])
+                + m.contact.damping_n_s_m[d] * (rs_dot - obs.bridge_velocity_m_s[d]);
+            obs.bridge_force_n[s][d] = f;
+            obs.total_force_n[d] += f;
+        }
+        if hammer_on && struck[s] {
+            let ye = dot(&m.hammer_shape, &q[m.ranges[s][0].clone()]);
+            obs.hammer_force_n[s] = m.hammer.felt_force_n(hammer_y - ye);
+        }
+    }
+    obs.volume_velocity_m3_s = dot(&m.board_volume, vb);
+}
+
+/// Whether this CPU can run the AVX2 + FMA build of the step.
+fn has_avx2_fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+const LANES: usize = 4;
+
+/// Dot product with independent lane accumulators, so that it vectorises without reassociation.
+#[inline(always)]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut lanes = [0.0; LANES];
+    let split = n - n % LANES;
+    for (ca, cb) in a[..split].chunks_exact(LANES).zip(b[..split].chunks_exact(LANES)) {
+        for l in 0..LANES {
+            lanes[l] += ca[l] * cb[l];
+        }
+    }
+    let mut sum = (lanes[0] + lanes[2]) + (lanes[1] + lanes[3]);
+    for i in split..n {
+        sum += a[i] * b[i];
+    }
+    sum
+}
+
+/// Two dot products sharing the left operand: `(a·b, a·c)`.
+#[inline(always)]
+fn dot2(a: &[f64], b: &[f64], c: &[f64]) -> (f64, f64) {
+    (dot(a, b), dot(a, c))
+}
+
+/// `y += alpha x`.
+#[inline(always)]
+fn axpy(y: &mut [f64], x: &[f64], alpha: f64) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi += alpha * xi;
+    }
+}
+
+/// `y -= C x` for the leading `x.len()` block of the symmetric `n × n` matrix `C`.
+#[inline(always)]
+fn sym_matvec_sub(c: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
+    let k = x.len();
+    for (i, yi) in y.iter_mut().enumerate().take(k) {
+        *yi -= dot(&c[i * n..i * n + k], x);
+    }
+}

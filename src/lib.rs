@@ -1,0 +1,15 @@
+//! unacorda: a physical model of the piano's una-corda effect, after "Modelling the una-corda
+//! effect in pianos" — stiff strings in three directions coupled through the bridge to a reduced
+//! modal soundboard, struck by a nonlinear felt hammer, advanced with RK4.
+//!
+//! - [`engine`]: the physics (pure, no I/O),
+//! - [`preset`]: parameter files,
+//! - [`render`]: strikes to frames at the output rate,
+//! - [`analysis`]: spectra, envelopes and the paper's figures,
+//! - [`audio`]: decimation and WAV output.
+
+pub mod analysis;
+pub mod audio;
+pub mod engine;
+pub mod preset;
+pub mod render;

@@ -1,0 +1,342 @@
+//! Preset files (TOML): every parameter of a note, with units in the field names.
+//!
+//! Unknown fields, missing fields and out-of-range values are errors that name the file, the field
+//! and the allowed range. A preset names its soundboard asset either as a built-in (`plate_ss`) or
+//! as a path relative to the preset file.
+
+use crate::engine::contact::{hertz_stiffness_n_m, Contact};
+use crate::engine::hammer::HammerParams;
+use crate::engine::soundboard::{AssetError, SoundboardModes};
+use crate::engine::string::{ModeSet, StringParams};
+use crate::engine::system::UnisonSpec;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// Built-in presets, by name.
+const BUILTIN_PRESETS: &[(&str, &str)] = &[("c2", include_str!("../presets/c2.toml"))];
+
+/// Built-in soundboard assets, by name.
+const BUILTIN_ASSETS: &[(&str, &str)] = &[(
+    "plate_ss",
+    include_str!("../assets/soundboard_modes/plate_ss.txt"),
+)];
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Preset {
+    pub name: String,
+    pub strings: StringsSection,
+    pub hammer: HammerSection,
+    pub contact: ContactSection,
+    pub soundboard: SoundboardSection,
+    pub simulation: SimulationSection,
+    pub radiation: RadiationSection,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StringsSection {
+    pub count: usize,
+    pub speaking_length_m: f64,
+    pub duplex_length_m: f64,
+    pub tension_n: f64,
+    pub linear_density_kg_m: f64,
+    pub core_diameter_m: f64,
+    pub young_modulus_pa: f64,
+    pub poisson_ratio: f64,
+    pub density_kg_m3: f64,
+    pub wound: bool,
+    pub mistuning_cents: Vec<f64>,
+    pub modes_t: usize,
+    pub modes_p: usize,
+    pub modes_l: usize,
+    pub damping_ratio_t: f64,
+    pub damping_ratio_p: f64,
+    pub damping_ratio_l: f64,
+    pub duplex_damping_n_s_m2: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HammerSection {
+    pub mass_kg: f64,
+    pub stiffness_n_m_p: f64,
+    pub exponent: f64,
+    pub strike_ratio: f64,
+    pub velocity_m_s: f64,
+    pub release_gap_m: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactSection {
+    pub length_m: f64,
+    pub bridge_young_modulus_pa: f64,
+    pub bridge_poisson_ratio: f64,
+    pub stiffness_ratio_l: f64,
+    pub stiffness_ratio_p: f64,
+    pub damping_n_s_m: [f64; 3],
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SoundboardSection {
+    pub asset: String,
+    pub bridge_point: String,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulationSection {
+    pub output_rate_hz: u32,
+    pub min_rate_over_fmax: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RadiationSection {
+    pub distance_m: f64,
+    pub air_density_kg_m3: f64,
+    pub full_scale_pa: f64,
+}
+
+/// What can be wrong with a preset.
+#[derive(Debug, thiserror::Error)]
+pub enum PresetError {
+    #[error("unknown preset `{0}`: built-in presets are {1}; or give a path to a .toml file")]
+    Unknown(String, String),
+    #[error("{path}: cannot read preset: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("{path}: field `{field}` = {value}: expected {allowed}")]
+    Range {
+        path: PathBuf,
+        field: &'static str,
+        value: String,
+        allowed: String,
+    },
+    #[error(transparent)]
+    Asset(#[from] AssetError),
+    #[error("{path}: field `soundboard.bridge_point` = `{point}`: the asset {asset} has points {available}")]
+    BridgePoint {
+        path: PathBuf,
+        point: String,
+        asset: String,
+        available: String,
+    },
+}
+
+/// A preset with its resolved soundboard, ready to build unisons.
+#[derive(Debug, Clone)]
+pub struct LoadedPreset {
+    pub preset: Preset,
+    pub source: PathBuf,
+    pub board: SoundboardModes,
+    pub bridge_point: usize,
+}
+
+impl Preset {
+    /// A built-in preset by name, or a TOML file by path.
+    pub fn resolve(name_or_path: &str) -> Result<LoadedPreset, PresetError> {
+        if let Some((_, text)) = BUILTIN_PRESETS.iter().find(|(n, _)| *n == name_or_path) {
+            return Self::from_str(text, Path::new(&format!("presets/{name_or_path}.toml")));
+        }
+        let path = Path::new(name_or_path);
+        if path.extension().is_some_and(|e| e == "toml") || path.exists() {
+            let text = std::fs::read_to_string(path).map_err(|source| PresetError::Io {
+                path: path.to_owned(),
+                source,
+            })?;
+            return Self::from_str(&text, path);
+        }
+        let names: Vec<&str> = BUILTIN_PRESETS.iter().map(|(n, _)| *n).collect();
+        Err(PresetError::Unknown(name_or_path.to_owned(), names.join(", ")))
+    }
+
+    /// Parse, validate and resolve the soundboard of preset text read from `path`.
+    pub fn from_str(text: &str, path: &Path) -> Result<LoadedPreset, PresetError> {
+        let preset: Preset = toml::from_str(text).map_err(|e| PresetError::Parse {
+            path: path.to_owned(),
+            message: e.to_string().trim_end().to_owned(),
+        })?;
+        preset.validate(path)?;
+        let (asset_name, board) = match BUILTIN_ASSETS.iter().find(|(n, _)| *n == preset.soundboard.asset) {
+            Some((name, text)) => {
+                let p = PathBuf::from(format!("assets/soundboard_modes/{name}.txt"));
+                (p.display().to_string(), SoundboardModes::parse(text, &p)?)
+            }
+            None => {
+                let p = path.parent().unwrap_or(Path::new(".")).join(&preset.soundboard.asset);
+                let text = std::fs::read_to_string(&p).map_err(|source| AssetError::Io {
+                    path: p.clone(),
+                    source,
+                })?;
+                (p.display().to_string(), SoundboardModes::parse(&text, &p)?)
+            }
+        };
+        let bridge_point = board
+            .points
+            .iter()
+            .position(|p| p.name == preset.soundboard.bridge_point)
+            .ok_or_else(|| PresetError::BridgePoint {
+                path: path.to_owned(),
+                point: preset.soundboard.bridge_point.clone(),
+                asset: asset_name,
+                available: board.points.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join(", "),
+            })?;
+        Ok(LoadedPreset {
+            preset,
+            source: path.to_owned(),
+            board,
+            bridge_point,
+        })
+    }
+
+    fn validate(&self, path: &Path) -> Result<(), PresetError> {
+        let range = |field: &'static str, value: f64, lo: f64, hi: f64| -> Result<(), PresetError> {
+            if value.is_finite() && value >= lo && value <= hi {
+                Ok(())
+            } else {
+                Err(PresetError::Range {
+                    path: path.to_owned(),
+                    field,
+                    value: value.to_string(),
+                    allowed: format!("a number in [{lo:e}, {hi:e}]"),
+                })
+            }
+        };
+        let s = &self.strings;
+        range("strings.count", s.count as f64, 1.0, 3.0)?;
+        range("strings.speaking_length_m", s.speaking_length_m, 0.01, 3.0)?;
+        range("strings.duplex_length_m", s.duplex_length_m, 1e-3, 1.0)?;
+        range("strings.tension_n", s.tension_n, 10.0, 5000.0)?;
+        range("strings.linear_density_kg_m", s.linear_density_kg_m, 1e-4, 0.5)?;
+        range("strings.core_diameter_m", s.core_diameter_m, 1e-4, 5e-3)?;
+        range("strings.young_modulus_pa", s.young_modulus_pa, 1e9, 1e12)?;
+        range("strings.poisson_ratio", s.poisson_ratio, 0.0, 0.5)?;
+        range("strings.density_kg_m3", s.density_kg_m3, 1000.0, 25000.0)?;
+        if s.mistuning_cents.len() != s.count {
+            return Err(PresetError::Range {
+                path: path.to_owned(),
+                field: "strings.mistuning_cents",
+                value: format!("{:?}", s.mistuning_cents),
+                allowed: format!("one value per string ({} values)", s.count),
+            });
+        }
+        for &c in &s.mistuning_cents {
+            range("strings.mistuning_cents", c, -100.0, 100.0)?;
+        }
+        range("strings.modes_t", s.modes_t as f64, 1.0, 400.0)?;
+        range("strings.modes_p", s.modes_p as f64, 0.0, 400.0)?;
+        range("strings.modes_l", s.modes_l as f64, 0.0, 50.0)?;
+        range("strings.damping_ratio_t", s.damping_ratio_t, 0.0, 0.5)?;
+        range("strings.damping_ratio_p", s.damping_ratio_p, 0.0, 0.5)?;
+        range("strings.damping_ratio_l", s.damping_ratio_l, 0.0, 0.5)?;
+        range("strings.duplex_damping_n_s_m2", s.duplex_damping_n_s_m2, 0.0, 1e4)?;
+        let h = &self.hammer;
+        range("hammer.mass_kg", h.mass_kg, 1e-4, 0.1)?;
+        range("hammer.stiffness_n_m_p", h.stiffness_n_m_p, 1e3, 1e14)?;
+        range("hammer.exponent", h.exponent, 1.0, 5.0)?;
+        range("hammer.strike_ratio", h.strike_ratio, 0.01, 0.5)?;
+        range("hammer.velocity_m_s", h.velocity_m_s, 0.01, 10.0)?;
+        range("hammer.release_gap_m", h.release_gap_m, 0.0, 0.05)?;
+        let c = &self.contact;
+        range("contact.length_m", c.length_m, 1e-4, 0.1)?;
+        range("contact.bridge_young_modulus_pa", c.bridge_young_modulus_pa, 1e6, 1e11)?;
+        range("contact.bridge_poisson_ratio", c.bridge_poisson_ratio, 0.0, 0.5)?;
+        range("contact.stiffness_ratio_l", c.stiffness_ratio_l, 0.0, 100.0)?;
+        range("contact.stiffness_ratio_p", c.stiffness_ratio_p, 0.0, 100.0)?;
+        for &d in &c.damping_n_s_m {
+            range("contact.damping_n_s_m", d, 0.0, 1e4)?;
+        }
+        range("simulation.output_rate_hz", self.simulation.output_rate_hz as f64, 8000.0, 384000.0)?;
+        range("simulation.min_rate_over_fmax", self.simulation.min_rate_over_fmax, 2.0, 100.0)?;
+        let r = &self.radiation;
+        range("radiation.distance_m", r.distance_m, 0.01, 100.0)?;
+        range("radiation.air_density_kg_m3", r.air_density_kg_m3, 0.1, 10.0)?;
+        range("radiation.full_scale_pa", r.full_scale_pa, 1e-6, 1e4)?;
+        Ok(())
+    }
+}
+
+impl LoadedPreset {
+    /// The strings of the unison, string `i` retuned by `mistuning_cents[i]` through its tension.
+    pub fn strings(&self) -> Vec<StringParams> {
+        let s = &self.preset.strings;
+        let nominal = StringParams {
+            speaking_length_m: s.speaking_length_m,
+            duplex_length_m: s.duplex_length_m,
+            tension_n: s.tension_n,
+            linear_density_kg_m: s.linear_density_kg_m,
+            core_diameter_m: s.core_diameter_m,
+            young_modulus_pa: s.young_modulus_pa,
+            density_kg_m3: s.density_kg_m3,
+            wound: s.wound,
+        };
+        s.mistuning_cents.iter().map(|&c| nominal.detuned(c)).collect()
+    }
+
+    /// Contact springs from Hertz (Eq. 7) in T, scaled for L and P; dampers as given.
+    pub fn contact(&self) -> Contact {
+        let c = &self.preset.contact;
+        let s = &self.preset.strings;
+        let k_t = hertz_stiffness_n_m(
+            c.length_m,
+            s.young_modulus_pa,
+            s.poisson_ratio,
+            c.bridge_young_modulus_pa,
+            c.bridge_poisson_ratio,
+        );
+        Contact {
+            stiffness_n_m: [k_t, k_t * c.stiffness_ratio_l, k_t * c.stiffness_ratio_p],
+            damping_n_s_m: c.damping_n_s_m,
+        }
+    }
+
+    /// Everything the engine needs, at an internal rate that is the smallest integer multiple of
+    /// the output rate at or above `min_rate_over_fmax × f_max` (the paper: 10 × f_max).
+    pub fn unison_spec(&self) -> UnisonSpec {
+        let s = &self.preset.strings;
+        let h = &self.preset.hammer;
+        let mut spec = UnisonSpec {
+            strings: self.strings(),
+            modes: ModeSet {
+                modes_t: s.modes_t,
+                modes_p: s.modes_p,
+                modes_l: s.modes_l,
+                damping_ratio_t: s.damping_ratio_t,
+                damping_ratio_p: s.damping_ratio_p,
+                damping_ratio_l: s.damping_ratio_l,
+            },
+            duplex_damping_n_s_m2: s.duplex_damping_n_s_m2,
+            hammer: HammerParams {
+                mass_kg: h.mass_kg,
+                stiffness_n_m_p: h.stiffness_n_m_p,
+                exponent: h.exponent,
+                strike_ratio: h.strike_ratio,
+                release_gap_m: h.release_gap_m,
+            },
+            contact: self.contact(),
+            board: self.board.clone(),
+            bridge_point: self.bridge_point,
+            sample_rate_hz: 0.0,
+        };
+        spec.sample_rate_hz = self.oversampling(&spec) as f64 * self.output_rate_hz();
+        spec
+    }
+
+    /// Output (audio and analysis) rate (Hz).
+    pub fn output_rate_hz(&self) -> f64 {
+        self.preset.simulation.output_rate_hz as f64
+    }
+
+    /// Internal steps per output sample.
+    pub fn oversampling(&self, spec: &UnisonSpec) -> usize {
+        let needed = self.preset.simulation.min_rate_over_fmax * spec.max_mode_freq_hz();
+        (needed / self.output_rate_hz()).ceil().max(1.0) as usize
+    }
+}

@@ -1,0 +1,165 @@
+//! From a preset and a strike to frames at the output rate: forces (Eq. 19) and radiated sound.
+//!
+//! The [`Renderer`] advances the [`Unison`] at the internal rate, reads the outputs after each step,
+//! turns the board's net volume velocity into pressure at the listener (a monopole,
+//! `p = rho0 / (4 pi r) dQ/dt`, DESIGN.md §1.7) and decimates every channel through the same
+//! anti-alias filter to the output rate.
+
+use crate::audio::Decimator;
+use crate::engine::system::{BuildError, Observation, Strike, Unison};
+use crate::engine::MAX_STRINGS;
+use crate::preset::LoadedPreset;
+
+/// Number of decimated channels: hammer (3), bridge (3 × 3), total (3), bridge velocity (3), pressure.
+const CHANNELS: usize = MAX_STRINGS + 3 * MAX_STRINGS + 3 + 3 + 1;
+
+/// One output-rate frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Frame {
+    /// Forces and velocities at the bridge and hammer (Eq. 19), low-passed with the audio.
+    pub obs: Observation,
+    /// Sound pressure at the listener (Pa).
+    pub pressure_pa: f64,
+}
+
+impl Frame {
+    fn pack(&self, out: &mut [f64; CHANNELS]) {
+        let o = &self.obs;
+        let flat = o
+            .hammer_force_n
+            .iter()
+            .chain(o.bridge_force_n.iter().flatten())
+            .chain(&o.total_force_n)
+            .chain(&o.bridge_velocity_m_s)
+            .chain(std::iter::once(&self.pressure_pa));
+        for (slot, v) in out.iter_mut().zip(flat) {
+            *slot = *v;
+        }
+    }
+
+    fn unpack(ch: &[f64; CHANNELS]) -> Frame {
+        let mut f = Frame::default();
+        let mut it = ch.iter().copied();
+        let mut next = || it.next().unwrap_or(0.0);
+        f.obs.hammer_force_n.iter_mut().for_each(|x| *x = next());
+        f.obs.bridge_force_n.iter_mut().flatten().for_each(|x| *x = next());
+        f.obs.total_force_n.iter_mut().for_each(|x| *x = next());
+        f.obs.bridge_velocity_m_s.iter_mut().for_each(|x| *x = next());
+        f.pressure_pa = next();
+        f
+    }
+}
+
+/// A unison and its output stage.
+pub struct Renderer {
+    unison: Unison,
+    decimator: Decimator,
+    /// `rho0 / (4 pi r)` (kg/m^4).
+    monopole: f64,
+    last_volume_velocity: f64,
+    output_rate_hz: f64,
+    inputs: [f64; CHANNELS],
+    outputs: [f64; CHANNELS],
+}
+
+impl Renderer {
+    pub fn new(preset: &LoadedPreset) -> Result<Renderer, BuildError> {
+        let spec = preset.unison_spec();
+        let unison = Unison::new(&spec)?;
+        let ratio = preset.oversampling(&spec);
+        let r = &preset.preset.radiation;
+        Ok(Renderer {
+            unison,
+            decimator: Decimator::new(ratio, CHANNELS),
+            monopole: r.air_density_kg_m3 / (4.0 * std::f64::consts::PI * r.distance_m),
+            last_volume_velocity: 0.0,
+            output_rate_hz: preset.output_rate_hz(),
+            inputs: [0.0; CHANNELS],
+            outputs: [0.0; CHANNELS],
+        })
+    }
+
+    pub fn unison(&self) -> &Unison {
+        &self.unison
+    }
+
+    pub fn unison_mut(&mut self) -> &mut Unison {
+        &mut self.unison
+    }
+
+    pub fn output_rate_hz(&self) -> f64 {
+        self.output_rate_hz
+    }
+
+    /// Internal steps per output frame.
+    pub fn oversampling(&self) -> usize {
+        self.decimator.ratio()
+    }
+
+    /// Delay of the anti-alias filter (output samples).
+    pub fn filter_delay_samples(&self) -> f64 {
+        self.decimator.delay_out_samples()
+    }
+
+    pub fn strike(&mut self, strike: Strike) {
+        self.unison.strike(strike);
+    }
+
+    /// Advance by one output frame.
+    pub fn next_frame(&mut self) -> Frame {
+        let fs_int = 1.0 / self.unison.step_s();
+        loop {
+            self.unison.step();
+            let obs = self.unison.observe();
+            let dq = (obs.volume_velocity_m3_s - self.last_volume_velocity) * fs_int;
+            self.last_volume_velocity = obs.volume_velocity_m3_s;
+            Frame {
+                obs,
+                pressure_pa: self.monopole * dq,
+            }
+            .pack(&mut self.inputs);
+            if self.decimator.push(&self.inputs, &mut self.outputs) {
+                return Frame::unpack(&self.outputs);
+            }
+        }
+    }
+}
+
+/// A whole offline simulation at the output rate.
+#[derive(Debug, Clone)]
+pub struct Recording {
+    pub rate_hz: f64,
+    pub frames: Vec<Frame>,
+}
+
+impl Recording {
+    /// One channel of the recording, extracted by `f`.
+    pub fn channel(&self, f: impl Fn(&Frame) -> f64) -> Vec<f64> {
+        self.frames.iter().map(f).collect()
+    }
+}
+
+/// Strike the preset's unison and record `seconds` of output; `progress` receives the fraction done.
+pub fn simulate(
+    preset: &LoadedPreset,
+    strike: Strike,
+    seconds: f64,
+    mut progress: impl FnMut(f64),
+) -> Result<Recording, BuildError> {
+    let mut r = Renderer::new(preset)?;
+    r.strike(strike);
+    let n = (seconds * r.output_rate_hz()).round() as usize;
+    let mut frames = Vec::with_capacity(n);
+    let every = (r.output_rate_hz() as usize / 20).max(1);
+    for k in 0..n {
+        frames.push(r.next_frame());
+        if k % every == 0 {
+            progress(k as f64 / n as f64);
+        }
+    }
+    progress(1.0);
+    Ok(Recording {
+        rate_hz: r.output_rate_hz(),
+        frames,
+    })
+}

@@ -1,0 +1,150 @@
+//! The paper's findings (Figures 3–6) as numbers, on the c2 preset: una corda vs normal playing.
+
+use std::sync::OnceLock;
+use unacorda::analysis::spectral::{beating_depth_db, partial_envelope, peak_frequency, rms_envelope};
+use unacorda::engine::Strike;
+use unacorda::preset::{LoadedPreset, Preset};
+use unacorda::render::{simulate, Recording};
+
+const SECONDS: f64 = 3.0;
+/// One period of C2 (s): envelopes over whole periods do not ripple with the waveform.
+const PERIOD_S: f64 = 1.0 / 65.406;
+
+struct Runs {
+    preset: LoadedPreset,
+    una_corda: Recording,
+    normal: Recording,
+}
+
+fn runs() -> &'static Runs {
+    static RUNS: OnceLock<Runs> = OnceLock::new();
+    RUNS.get_or_init(|| {
+        let preset = Preset::resolve("c2").expect("built-in preset");
+        let v = preset.preset.hammer.velocity_m_s;
+        let run = |una_corda| simulate(&preset, Strike { velocity_m_s: v, una_corda }, SECONDS, |_| {}).unwrap();
+        let (una_corda, normal) = std::thread::scope(|s| {
+            let a = s.spawn(|| run(true));
+            let b = s.spawn(|| run(false));
+            (a.join().unwrap(), b.join().unwrap())
+        });
+        Runs { preset, una_corda, normal }
+    })
+}
+
+/// Peak (N) and duration (ms) of the main contact pulse of a hammer-force channel.
+fn pulse(rec: &Recording, string: usize) -> (f64, f64) {
+    let f = rec.channel(|fr| fr.obs.hammer_force_n[string]);
+    let peak = f.iter().fold(0f64, |m, &x| m.max(x));
+    let on: Vec<usize> = f.iter().enumerate().filter(|(_, &x)| x > 0.01 * peak).map(|(i, _)| i).collect();
+    let duration_ms = (on.last().unwrap() - on.first().unwrap()) as f64 / rec.rate_hz * 1e3;
+    (peak, duration_ms)
+}
+
+#[test]
+fn fig3_una_corda_hammer_force_is_higher_and_longer() {
+    let r = runs();
+    let (uc_peak, uc_ms) = pulse(&r.una_corda, 0);
+    let (n1_peak, n1_ms) = pulse(&r.normal, 0);
+    let (n2_peak, n2_ms) = pulse(&r.normal, 1);
+    println!("Figure 3 — hammer–string contact force");
+    println!("  una corda, string 1: peak {uc_peak:7.1} N, contact {uc_ms:5.2} ms");
+    println!("  normal,    string 1: peak {n1_peak:7.1} N, contact {n1_ms:5.2} ms");
+    println!("  normal,    string 2: peak {n2_peak:7.1} N, contact {n2_ms:5.2} ms");
+    let unstruck = r.una_corda.channel(|f| f.obs.hammer_force_n[1]).iter().fold(0f64, |m, &x| m.max(x.abs()));
+    assert_eq!(unstruck, 0.0, "the unstruck string never touches the hammer");
+    assert!(uc_peak > 1.05 * n1_peak.max(n2_peak), "una corda peak must exceed the per-string normal peak");
+    assert!(uc_ms > 1.05 * n1_ms.max(n2_ms), "una corda contact must last longer");
+    assert!((n1_peak / n2_peak - 1.0).abs() < 0.05, "normal playing: two near-equal forces");
+}
+
+#[test]
+fn fig4_passive_string_force_rises_over_tens_of_ms() {
+    let r = runs();
+    let fs = r.una_corda.rate_hz;
+    let f2 = r.una_corda.channel(|f| f.obs.bridge_force_n[1][0]);
+    let (t, env) = rms_envelope(&f2[..(0.2 * fs) as usize], fs, PERIOD_S);
+    println!("Figure 4(b) — una corda, passive string 2, T bridge force, RMS over one period of C2:");
+    for (ti, e) in t.iter().zip(&env) {
+        println!("  t = {:5.1} ms  {:9.4} N", ti * 1e3, e);
+    }
+    let early = env[0];
+    let (k_max, max) = env.iter().enumerate().fold((0, 0f64), |b, (k, &e)| if e > b.1 { (k, e) } else { b });
+    println!("  first window {early:.4} N, maximum {max:.4} N at {:.1} ms", t[k_max] * 1e3);
+    assert!(t[k_max] > 0.02, "the passive string's force peaks after the first tens of ms");
+    assert!(max > 3.0 * early, "and grows several-fold from its first window");
+    // In normal playing both strings are struck: string 2's force is largest at once.
+    let n2 = r.normal.channel(|f| f.obs.bridge_force_n[1][0]);
+    let (_, nenv) = rms_envelope(&n2[..(0.2 * fs) as usize], fs, PERIOD_S);
+    let (n_max, nmax) = nenv.iter().enumerate().fold((0, 0f64), |b, (k, &e)| if e > b.1 { (k, e) } else { b });
+    println!("  normal playing, string 2: first window {:.4} N, maximum {nmax:.4} N at {:.1} ms", nenv[0], t[n_max] * 1e3);
+    assert!(t[n_max] < t[k_max], "a struck string's force peaks before the passive one's");
+}
+
+/// Partial frequencies of the total T force, measured on the normal run.
+fn partials(r: &Runs, count: usize) -> Vec<f64> {
+    let s = &r.preset.strings()[0];
+    let fs = r.normal.rate_hz;
+    let x = r.normal.channel(|f| f.obs.total_force_n[0]);
+    let x = &x[(0.1 * fs) as usize..];
+    let b = s.inharmonicity() * (s.length_m() / s.speaking_length_m).powi(2);
+    let f0 = (s.tension_n / s.linear_density_kg_m).sqrt() / (2.0 * s.speaking_length_m);
+    (1..=count)
+        .map(|n| {
+            let guess = n as f64 * f0 * (1.0 + b * (n * n) as f64).sqrt();
+            peak_frequency(x, fs, guess - 8.0, guess + 8.0)
+        })
+        .collect()
+}
+
+#[test]
+fn fig6_normal_playing_beats_una_corda_decays_evenly() {
+    let r = runs();
+    let fs = r.normal.rate_hz;
+    let freqs = partials(r, 20);
+    let depth = |rec: &Recording| -> Vec<f64> {
+        let x = rec.channel(|f| f.obs.total_force_n[0]);
+        let x = &x[(0.1 * fs) as usize..];
+        freqs
+            .iter()
+            .map(|&f| {
+                let (t, a) = partial_envelope(x, fs, f, 0.1, 0.02);
+                beating_depth_db(&t, &a)
+            })
+            .collect()
+    };
+    let (uc, normal) = (depth(&r.una_corda), depth(&r.normal));
+    println!("Figure 6 — beating depth of the total T force partials (dB RMS about a cubic fit of the level):");
+    println!("  partial   freq Hz   una corda   normal");
+    for (k, f) in freqs.iter().enumerate() {
+        println!("  {:7} {:9.2} {:10.2} {:8.2}", k + 1, f, uc[k], normal[k]);
+    }
+    let median = |v: &[f64]| {
+        let mut s = v.to_vec();
+        s.sort_by(f64::total_cmp);
+        0.5 * (s[s.len() / 2] + s[(s.len() - 1) / 2])
+    };
+    let (mu, mn) = (median(&uc), median(&normal));
+    println!("  median: una corda {mu:.2} dB, normal {mn:.2} dB");
+    assert!(mn > 1.5 * mu, "normal playing beats more than una corda");
+}
+
+#[test]
+fn fig5_aftersound_to_attack_is_larger_with_una_corda() {
+    let r = runs();
+    let ratio = |rec: &Recording| {
+        let fs = rec.rate_hz;
+        let x = rec.channel(|f| f.obs.total_force_n[0]);
+        let (_, env) = rms_envelope(&x, fs, 0.02);
+        let attack = env[..10].iter().fold(0f64, |m, &e| m.max(e));
+        let tail = &x[(2.0 * fs) as usize..(3.0 * fs) as usize];
+        let after = (tail.iter().map(|v| v * v).sum::<f64>() / tail.len() as f64).sqrt();
+        (attack, after, 20.0 * (after / attack).log10())
+    };
+    let (ua, uf, ur) = ratio(&r.una_corda);
+    let (na, nf, nr) = ratio(&r.normal);
+    println!("Figure 5 — total transmitted T force: attack (max 20 ms RMS, first 0.2 s) vs aftersound (RMS 2–3 s)");
+    println!("  una corda: attack {ua:8.3} N, aftersound {uf:8.4} N, ratio {ur:6.1} dB");
+    println!("  normal:    attack {na:8.3} N, aftersound {nf:8.4} N, ratio {nr:6.1} dB");
+    assert!(na > ua, "normal playing transmits the larger attack");
+    assert!(ur > nr + 1.0, "aftersound relative to attack is larger with una corda (Weinreich)");
+}
