@@ -1,0 +1,246 @@
+//! The engine against what is known independently: Eq. 2 frequencies, modal damping, RK4's order,
+//! energy conservation and dissipation, and the tuned pitch of the c2 preset.
+
+use std::f64::consts::PI;
+use unacorda::analysis::spectral::{dtft_magnitude, peak_frequency};
+use unacorda::engine::system::{Unison, UnisonSpec};
+use unacorda::engine::Strike;
+use unacorda::preset::{LoadedPreset, Preset};
+
+fn c2() -> LoadedPreset {
+    Preset::resolve("c2").unwrap()
+}
+
+/// The c2 spec with the strings cut loose from the bridge and the duplex damper removed.
+fn uncoupled(zeta: f64) -> UnisonSpec {
+    let mut spec = c2().unison_spec();
+    spec.contact.stiffness_n_m = [0.0; 3];
+    spec.contact.damping_n_s_m = [0.0; 3];
+    spec.duplex_damping_n_s_m2 = 0.0;
+    spec.modes.damping_ratio_t = zeta;
+    spec.strings.truncate(1);
+    spec
+}
+
+/// Free vibration of string 1 from a smooth initial shape, sampled at every other step:
+/// transverse displacement at 0.37 L.
+fn free_vibration(spec: &UnisonSpec, seconds: f64) -> (f64, Vec<f64>) {
+    let mut u = Unison::new(spec).unwrap();
+    let t = u.string_range(0, 0);
+    let s = &spec.strings[0];
+    let x_obs = 0.37 * s.length_m();
+    let shape: Vec<f64> = (1..=t.len()).map(|n| s.mode_shape(n, x_obs)).collect();
+    {
+        let (q, _) = u.state_mut();
+        for (k, i) in t.clone().enumerate() {
+            q[i] = 1e-4 / (k + 1) as f64;
+        }
+    }
+    let steps = (seconds / u.step_s()).round() as usize;
+    let mut out = Vec::with_capacity(steps / 2);
+    for k in 0..steps {
+        u.step();
+        if k % 2 == 1 {
+            let (q, _) = u.state();
+            out.push(shape.iter().zip(&q[t.clone()]).map(|(a, b)| a * b).sum());
+        }
+    }
+    (0.5 / u.step_s(), out)
+}
+
+/// Eq. 2, written out from the preset's raw numbers (independent of the engine's code).
+fn eq2_hz(spec: &UnisonSpec, n: usize) -> f64 {
+    let s = &spec.strings[0];
+    let l = s.speaking_length_m + s.duplex_length_m;
+    let f0 = (s.tension_n / s.linear_density_kg_m).sqrt() / (2.0 * l);
+    let esk2 = s.young_modulus_pa * PI * s.core_diameter_m.powi(4) / 64.0;
+    let b = PI * PI * esk2 / (s.tension_n * l * l);
+    n as f64 * f0 * (1.0 + b * (n * n) as f64).sqrt()
+}
+
+#[test]
+fn uncoupled_partials_follow_eq2() {
+    let spec = uncoupled(0.0);
+    let (fs, x) = free_vibration(&spec, 2.0);
+    println!("Eq. 2 — uncoupled string partials from a simulated free vibration (2 s):");
+    println!("  n   Eq. 2 Hz      measured Hz    error cents");
+    let mut worst: f64 = 0.0;
+    for n in 1..=20 {
+        let f = eq2_hz(&spec, n);
+        let m = peak_frequency(&x, fs, f - 1.0, f + 1.0);
+        let cents = 1200.0 * (m / f).log2();
+        worst = worst.max(cents.abs());
+        println!("  {n:2} {f:12.5} {m:14.5} {cents:12.5}");
+    }
+    println!("  worst |error| = {worst:.5} cents (limit 0.1)");
+    assert!(worst < 0.1);
+}
+
+#[test]
+fn free_decay_matches_modal_damping() {
+    let zeta = 1e-3;
+    let spec = uncoupled(zeta);
+    let (fs, x) = free_vibration(&spec, 1.0);
+    let win = (0.25 * fs) as usize;
+    let (a, b) = (&x[..win], &x[x.len() - win..]);
+    let dt = (x.len() - win) as f64 / fs;
+    println!("Free decay — zeta = {zeta}: decay rate sigma = zeta omega_n, measured between windows {dt:.2} s apart:");
+    println!("  n   expected 1/s   measured 1/s   error %");
+    let mut worst: f64 = 0.0;
+    for n in 1..=10 {
+        let f = eq2_hz(&spec, n);
+        let sigma = zeta * 2.0 * PI * f;
+        let measured = (dtft_magnitude(a, fs, f) / dtft_magnitude(b, fs, f)).ln() / dt;
+        let err = 100.0 * (measured / sigma - 1.0);
+        worst = worst.max(err.abs());
+        println!("  {n:2} {sigma:13.5} {measured:14.5} {err:9.3}");
+    }
+    println!("  worst |error| = {worst:.3} % (limit 2 %)");
+    assert!(worst < 2.0);
+}
+
+/// A linear sub-problem: one string on the bridge and the board, no hammer, 20 + 20 + 2 modes.
+fn linear_subproblem(rate_hz: f64, damped: bool) -> UnisonSpec {
+    let mut spec = c2().unison_spec();
+    spec.strings.truncate(1);
+    spec.modes.modes_t = 20;
+    spec.modes.modes_p = 20;
+    spec.modes.modes_l = 2;
+    // Board modes up to 1 kHz keep the fastest motion resolvable at the fine steps used here.
+    let keep: Vec<usize> = (0..spec.board.len()).filter(|&k| spec.board.freq_hz[k] < 1000.0).collect();
+    let pick = |v: &Vec<f64>| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
+    spec.board.freq_hz = pick(&spec.board.freq_hz);
+    spec.board.damping_ratio = pick(&spec.board.damping_ratio);
+    spec.board.volume_m2_per_sqrt_kg = pick(&spec.board.volume_m2_per_sqrt_kg);
+    for p in &mut spec.board.points {
+        for d in 0..3 {
+            p.shape[d] = pick(&p.shape[d]);
+        }
+    }
+    if !damped {
+        spec.modes.damping_ratio_t = 0.0;
+        spec.modes.damping_ratio_p = 0.0;
+        spec.modes.damping_ratio_l = 0.0;
+        spec.board.damping_ratio.iter_mut().for_each(|z| *z = 0.0);
+        spec.contact.damping_n_s_m = [0.0; 3];
+        spec.duplex_damping_n_s_m2 = 0.0;
+    }
+    spec.sample_rate_hz = rate_hz;
+    spec
+}
+
+/// Start with the string moving in a smooth shape whose bridge point is at rest.
+fn set_initial_velocity(u: &mut Unison) {
+    let t = u.string_range(0, 0);
+    let p = u.string_range(0, 2);
+    let (_, v) = u.state_mut();
+    for (k, i) in t.enumerate() {
+        v[i] = 0.02 / ((k + 1) * (k + 1)) as f64;
+    }
+    for (k, i) in p.enumerate().take(3) {
+        v[i] = 0.005 / (k + 1) as f64;
+    }
+}
+
+#[test]
+fn rk4_converges_with_order_four() {
+    let t_end = 0.01;
+    let run = |rate: f64| -> Vec<f64> {
+        let mut u = Unison::new(&linear_subproblem(rate, true)).unwrap();
+        set_initial_velocity(&mut u);
+        for _ in 0..(t_end * rate).round() as usize {
+            u.step();
+        }
+        let (q, v) = u.state();
+        q.iter().chain(v).copied().collect()
+    };
+    let base = 384_000.0;
+    let reference = run(base * 64.0);
+    let err = |x: &[f64]| x.iter().zip(&reference).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+    let errors: Vec<f64> = [1.0, 2.0, 4.0].iter().map(|m| err(&run(base * m))).collect();
+    println!("RK4 convergence on string + contact + board (linear), state error at {} ms:", t_end * 1e3);
+    for (k, e) in errors.iter().enumerate() {
+        println!("  h = 1/{:.0} Hz: error {e:.3e}", base * 2f64.powi(k as i32));
+    }
+    let ratios = [errors[0] / errors[1], errors[1] / errors[2]];
+    println!("  error ratios when h halves: {:.2}, {:.2} (order 4 → 16)", ratios[0], ratios[1]);
+    for r in ratios {
+        assert!((13.0..19.0).contains(&r), "ratio {r}");
+    }
+}
+
+/// Worst relative drift of the total energy over 1 s, and the largest energy held by board + springs.
+fn undamped_drift(rate_hz: f64) -> (f64, f64, f64) {
+    let mut u = Unison::new(&linear_subproblem(rate_hz, false)).unwrap();
+    set_initial_velocity(&mut u);
+    let e0 = u.energy().total_j();
+    let steps = (1.0 / u.step_s()).round() as usize;
+    let (mut worst, mut exchanged): (f64, f64) = (0.0, 0.0);
+    for _ in 0..steps {
+        u.step();
+        let e = u.energy();
+        worst = worst.max((e.total_j() / e0 - 1.0).abs());
+        exchanged = exchanged.max(e.board_j + e.contact_j);
+    }
+    (e0, worst, exchanged)
+}
+
+#[test]
+fn energy_is_conserved_without_damping() {
+    // RK4 itself dissipates (omega h)^6 / 144 of a mode's energy per step; the stiff contact mode
+    // (≈ 10 kHz with 20 string modes) needs a fine step for the drift to fall below 1e-6, and the
+    // drift must shrink as h^5 if it is the integrator's and not a flaw of the coupling.
+    let (e0, coarse, exchanged) = undamped_drift(768_000.0);
+    let (_, fine, _) = undamped_drift(1_536_000.0);
+    println!("Energy without damping or hammer over 1 s (string + contact + board, initial {e0:.4e} J):");
+    println!("  h = 1/768 kHz: worst relative drift {coarse:.2e}");
+    println!("  h = 1/1536 kHz: worst relative drift {fine:.2e} (limit 1e-6)");
+    println!("  drift ratio {:.1} (RK4's dissipation: 2^5 = 32)", coarse / fine);
+    println!("  largest energy held by board + contact springs: {exchanged:.3e} J (the parts do exchange energy)");
+    assert!(exchanged > 1e-3 * e0);
+    assert!(fine < 1e-6);
+    assert!(coarse / fine > 20.0);
+}
+
+#[test]
+fn energy_never_increases_with_damping_and_hammer() {
+    let preset = c2();
+    let mut u = Unison::new(&preset.unison_spec()).unwrap();
+    u.strike(Strike { velocity_m_s: 2.5, una_corda: false });
+    let e0 = u.energy().total_j();
+    let mut prev = e0;
+    let (mut onset_rise, mut later_rise): (f64, f64) = (0.0, 0.0);
+    let steps = (0.2 / u.step_s()) as usize;
+    for k in 0..steps {
+        u.step();
+        let e = u.energy().total_j();
+        let rise = (e - prev) / e0;
+        // The felt law xi^2.3 is not smooth where contact begins: there RK4's local error is of
+        // order h^3.3 and can be of either sign for a few steps.
+        if k < 10 {
+            onset_rise = onset_rise.max(rise);
+        } else {
+            later_rise = later_rise.max(rise);
+        }
+        prev = e;
+    }
+    println!("Energy with damping, c2 struck at 2.5 m/s: {e0:.4e} J at the strike, {prev:.4e} J after 0.2 s");
+    println!("  largest step-to-step rise, first 10 steps (felt contact onset): {onset_rise:.2e} of the strike energy (limit 1e-7)");
+    println!("  largest step-to-step rise afterwards: {later_rise:.2e} (limit 1e-14, round-off)");
+    assert!(onset_rise < 1e-7);
+    assert!(later_rise <= 1e-14);
+    assert!(prev < 0.8 * e0);
+}
+
+#[test]
+fn c2_first_partial_is_on_pitch() {
+    // The first partial of the coupled unison (bridge, board, both strings), normal playing.
+    let preset = c2();
+    let rec = unacorda::render::simulate(&preset, Strike { velocity_m_s: 2.5, una_corda: false }, 1.5, |_| {}).unwrap();
+    let x = rec.channel(|f| f.obs.total_force_n[0]);
+    let x = &x[(0.2 * rec.rate_hz) as usize..];
+    let f1 = peak_frequency(x, rec.rate_hz, 60.0, 70.0);
+    let cents = 1200.0 * (f1 / 65.406).log2();
+    println!("Pitch — c2 first partial {f1:.3} Hz, {cents:+.2} cents from C2 = 65.406 Hz (limit ±3)");
+    assert!(cents.abs() < 3.0);
+}
