@@ -171,11 +171,7 @@ impl Preset {
             }
             None => {
                 let p = path.parent().unwrap_or(Path::new(".")).join(&preset.soundboard.asset);
-                let text = std::fs::read_to_string(&p).map_err(|source| AssetError::Io {
-                    path: p.clone(),
-                    source,
-                })?;
-                (p.display().to_string(), SoundboardModes::parse(&text, &p)?)
+                (p.display().to_string(), SoundboardModes::load_file(&p)?)
             }
         };
         let bridge_point = board

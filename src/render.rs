@@ -129,10 +129,17 @@ impl Renderer {
 #[derive(Debug, Clone)]
 pub struct Recording {
     pub rate_hz: f64,
+    /// Group delay of the anti-alias filter (s): frame `k` shows the system at `k / rate_hz - delay_s`.
+    pub delay_s: f64,
     pub frames: Vec<Frame>,
 }
 
 impl Recording {
+    /// Physical time of frame `k` (s), the filter delay removed.
+    pub fn time_s(&self, k: usize) -> f64 {
+        k as f64 / self.rate_hz - self.delay_s
+    }
+
     /// One channel of the recording, extracted by `f`.
     pub fn channel(&self, f: impl Fn(&Frame) -> f64) -> Vec<f64> {
         self.frames.iter().map(f).collect()
@@ -160,6 +167,7 @@ pub fn simulate(
     progress(1.0);
     Ok(Recording {
         rate_hz: r.output_rate_hz(),
+        delay_s: r.filter_delay_samples() / r.output_rate_hz(),
         frames,
     })
 }

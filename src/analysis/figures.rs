@@ -1,6 +1,336 @@
-use crate::render::Recording;
-use std::path::{Path, PathBuf};
+//! The paper's Figures 3–6, una corda vs normal playing: each as a PNG and the CSV of its data.
+//!
+//! Figures 4 and 5 span seconds of a signal that oscillates at 65 Hz and up; they are drawn (and
+//! tabulated) as the minimum and maximum of the force in each 5 ms bin, which is what a plot of
+//! every sample shows.
 
-pub fn write_all(_dir: &Path, _uc: &Recording, _normal: &Recording) -> anyhow::Result<Vec<PathBuf>> {
-    Ok(vec![])
+use super::spectral::spectrogram;
+use crate::engine::DIRECTIONS;
+use crate::render::Recording;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// What can go wrong while writing figures.
+#[derive(Debug, thiserror::Error)]
+pub enum FigureError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: drawing failed: {message}")]
+    Plot { path: PathBuf, message: String },
+}
+
+const FONT: &str = "sans-serif";
+const BIN_S: f64 = 0.005;
+const COLORS: [RGBColor; 3] = [RGBColor(31, 119, 180), RGBColor(44, 160, 44), RGBColor(214, 39, 40)];
+
+/// Register the bundled DejaVu Sans so that text needs no system fonts.
+fn register_font() {
+    static DONE: OnceLock<()> = OnceLock::new();
+    DONE.get_or_init(|| {
+        let bytes: &'static [u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+        plotters::style::register_font(FONT, FontStyle::Normal, bytes)
+            .unwrap_or_else(|_| panic!("bundled font is a valid TTF"));
+    });
+}
+
+/// Write Figures 3–6 into `dir`; returns the files written.
+pub fn write_all(dir: &Path, una_corda: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
+    register_font();
+    let mut written = Vec::new();
+    written.extend(figure3(dir, una_corda, normal)?);
+    written.extend(figure4(dir, una_corda, normal)?);
+    written.extend(figure5(dir, una_corda, normal)?);
+    written.extend(figure6(dir, una_corda, normal)?);
+    Ok(written)
+}
+
+fn write_text(path: PathBuf, text: &str) -> Result<PathBuf, FigureError> {
+    std::fs::write(&path, text).map_err(|source| FigureError::Io { path: path.clone(), source })?;
+    Ok(path)
+}
+
+fn plot_err(path: &Path) -> impl Fn(Box<dyn std::error::Error + '_>) -> FigureError + '_ {
+    move |e| FigureError::Plot {
+        path: path.to_owned(),
+        message: e.to_string(),
+    }
+}
+
+type Result2<T> = Result<T, Box<dyn std::error::Error>>;
+
+/// Min and max of `x` in consecutive bins of `BIN_S`: `(bin start times, mins, maxs)`.
+fn min_max_bins(rec: &Recording, x: &[f64]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let n = (BIN_S * rec.rate_hz) as usize;
+    let mut out = (Vec::new(), Vec::new(), Vec::new());
+    for (b, chunk) in x.chunks(n).enumerate() {
+        out.0.push(rec.time_s(b * n).max(0.0));
+        out.1.push(chunk.iter().copied().fold(f64::INFINITY, f64::min));
+        out.2.push(chunk.iter().copied().fold(f64::NEG_INFINITY, f64::max));
+    }
+    out
+}
+
+fn symmetric_range(series: &[&[f64]]) -> f64 {
+    let m = series.iter().flat_map(|s| s.iter()).fold(0f64, |m, v| m.max(v.abs()));
+    if m > 0.0 {
+        1.1 * m
+    } else {
+        1.0
+    }
+}
+
+/// Figure 3: hammer–string contact force, first 8 ms.
+fn figure3(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
+    let n = (0.008 * uc.rate_hz) as usize;
+    let series = [
+        ("una corda, string 1", uc.channel(|f| f.obs.hammer_force_n[0])),
+        ("normal, string 1", normal.channel(|f| f.obs.hammer_force_n[0])),
+        ("normal, string 2 (mistuned)", normal.channel(|f| f.obs.hammer_force_n[1])),
+    ];
+    let mut csv = String::from("time_ms,una_corda_string1_n,normal_string1_n,normal_string2_n\n");
+    for k in 0..n {
+        let _ = writeln!(csv, "{:.4},{:.5},{:.5},{:.5}", uc.time_s(k) * 1e3, series[0].1[k], series[1].1[k], series[2].1[k]);
+    }
+    let png = dir.join("fig3_hammer_force.png");
+    let draw = || -> Result2<()> {
+        let root = BitMapBackend::new(&png, (900, 560)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let y_max = 1.1 * series.iter().flat_map(|s| s.1[..n].iter()).fold(0f64, |m, &v| m.max(v));
+        let mut chart = ChartBuilder::on(&root)
+            .caption("Fig. 3 — hammer–string contact force (c2, 2.5 m/s)", (FONT, 22))
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..8.0, -0.02 * y_max..y_max)?;
+        chart.configure_mesh().x_desc("time (ms)").y_desc("force (N)").label_style((FONT, 15)).draw()?;
+        for (i, (label, data)) in series.iter().enumerate() {
+            let color = COLORS[i];
+            chart
+                .draw_series(LineSeries::new((0..n).map(|k| (uc.time_s(k) * 1e3, data[k])), color.stroke_width(2)))?
+                .label(*label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .label_font((FONT, 15))
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.9))
+            .draw()?;
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(plot_err(&png))?;
+    Ok(vec![png, write_text(dir.join("fig3_hammer_force.csv"), &csv)?])
+}
+
+/// One panel of min/max bins: a filled band per bin.
+fn draw_band(
+    area: &DrawingArea<BitMapBackend, Shift>,
+    caption: &str,
+    t: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    y: f64,
+    color: RGBColor,
+    x_label: bool,
+) -> Result2<()> {
+    let t_end = t.last().copied().unwrap_or(1.0) + BIN_S;
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, (FONT, 15))
+        .margin(6)
+        .x_label_area_size(if x_label { 30 } else { 18 })
+        .y_label_area_size(55)
+        .build_cartesian_2d(0.0..t_end, -y..y)?;
+    let mut mesh = chart.configure_mesh();
+    mesh.label_style((FONT, 11)).y_desc("N").disable_x_mesh();
+    if x_label {
+        mesh.x_desc("time (s)");
+    }
+    mesh.draw()?;
+    chart.draw_series(
+        t.iter()
+            .zip(lo.iter().zip(hi))
+            .map(|(&ti, (&a, &b))| Rectangle::new([(ti, a), (ti + BIN_S, b)], color.filled())),
+    )?;
+    Ok(())
+}
+
+/// Figure 4: force of each string on the soundboard in T, L and P, una corda (a, b) and normal (c, d).
+fn figure4(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
+    let cases = [
+        ("(a) una corda, string 1 (struck)", uc, 0),
+        ("(b) una corda, string 2 (passive)", uc, 1),
+        ("(c) normal, string 1", normal, 0),
+        ("(d) normal, string 2", normal, 1),
+    ];
+    let bins: Vec<[(Vec<f64>, Vec<f64>, Vec<f64>); 3]> = cases
+        .iter()
+        .map(|(_, rec, s)| std::array::from_fn(|d| min_max_bins(rec, &rec.channel(|f| f.obs.bridge_force_n[*s][d]))))
+        .collect();
+    let mut csv = String::from("time_s");
+    for tag in ["a_uc_str1", "b_uc_str2", "c_normal_str1", "d_normal_str2"] {
+        for d in DIRECTIONS {
+            let _ = write!(csv, ",{tag}_{d}_min_n,{tag}_{d}_max_n");
+        }
+    }
+    csv.push('\n');
+    for k in 0..bins[0][0].0.len() {
+        let _ = write!(csv, "{:.4}", bins[0][0].0[k]);
+        for b in &bins {
+            for dir_bins in b {
+                let _ = write!(csv, ",{:.6},{:.6}", dir_bins.1[k], dir_bins.2[k]);
+            }
+        }
+        csv.push('\n');
+    }
+    let png = dir.join("fig4_string_forces.png");
+    let draw = || -> Result2<()> {
+        let root = BitMapBackend::new(&png, (1400, 900)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (title, body) = root.split_vertically(40);
+        title.titled("Fig. 4 — force of each string on the soundboard (rows T, L, P)", (FONT, 22))?;
+        let panels = body.split_evenly((3, 4));
+        for d in 0..3 {
+            // One scale per direction across the four cases, so that they compare.
+            let y = symmetric_range(&bins.iter().flat_map(|b| [&b[d].1[..], &b[d].2[..]]).collect::<Vec<_>>());
+            for (c, (label, _, _)) in cases.iter().enumerate() {
+                let (t, lo, hi) = &bins[c][d];
+                draw_band(&panels[d * 4 + c], &format!("{label} — {}", DIRECTIONS[d]), t, lo, hi, y, COLORS[d], d == 2)?;
+            }
+        }
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(plot_err(&png))?;
+    Ok(vec![png, write_text(dir.join("fig4_string_forces.csv"), &csv)?])
+}
+
+/// Figure 5: total force transmitted to the soundboard, una corda (a) and normal (b).
+fn figure5(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
+    let cases = [("(a) una corda", uc), ("(b) normal", normal)];
+    let bins: Vec<[(Vec<f64>, Vec<f64>, Vec<f64>); 3]> = cases
+        .iter()
+        .map(|(_, rec)| std::array::from_fn(|d| min_max_bins(rec, &rec.channel(|f| f.obs.total_force_n[d]))))
+        .collect();
+    let mut csv = String::from("time_s");
+    for tag in ["a_uc", "b_normal"] {
+        for d in DIRECTIONS {
+            let _ = write!(csv, ",{tag}_{d}_min_n,{tag}_{d}_max_n");
+        }
+    }
+    csv.push('\n');
+    for k in 0..bins[0][0].0.len() {
+        let _ = write!(csv, "{:.4}", bins[0][0].0[k]);
+        for b in &bins {
+            for dir_bins in b {
+                let _ = write!(csv, ",{:.6},{:.6}", dir_bins.1[k], dir_bins.2[k]);
+            }
+        }
+        csv.push('\n');
+    }
+    let png = dir.join("fig5_total_force.png");
+    let draw = || -> Result2<()> {
+        let root = BitMapBackend::new(&png, (1100, 800)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (title, body) = root.split_vertically(40);
+        title.titled("Fig. 5 — total force transmitted to the soundboard (rows T, L, P)", (FONT, 22))?;
+        let panels = body.split_evenly((3, 2));
+        for d in 0..3 {
+            let y = symmetric_range(&bins.iter().flat_map(|b| [&b[d].1[..], &b[d].2[..]]).collect::<Vec<_>>());
+            for (c, (label, _)) in cases.iter().enumerate() {
+                let (t, lo, hi) = &bins[c][d];
+                draw_band(&panels[d * 2 + c], &format!("{label} — {}", DIRECTIONS[d]), t, lo, hi, y, COLORS[d], d == 2)?;
+            }
+        }
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(plot_err(&png))?;
+    Ok(vec![png, write_text(dir.join("fig5_total_force.csv"), &csv)?])
+}
+
+/// A perceptually ordered colour map (viridis, five stops), `x` in [0, 1].
+fn colormap(x: f64) -> RGBColor {
+    const STOPS: [(f64, f64, f64); 5] = [
+        (68.0, 1.0, 84.0),
+        (59.0, 82.0, 139.0),
+        (33.0, 145.0, 140.0),
+        (94.0, 201.0, 98.0),
+        (253.0, 231.0, 37.0),
+    ];
+    let x = x.clamp(0.0, 1.0) * 4.0;
+    let i = (x.floor() as usize).min(3);
+    let f = x - i as f64;
+    let (a, b) = (STOPS[i], STOPS[i + 1]);
+    let mix = |p: f64, q: f64| (p + f * (q - p)).round() as u8;
+    RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
+}
+
+/// Figure 6: spectrograms of the transmitted T force, first 4 s, up to 4 kHz.
+fn figure6(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
+    let fs = uc.rate_hz;
+    let n_fft = 4096;
+    let hop = 1024;
+    let seconds = 4.0f64.min(uc.frames.len() as f64 / fs);
+    let spec = |rec: &Recording| {
+        let x = rec.channel(|f| f.obs.total_force_n[0]);
+        spectrogram(&x[..(seconds * fs) as usize], fs, n_fft, hop, 4000.0)
+    };
+    let (times, freqs, s_uc) = spec(uc);
+    let (_, _, s_n) = spec(normal);
+    let mut csv = String::from("time_s,freq_hz,una_corda_db,normal_db\n");
+    for (i, t) in times.iter().enumerate() {
+        for (j, f) in freqs.iter().enumerate() {
+            let _ = writeln!(csv, "{t:.4},{f:.2},{:.2},{:.2}", s_uc[i][j], s_n[i][j]);
+        }
+    }
+    let top = s_uc.iter().chain(&s_n).flatten().fold(f64::NEG_INFINITY, |m, &v| m.max(v));
+    let range_db = 70.0;
+    let png = dir.join("fig6_spectrograms.png");
+    let df = fs / n_fft as f64;
+    let dt = hop as f64 / fs;
+    let freqs = &freqs[..];
+    let draw = || -> Result2<()> {
+        let root = BitMapBackend::new(&png, (1300, 560)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (title, body) = root.split_vertically(40);
+        title.titled(
+            &format!("Fig. 6 — spectrogram of the transmitted T force (dB, top {top:.0} dB re 1 N, {range_db:.0} dB range)"),
+            (FONT, 20),
+        )?;
+        let panels = body.split_evenly((1, 2));
+        for (panel, (label, rows)) in panels.iter().zip([("(a) una corda", &s_uc), ("(b) normal", &s_n)]) {
+            let mut chart = ChartBuilder::on(panel)
+                .caption(label, (FONT, 17))
+                .margin(10)
+                .x_label_area_size(40)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..seconds, 0.0..4000.0)?;
+            chart
+                .configure_mesh()
+                .disable_mesh()
+                .x_desc("time (s)")
+                .y_desc("frequency (Hz)")
+                .label_style((FONT, 13))
+                .draw()?;
+            chart.draw_series(rows.iter().enumerate().flat_map(|(i, row)| {
+                let t0 = times[i] - dt / 2.0;
+                row.iter().enumerate().map(move |(j, &db)| {
+                    let f0 = freqs[j] - df / 2.0;
+                    let c = colormap(1.0 - (top - db) / range_db);
+                    Rectangle::new([(t0.max(0.0), f0.max(0.0)), (t0 + dt, f0 + df)], c.filled())
+                })
+            }))?;
+        }
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(plot_err(&png))?;
+    Ok(vec![png, write_text(dir.join("fig6_spectrograms.csv"), &csv)?])
 }

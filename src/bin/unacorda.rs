@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use unacorda::engine::plate::{generate_asset, PlateParams};
 use unacorda::engine::Strike;
@@ -30,10 +30,10 @@ enum Command {
         #[arg(long)]
         una_corda: bool,
         /// Hammer speed at the strings (m/s), 0.01–10; default: the preset's.
-        #[arg(long, value_name = "M/S")]
+        #[arg(long, value_name = "M/S", allow_negative_numbers = true)]
         velocity: Option<f64>,
         /// Length of the render (s), 0.001–600.
-        #[arg(long, default_value_t = 4.0, value_name = "S")]
+        #[arg(long, default_value_t = 4.0, value_name = "S", allow_negative_numbers = true)]
         seconds: f64,
         /// Output WAV file.
         #[arg(long)]
@@ -46,7 +46,7 @@ enum Command {
         #[arg(long, default_value = "c2")]
         preset: String,
         /// Simulated length of each case (s), 0.1–20; the paper's spectrograms span 4 s.
-        #[arg(long, default_value_t = 4.0)]
+        #[arg(long, default_value_t = 4.0, allow_negative_numbers = true)]
         seconds: f64,
     },
     /// Generate the reduced soundboard asset (simply-supported orthotropic plate, Table 1).
@@ -71,8 +71,18 @@ fn progress_bar(seconds: f64, label: &str) -> ProgressBar {
     pb
 }
 
-fn main() -> Result<()> {
-    match Cli::parse().command {
+fn main() -> std::process::ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
         Command::Render {
             offline,
             preset,
@@ -122,16 +132,24 @@ fn main() -> Result<()> {
             let loaded = Preset::resolve(&preset)?;
             std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
             let v = loaded.preset.hammer.velocity_m_s;
-            let mut runs = Vec::new();
-            for una_corda in [true, false] {
-                let label = if una_corda { "una corda" } else { "normal" };
-                let pb = progress_bar(seconds, label);
-                let rec = simulate(&loaded, Strike { velocity_m_s: v, una_corda }, seconds, |f| {
-                    pb.set_position((f * 1000.0) as u64)
-                })?;
-                pb.finish_and_clear();
-                runs.push(rec);
-            }
+            // The two cases are independent: simulate them on two threads.
+            let bars = MultiProgress::new();
+            let [una_corda, normal] = std::thread::scope(|scope| {
+                [true, false].map(|una_corda| {
+                    let label = if una_corda { "una corda" } else { "normal" };
+                    let pb = bars.add(progress_bar(seconds, label));
+                    let loaded = &loaded;
+                    scope.spawn(move || {
+                        let rec = simulate(loaded, Strike { velocity_m_s: v, una_corda }, seconds, |f| {
+                            pb.set_position((f * 1000.0) as u64)
+                        });
+                        pb.finish_and_clear();
+                        rec
+                    })
+                })
+                .map(|h| h.join().expect("simulation thread"))
+            });
+            let runs = [una_corda?, normal?];
             let written = unacorda::analysis::figures::write_all(&out_dir, &runs[0], &runs[1])?;
             for w in written {
                 eprintln!("wrote {}", w.display());

@@ -207,8 +207,8 @@ pub fn generate_asset(params: &PlateParams, command: &str) -> (SoundboardModes, 
         format!("bridge lever arm {} m; points (name x_m y_m string_angle_deg): {}", params.lever_m,
             params.points.iter().map(|(n, x, y, a)| format!("{n} {x} {y} {a}")).collect::<Vec<_>>().join(", ")),
         format!(
-            "{} plate modes in {}-{} Hz reduced to {} (dominant mode per 1/12 octave and direction at {})",
-            full.modes.len(), params.f_min_hz, params.f_max_hz, reduced.len(), params.points[0].0
+            "{} plate modes below {} Hz; the {}-{} Hz bands keep {} (dominant mode per 1/12 octave and direction at {})",
+            full.modes.len(), params.f_max_hz, params.f_min_hz, params.f_max_hz, reduced.len(), params.points[0].0
         ),
     ];
     let text = reduced.to_text(&header);

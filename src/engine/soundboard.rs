@@ -96,8 +96,8 @@ impl SoundboardModes {
         y
     }
 
-    /// Read an asset file.
-    pub fn load(path: &Path) -> Result<Self, AssetError> {
+    /// Read an asset file (at build time, never from the audio path).
+    pub fn load_file(path: &Path) -> Result<Self, AssetError> {
         let text = std::fs::read_to_string(path).map_err(|source| AssetError::Io {
             path: path.to_owned(),
             source,

@@ -1,0 +1,100 @@
+//! Malformed presets, assets and command lines: clear errors that name the file, the line or
+//! field and what was expected; a non-zero exit; no panic; no output file.
+
+use std::path::Path;
+use std::process::Command;
+use unacorda::engine::soundboard::SoundboardModes;
+use unacorda::preset::Preset;
+
+fn data(name: &str) -> String {
+    format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+fn asset_error(name: &str) -> String {
+    let e = SoundboardModes::load_file(Path::new(&data(name))).unwrap_err().to_string();
+    println!("{name}: {e}");
+    e
+}
+
+fn preset_error(name: &str) -> String {
+    let e = Preset::resolve(&data(name)).unwrap_err().to_string();
+    println!("{name}: {e}");
+    e
+}
+
+#[test]
+fn malformed_assets_are_rejected_with_file_line_and_field() {
+    let e = asset_error("bad_asset_columns.txt");
+    assert!(e.contains("bad_asset_columns.txt:10:") && e.contains("expected 6 columns, found 5"));
+    let e = asset_error("bad_asset_nan.txt");
+    assert!(e.contains("bad_asset_nan.txt:11:") && e.contains("`T@C2`") && e.contains("finite"));
+    let e = asset_error("bad_asset_zeta.txt");
+    assert!(e.contains(":10:") && e.contains("`zeta`") && e.contains("[0, 1)"));
+    let e = asset_error("bad_asset_no_modes.txt");
+    assert!(e.contains("bad_asset_no_modes.txt") && e.contains("no modes"));
+    let e = asset_error("does_not_exist.txt");
+    assert!(e.contains("does_not_exist.txt") && e.contains("cannot read"));
+}
+
+#[test]
+fn malformed_presets_are_rejected_with_field_and_range() {
+    let e = preset_error("bad_preset_unknown_field.toml");
+    assert!(e.contains("bad_preset_unknown_field.toml") && e.contains("felt_colour") && e.contains("line 49"));
+    let e = preset_error("bad_preset_missing_field.toml");
+    assert!(e.contains("missing field `mass_kg`"));
+    let e = preset_error("bad_preset_range.toml");
+    assert!(e.contains("`strings.tension_n` = -724.1") && e.contains("[1e1, 5e3]"));
+    let e = preset_error("bad_preset_asset.toml");
+    assert!(e.contains("bad_asset_nan.txt:11:"));
+    let e = preset_error("bad_preset_point.toml");
+    assert!(e.contains("`soundboard.bridge_point` = `C9`") && e.contains("points C2"));
+    let e = Preset::resolve("c3").unwrap_err().to_string();
+    println!("c3: {e}");
+    assert!(e.contains("unknown preset `c3`") && e.contains("c2"));
+}
+
+/// Run the CLI; returns (success, stderr).
+fn cli(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_unacorda")).args(args).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    println!("unacorda {}\n  → exit {:?}: {}", args.join(" "), out.status.code(), stderr.trim());
+    assert!(!stderr.contains("panicked"), "the CLI must not panic");
+    (out.status.success(), stderr)
+}
+
+#[test]
+fn cli_rejects_bad_input_without_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let wav = dir.path().join("out.wav");
+    let wav = wav.to_str().unwrap();
+    let bad_preset = data("bad_preset_range.toml");
+    let cases: [(&[&str], &str); 6] = [
+        (&["render", "--offline", "--preset", &bad_preset, "--out", wav], "strings.tension_n"),
+        (&["render", "--offline", "--seconds", "-1", "--out", wav], "--seconds"),
+        (&["render", "--offline", "--seconds", "nan", "--out", wav], "--seconds"),
+        (&["render", "--offline", "--velocity", "40", "--out", wav], "--velocity 40"),
+        (&["render", "--out", wav], "--offline"),
+        (&["figures", "--seconds", "0", "--out-dir", wav], "--seconds"),
+    ];
+    for (args, needle) in cases {
+        let (ok, stderr) = cli(args);
+        assert!(!ok, "must fail");
+        assert!(stderr.contains(needle), "message names `{needle}`");
+        assert!(!Path::new(wav).exists(), "nothing written");
+    }
+}
+
+#[test]
+fn cli_renders_a_short_wav() {
+    let dir = tempfile::tempdir().unwrap();
+    let wav = dir.path().join("c2.wav");
+    let (ok, _) = cli(&["render", "--offline", "--preset", "c2", "--una-corda", "--seconds", "0.2", "--out", wav.to_str().unwrap()]);
+    assert!(ok);
+    let reader = hound::WavReader::open(&wav).unwrap();
+    assert_eq!(reader.spec().sample_rate, 48_000);
+    let samples: Vec<f32> = reader.into_samples::<f32>().map(Result::unwrap).collect();
+    assert_eq!(samples.len(), 9600);
+    let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
+    println!("0.2 s una corda render: peak {peak:.3} of full scale");
+    assert!(samples.iter().all(|s| s.is_finite()) && peak > 1e-3 && peak <= 1.0);
+}
