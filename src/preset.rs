@@ -154,7 +154,10 @@ impl Preset {
             return Self::from_str(&text, path);
         }
         let names: Vec<&str> = BUILTIN_PRESETS.iter().map(|(n, _)| *n).collect();
-        Err(PresetError::Unknown(name_or_path.to_owned(), names.join(", ")))
+        Err(PresetError::Unknown(
+            name_or_path.to_owned(),
+            names.join(", "),
+        ))
     }
 
     /// Parse, validate and resolve the soundboard of preset text read from `path`.
@@ -164,13 +167,19 @@ impl Preset {
             message: e.to_string().trim_end().to_owned(),
         })?;
         preset.validate(path)?;
-        let (asset_name, board) = match BUILTIN_ASSETS.iter().find(|(n, _)| *n == preset.soundboard.asset) {
+        let (asset_name, board) = match BUILTIN_ASSETS
+            .iter()
+            .find(|(n, _)| *n == preset.soundboard.asset)
+        {
             Some((name, text)) => {
                 let p = PathBuf::from(format!("assets/soundboard_modes/{name}.txt"));
                 (p.display().to_string(), SoundboardModes::parse(text, &p)?)
             }
             None => {
-                let p = path.parent().unwrap_or(Path::new(".")).join(&preset.soundboard.asset);
+                let p = path
+                    .parent()
+                    .unwrap_or(Path::new("."))
+                    .join(&preset.soundboard.asset);
                 (p.display().to_string(), SoundboardModes::load_file(&p)?)
             }
         };
@@ -182,7 +191,12 @@ impl Preset {
                 path: path.to_owned(),
                 point: preset.soundboard.bridge_point.clone(),
                 asset: asset_name,
-                available: board.points.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join(", "),
+                available: board
+                    .points
+                    .iter()
+                    .map(|p| p.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
             })?;
         Ok(LoadedPreset {
             preset,
@@ -193,24 +207,30 @@ impl Preset {
     }
 
     fn validate(&self, path: &Path) -> Result<(), PresetError> {
-        let range = |field: &'static str, value: f64, lo: f64, hi: f64| -> Result<(), PresetError> {
-            if value.is_finite() && value >= lo && value <= hi {
-                Ok(())
-            } else {
-                Err(PresetError::Range {
-                    path: path.to_owned(),
-                    field,
-                    value: value.to_string(),
-                    allowed: format!("a number in [{lo:e}, {hi:e}]"),
-                })
-            }
-        };
+        let range =
+            |field: &'static str, value: f64, lo: f64, hi: f64| -> Result<(), PresetError> {
+                if value.is_finite() && value >= lo && value <= hi {
+                    Ok(())
+                } else {
+                    Err(PresetError::Range {
+                        path: path.to_owned(),
+                        field,
+                        value: value.to_string(),
+                        allowed: format!("a number in [{lo:e}, {hi:e}]"),
+                    })
+                }
+            };
         let s = &self.strings;
         range("strings.count", s.count as f64, 1.0, 3.0)?;
         range("strings.speaking_length_m", s.speaking_length_m, 0.01, 3.0)?;
         range("strings.duplex_length_m", s.duplex_length_m, 1e-3, 1.0)?;
         range("strings.tension_n", s.tension_n, 10.0, 5000.0)?;
-        range("strings.linear_density_kg_m", s.linear_density_kg_m, 1e-4, 0.5)?;
+        range(
+            "strings.linear_density_kg_m",
+            s.linear_density_kg_m,
+            1e-4,
+            0.5,
+        )?;
         range("strings.core_diameter_m", s.core_diameter_m, 1e-4, 5e-3)?;
         range("strings.young_modulus_pa", s.young_modulus_pa, 1e9, 1e12)?;
         range("strings.poisson_ratio", s.poisson_ratio, 0.0, 0.5)?;
@@ -232,7 +252,12 @@ impl Preset {
         range("strings.damping_ratio_t", s.damping_ratio_t, 0.0, 0.5)?;
         range("strings.damping_ratio_p", s.damping_ratio_p, 0.0, 0.5)?;
         range("strings.damping_ratio_l", s.damping_ratio_l, 0.0, 0.5)?;
-        range("strings.duplex_damping_n_s_m2", s.duplex_damping_n_s_m2, 0.0, 1e4)?;
+        range(
+            "strings.duplex_damping_n_s_m2",
+            s.duplex_damping_n_s_m2,
+            0.0,
+            1e4,
+        )?;
         let h = &self.hammer;
         range("hammer.mass_kg", h.mass_kg, 1e-4, 0.1)?;
         range("hammer.stiffness_n_m_p", h.stiffness_n_m_p, 1e3, 1e14)?;
@@ -242,18 +267,43 @@ impl Preset {
         range("hammer.release_gap_m", h.release_gap_m, 0.0, 0.05)?;
         let c = &self.contact;
         range("contact.length_m", c.length_m, 1e-4, 0.1)?;
-        range("contact.bridge_young_modulus_pa", c.bridge_young_modulus_pa, 1e6, 1e11)?;
-        range("contact.bridge_poisson_ratio", c.bridge_poisson_ratio, 0.0, 0.5)?;
+        range(
+            "contact.bridge_young_modulus_pa",
+            c.bridge_young_modulus_pa,
+            1e6,
+            1e11,
+        )?;
+        range(
+            "contact.bridge_poisson_ratio",
+            c.bridge_poisson_ratio,
+            0.0,
+            0.5,
+        )?;
         range("contact.stiffness_ratio_l", c.stiffness_ratio_l, 0.0, 100.0)?;
         range("contact.stiffness_ratio_p", c.stiffness_ratio_p, 0.0, 100.0)?;
         for &d in &c.damping_n_s_m {
             range("contact.damping_n_s_m", d, 0.0, 1e4)?;
         }
-        range("simulation.output_rate_hz", self.simulation.output_rate_hz as f64, 8000.0, 384000.0)?;
-        range("simulation.min_rate_over_fmax", self.simulation.min_rate_over_fmax, 2.0, 100.0)?;
+        range(
+            "simulation.output_rate_hz",
+            self.simulation.output_rate_hz as f64,
+            8000.0,
+            384000.0,
+        )?;
+        range(
+            "simulation.min_rate_over_fmax",
+            self.simulation.min_rate_over_fmax,
+            2.0,
+            100.0,
+        )?;
         let r = &self.radiation;
         range("radiation.distance_m", r.distance_m, 0.01, 100.0)?;
-        range("radiation.air_density_kg_m3", r.air_density_kg_m3, 0.1, 10.0)?;
+        range(
+            "radiation.air_density_kg_m3",
+            r.air_density_kg_m3,
+            0.1,
+            10.0,
+        )?;
         range("radiation.full_scale_pa", r.full_scale_pa, 1e-6, 1e4)?;
         Ok(())
     }
@@ -273,7 +323,10 @@ impl LoadedPreset {
             density_kg_m3: s.density_kg_m3,
             wound: s.wound,
         };
-        s.mistuning_cents.iter().map(|&c| nominal.detuned(c)).collect()
+        s.mistuning_cents
+            .iter()
+            .map(|&c| nominal.detuned(c))
+            .collect()
     }
 
     /// Contact springs from Hertz (Eq. 7) in T, scaled for L and P; dampers as given.

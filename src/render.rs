@@ -42,9 +42,16 @@ impl Frame {
         let mut it = ch.iter().copied();
         let mut next = || it.next().unwrap_or(0.0);
         f.obs.hammer_force_n.iter_mut().for_each(|x| *x = next());
-        f.obs.bridge_force_n.iter_mut().flatten().for_each(|x| *x = next());
+        f.obs
+            .bridge_force_n
+            .iter_mut()
+            .flatten()
+            .for_each(|x| *x = next());
         f.obs.total_force_n.iter_mut().for_each(|x| *x = next());
-        f.obs.bridge_velocity_m_s.iter_mut().for_each(|x| *x = next());
+        f.obs
+            .bridge_velocity_m_s
+            .iter_mut()
+            .for_each(|x| *x = next());
         f.pressure_pa = next();
         f
     }

@@ -11,7 +11,9 @@ fn data(name: &str) -> String {
 }
 
 fn asset_error(name: &str) -> String {
-    let e = SoundboardModes::load_file(Path::new(&data(name))).unwrap_err().to_string();
+    let e = SoundboardModes::load_file(Path::new(&data(name)))
+        .unwrap_err()
+        .to_string();
     println!("{name}: {e}");
     e
 }
@@ -39,7 +41,11 @@ fn malformed_assets_are_rejected_with_file_line_and_field() {
 #[test]
 fn malformed_presets_are_rejected_with_field_and_range() {
     let e = preset_error("bad_preset_unknown_field.toml");
-    assert!(e.contains("bad_preset_unknown_field.toml") && e.contains("felt_colour") && e.contains("line 49"));
+    assert!(
+        e.contains("bad_preset_unknown_field.toml")
+            && e.contains("felt_colour")
+            && e.contains("line 49")
+    );
     let e = preset_error("bad_preset_missing_field.toml");
     assert!(e.contains("missing field `mass_kg`"));
     let e = preset_error("bad_preset_range.toml");
@@ -55,9 +61,17 @@ fn malformed_presets_are_rejected_with_field_and_range() {
 
 /// Run the CLI; returns (success, stderr).
 fn cli(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_unacorda")).args(args).output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_unacorda"))
+        .args(args)
+        .output()
+        .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    println!("unacorda {}\n  → exit {:?}: {}", args.join(" "), out.status.code(), stderr.trim());
+    println!(
+        "unacorda {}\n  → exit {:?}: {}",
+        args.join(" "),
+        out.status.code(),
+        stderr.trim()
+    );
     assert!(!stderr.contains("panicked"), "the CLI must not panic");
     (out.status.success(), stderr)
 }
@@ -68,13 +82,32 @@ fn cli_rejects_bad_input_without_writing() {
     let wav = dir.path().join("out.wav");
     let wav = wav.to_str().unwrap();
     let bad_preset = data("bad_preset_range.toml");
-    let cases: [(&[&str], &str); 6] = [
-        (&["render", "--offline", "--preset", &bad_preset, "--out", wav], "strings.tension_n"),
-        (&["render", "--offline", "--seconds", "-1", "--out", wav], "--seconds"),
-        (&["render", "--offline", "--seconds", "nan", "--out", wav], "--seconds"),
-        (&["render", "--offline", "--velocity", "40", "--out", wav], "--velocity 40"),
+    let cases: [(&[&str], &str); 7] = [
+        (
+            &["render", "--offline", "--midi-velocity", "0", "--out", wav],
+            "--midi-velocity 0",
+        ),
+        (
+            &["render", "--offline", "--preset", &bad_preset, "--out", wav],
+            "strings.tension_n",
+        ),
+        (
+            &["render", "--offline", "--seconds", "-1", "--out", wav],
+            "--seconds",
+        ),
+        (
+            &["render", "--offline", "--seconds", "nan", "--out", wav],
+            "--seconds",
+        ),
+        (
+            &["render", "--offline", "--velocity", "40", "--out", wav],
+            "--velocity 40",
+        ),
         (&["render", "--out", wav], "--offline"),
-        (&["figures", "--seconds", "0", "--out-dir", wav], "--seconds"),
+        (
+            &["figures", "--seconds", "0", "--out-dir", wav],
+            "--seconds",
+        ),
     ];
     for (args, needle) in cases {
         let (ok, stderr) = cli(args);
@@ -88,7 +121,17 @@ fn cli_rejects_bad_input_without_writing() {
 fn cli_renders_a_short_wav() {
     let dir = tempfile::tempdir().unwrap();
     let wav = dir.path().join("c2.wav");
-    let (ok, _) = cli(&["render", "--offline", "--preset", "c2", "--una-corda", "--seconds", "0.2", "--out", wav.to_str().unwrap()]);
+    let (ok, _) = cli(&[
+        "render",
+        "--offline",
+        "--preset",
+        "c2",
+        "--una-corda",
+        "--seconds",
+        "0.2",
+        "--out",
+        wav.to_str().unwrap(),
+    ]);
     assert!(ok);
     let reader = hound::WavReader::open(&wav).unwrap();
     assert_eq!(reader.spec().sample_rate, 48_000);

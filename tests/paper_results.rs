@@ -1,7 +1,9 @@
 //! The paper's findings (Figures 3–6) as numbers, on the c2 preset: una corda vs normal playing.
 
 use std::sync::OnceLock;
-use unacorda::analysis::spectral::{beating_depth_db, partial_envelope, peak_frequency, rms_envelope};
+use unacorda::analysis::spectral::{
+    beating_depth_db, partial_envelope, peak_frequency, rms_envelope,
+};
 use unacorda::engine::Strike;
 use unacorda::preset::{LoadedPreset, Preset};
 use unacorda::render::{simulate, Recording};
@@ -21,13 +23,28 @@ fn runs() -> &'static Runs {
     RUNS.get_or_init(|| {
         let preset = Preset::resolve("c2").expect("built-in preset");
         let v = preset.preset.hammer.velocity_m_s;
-        let run = |una_corda| simulate(&preset, Strike { velocity_m_s: v, una_corda }, SECONDS, |_| {}).unwrap();
+        let run = |una_corda| {
+            simulate(
+                &preset,
+                Strike {
+                    velocity_m_s: v,
+                    una_corda,
+                },
+                SECONDS,
+                |_| {},
+            )
+            .unwrap()
+        };
         let (una_corda, normal) = std::thread::scope(|s| {
             let a = s.spawn(|| run(true));
             let b = s.spawn(|| run(false));
             (a.join().unwrap(), b.join().unwrap())
         });
-        Runs { preset, una_corda, normal }
+        Runs {
+            preset,
+            una_corda,
+            normal,
+        }
     })
 }
 
@@ -35,7 +52,12 @@ fn runs() -> &'static Runs {
 fn pulse(rec: &Recording, string: usize) -> (f64, f64) {
     let f = rec.channel(|fr| fr.obs.hammer_force_n[string]);
     let peak = f.iter().fold(0f64, |m, &x| m.max(x));
-    let on: Vec<usize> = f.iter().enumerate().filter(|(_, &x)| x > 0.01 * peak).map(|(i, _)| i).collect();
+    let on: Vec<usize> = f
+        .iter()
+        .enumerate()
+        .filter(|(_, &x)| x > 0.01 * peak)
+        .map(|(i, _)| i)
+        .collect();
     let duration_ms = (on.last().unwrap() - on.first().unwrap()) as f64 / rec.rate_hz * 1e3;
     (peak, duration_ms)
 }
@@ -50,11 +72,27 @@ fn fig3_una_corda_hammer_force_is_higher_and_longer() {
     println!("  una corda, string 1: peak {uc_peak:7.1} N, contact {uc_ms:5.2} ms");
     println!("  normal,    string 1: peak {n1_peak:7.1} N, contact {n1_ms:5.2} ms");
     println!("  normal,    string 2: peak {n2_peak:7.1} N, contact {n2_ms:5.2} ms");
-    let unstruck = r.una_corda.channel(|f| f.obs.hammer_force_n[1]).iter().fold(0f64, |m, &x| m.max(x.abs()));
-    assert_eq!(unstruck, 0.0, "the unstruck string never touches the hammer");
-    assert!(uc_peak > 1.05 * n1_peak.max(n2_peak), "una corda peak must exceed the per-string normal peak");
-    assert!(uc_ms > 1.05 * n1_ms.max(n2_ms), "una corda contact must last longer");
-    assert!((n1_peak / n2_peak - 1.0).abs() < 0.05, "normal playing: two near-equal forces");
+    let unstruck = r
+        .una_corda
+        .channel(|f| f.obs.hammer_force_n[1])
+        .iter()
+        .fold(0f64, |m, &x| m.max(x.abs()));
+    assert_eq!(
+        unstruck, 0.0,
+        "the unstruck string never touches the hammer"
+    );
+    assert!(
+        uc_peak > 1.05 * n1_peak.max(n2_peak),
+        "una corda peak must exceed the per-string normal peak"
+    );
+    assert!(
+        uc_ms > 1.05 * n1_ms.max(n2_ms),
+        "una corda contact must last longer"
+    );
+    assert!(
+        (n1_peak / n2_peak - 1.0).abs() < 0.05,
+        "normal playing: two near-equal forces"
+    );
 }
 
 #[test]
@@ -63,21 +101,45 @@ fn fig4_passive_string_force_rises_over_tens_of_ms() {
     let fs = r.una_corda.rate_hz;
     let f2 = r.una_corda.channel(|f| f.obs.bridge_force_n[1][0]);
     let (t, env) = rms_envelope(&f2[..(0.2 * fs) as usize], fs, PERIOD_S);
-    println!("Figure 4(b) — una corda, passive string 2, T bridge force, RMS over one period of C2:");
+    println!(
+        "Figure 4(b) — una corda, passive string 2, T bridge force, RMS over one period of C2:"
+    );
     for (ti, e) in t.iter().zip(&env) {
         println!("  t = {:5.1} ms  {:9.4} N", ti * 1e3, e);
     }
     let early = env[0];
-    let (k_max, max) = env.iter().enumerate().fold((0, 0f64), |b, (k, &e)| if e > b.1 { (k, e) } else { b });
-    println!("  first window {early:.4} N, maximum {max:.4} N at {:.1} ms", t[k_max] * 1e3);
-    assert!(t[k_max] > 0.02, "the passive string's force peaks after the first tens of ms");
-    assert!(max > 3.0 * early, "and grows several-fold from its first window");
+    let (k_max, max) = env
+        .iter()
+        .enumerate()
+        .fold((0, 0f64), |b, (k, &e)| if e > b.1 { (k, e) } else { b });
+    println!(
+        "  first window {early:.4} N, maximum {max:.4} N at {:.1} ms",
+        t[k_max] * 1e3
+    );
+    assert!(
+        t[k_max] > 0.02,
+        "the passive string's force peaks after the first tens of ms"
+    );
+    assert!(
+        max > 3.0 * early,
+        "and grows several-fold from its first window"
+    );
     // In normal playing both strings are struck: string 2's force is largest at once.
     let n2 = r.normal.channel(|f| f.obs.bridge_force_n[1][0]);
     let (_, nenv) = rms_envelope(&n2[..(0.2 * fs) as usize], fs, PERIOD_S);
-    let (n_max, nmax) = nenv.iter().enumerate().fold((0, 0f64), |b, (k, &e)| if e > b.1 { (k, e) } else { b });
-    println!("  normal playing, string 2: first window {:.4} N, maximum {nmax:.4} N at {:.1} ms", nenv[0], t[n_max] * 1e3);
-    assert!(t[n_max] < t[k_max], "a struck string's force peaks before the passive one's");
+    let (n_max, nmax) = nenv
+        .iter()
+        .enumerate()
+        .fold((0, 0f64), |b, (k, &e)| if e > b.1 { (k, e) } else { b });
+    println!(
+        "  normal playing, string 2: first window {:.4} N, maximum {nmax:.4} N at {:.1} ms",
+        nenv[0],
+        t[n_max] * 1e3
+    );
+    assert!(
+        t[n_max] < t[k_max],
+        "a struck string's force peaks before the passive one's"
+    );
 }
 
 /// Partial frequencies of the total T force, measured on the normal run.
@@ -146,5 +208,8 @@ fn fig5_aftersound_to_attack_is_larger_with_una_corda() {
     println!("  una corda: attack {ua:8.3} N, aftersound {uf:8.4} N, ratio {ur:6.1} dB");
     println!("  normal:    attack {na:8.3} N, aftersound {nf:8.4} N, ratio {nr:6.1} dB");
     assert!(na > ua, "normal playing transmits the larger attack");
-    assert!(ur > nr + 1.0, "aftersound relative to attack is larger with una corda (Weinreich)");
+    assert!(
+        ur > nr + 1.0,
+        "aftersound relative to attack is larger with una corda (Weinreich)"
+    );
 }

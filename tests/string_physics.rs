@@ -107,7 +107,9 @@ fn linear_subproblem(rate_hz: f64, damped: bool) -> UnisonSpec {
     spec.modes.modes_p = 20;
     spec.modes.modes_l = 2;
     // Board modes up to 1 kHz keep the fastest motion resolvable at the fine steps used here.
-    let keep: Vec<usize> = (0..spec.board.len()).filter(|&k| spec.board.freq_hz[k] < 1000.0).collect();
+    let keep: Vec<usize> = (0..spec.board.len())
+        .filter(|&k| spec.board.freq_hz[k] < 1000.0)
+        .collect();
     let pick = |v: &Vec<f64>| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
     spec.board.freq_hz = pick(&spec.board.freq_hz);
     spec.board.damping_ratio = pick(&spec.board.damping_ratio);
@@ -156,14 +158,32 @@ fn rk4_converges_with_order_four() {
     };
     let base = 384_000.0;
     let reference = run(base * 64.0);
-    let err = |x: &[f64]| x.iter().zip(&reference).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
-    let errors: Vec<f64> = [1.0, 2.0, 4.0].iter().map(|m| err(&run(base * m))).collect();
-    println!("RK4 convergence on string + contact + board (linear), state error at {} ms:", t_end * 1e3);
+    let err = |x: &[f64]| {
+        x.iter()
+            .zip(&reference)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let errors: Vec<f64> = [1.0, 2.0, 4.0]
+        .iter()
+        .map(|m| err(&run(base * m)))
+        .collect();
+    println!(
+        "RK4 convergence on string + contact + board (linear), state error at {} ms:",
+        t_end * 1e3
+    );
     for (k, e) in errors.iter().enumerate() {
-        println!("  h = 1/{:.0} Hz: error {e:.3e}", base * 2f64.powi(k as i32));
+        println!(
+            "  h = 1/{:.0} Hz: error {e:.3e}",
+            base * 2f64.powi(k as i32)
+        );
     }
     let ratios = [errors[0] / errors[1], errors[1] / errors[2]];
-    println!("  error ratios when h halves: {:.2}, {:.2} (order 4 → 16)", ratios[0], ratios[1]);
+    println!(
+        "  error ratios when h halves: {:.2}, {:.2} (order 4 → 16)",
+        ratios[0], ratios[1]
+    );
     for r in ratios {
         assert!((13.0..19.0).contains(&r), "ratio {r}");
     }
@@ -192,10 +212,15 @@ fn energy_is_conserved_without_damping() {
     // drift must shrink as h^5 if it is the integrator's and not a flaw of the coupling.
     let (e0, coarse, exchanged) = undamped_drift(768_000.0);
     let (_, fine, _) = undamped_drift(1_536_000.0);
-    println!("Energy without damping or hammer over 1 s (string + contact + board, initial {e0:.4e} J):");
+    println!(
+        "Energy without damping or hammer over 1 s (string + contact + board, initial {e0:.4e} J):"
+    );
     println!("  h = 1/768 kHz: worst relative drift {coarse:.2e}");
     println!("  h = 1/1536 kHz: worst relative drift {fine:.2e} (limit 1e-6)");
-    println!("  drift ratio {:.1} (RK4's dissipation: 2^5 = 32)", coarse / fine);
+    println!(
+        "  drift ratio {:.1} (RK4's dissipation: 2^5 = 32)",
+        coarse / fine
+    );
     println!("  largest energy held by board + contact springs: {exchanged:.3e} J (the parts do exchange energy)");
     assert!(exchanged > 1e-3 * e0);
     assert!(fine < 1e-6);
@@ -206,7 +231,10 @@ fn energy_is_conserved_without_damping() {
 fn energy_never_increases_with_damping_and_hammer() {
     let preset = c2();
     let mut u = Unison::new(&preset.unison_spec()).unwrap();
-    u.strike(Strike { velocity_m_s: 2.5, una_corda: false });
+    u.strike(Strike {
+        velocity_m_s: 2.5,
+        una_corda: false,
+    });
     let e0 = u.energy().total_j();
     let mut prev = e0;
     let (mut onset_rise, mut later_rise): (f64, f64) = (0.0, 0.0);
@@ -236,11 +264,22 @@ fn energy_never_increases_with_damping_and_hammer() {
 fn c2_first_partial_is_on_pitch() {
     // The first partial of the coupled unison (bridge, board, both strings), normal playing.
     let preset = c2();
-    let rec = unacorda::render::simulate(&preset, Strike { velocity_m_s: 2.5, una_corda: false }, 1.5, |_| {}).unwrap();
+    let rec = unacorda::render::simulate(
+        &preset,
+        Strike {
+            velocity_m_s: 2.5,
+            una_corda: false,
+        },
+        1.5,
+        |_| {},
+    )
+    .unwrap();
     let x = rec.channel(|f| f.obs.total_force_n[0]);
     let x = &x[(0.2 * rec.rate_hz) as usize..];
     let f1 = peak_frequency(x, rec.rate_hz, 60.0, 70.0);
     let cents = 1200.0 * (f1 / 65.406).log2();
-    println!("Pitch — c2 first partial {f1:.3} Hz, {cents:+.2} cents from C2 = 65.406 Hz (limit ±3)");
+    println!(
+        "Pitch — c2 first partial {f1:.3} Hz, {cents:+.2} cents from C2 = 65.406 Hz (limit ±3)"
+    );
     assert!(cents.abs() < 3.0);
 }

@@ -27,7 +27,11 @@ pub enum FigureError {
 
 const FONT: &str = "sans-serif";
 const BIN_S: f64 = 0.005;
-const COLORS: [RGBColor; 3] = [RGBColor(31, 119, 180), RGBColor(44, 160, 44), RGBColor(214, 39, 40)];
+const COLORS: [RGBColor; 3] = [
+    RGBColor(31, 119, 180),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+];
 
 /// Register the bundled DejaVu Sans so that text needs no system fonts.
 fn register_font() {
@@ -40,7 +44,11 @@ fn register_font() {
 }
 
 /// Write Figures 3–6 into `dir`; returns the files written.
-pub fn write_all(dir: &Path, una_corda: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
+pub fn write_all(
+    dir: &Path,
+    una_corda: &Recording,
+    normal: &Recording,
+) -> Result<Vec<PathBuf>, FigureError> {
     register_font();
     let mut written = Vec::new();
     written.extend(figure3(dir, una_corda, normal)?);
@@ -51,7 +59,10 @@ pub fn write_all(dir: &Path, una_corda: &Recording, normal: &Recording) -> Resul
 }
 
 fn write_text(path: PathBuf, text: &str) -> Result<PathBuf, FigureError> {
-    std::fs::write(&path, text).map_err(|source| FigureError::Io { path: path.clone(), source })?;
+    std::fs::write(&path, text).map_err(|source| FigureError::Io {
+        path: path.clone(),
+        source,
+    })?;
     Ok(path)
 }
 
@@ -64,20 +75,36 @@ fn plot_err(path: &Path) -> impl Fn(Box<dyn std::error::Error + '_>) -> FigureEr
 
 type Result2<T> = Result<T, Box<dyn std::error::Error>>;
 
-/// Min and max of `x` in consecutive bins of `BIN_S`: `(bin start times, mins, maxs)`.
-fn min_max_bins(rec: &Recording, x: &[f64]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+/// Minimum and maximum of a signal in consecutive bins of `BIN_S`.
+struct MinMax {
+    /// Bin start times (s).
+    t: Vec<f64>,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+}
+
+fn min_max_bins(rec: &Recording, x: &[f64]) -> MinMax {
     let n = (BIN_S * rec.rate_hz) as usize;
-    let mut out = (Vec::new(), Vec::new(), Vec::new());
+    let mut out = MinMax {
+        t: Vec::new(),
+        lo: Vec::new(),
+        hi: Vec::new(),
+    };
     for (b, chunk) in x.chunks(n).enumerate() {
-        out.0.push(rec.time_s(b * n).max(0.0));
-        out.1.push(chunk.iter().copied().fold(f64::INFINITY, f64::min));
-        out.2.push(chunk.iter().copied().fold(f64::NEG_INFINITY, f64::max));
+        out.t.push(rec.time_s(b * n).max(0.0));
+        out.lo
+            .push(chunk.iter().copied().fold(f64::INFINITY, f64::min));
+        out.hi
+            .push(chunk.iter().copied().fold(f64::NEG_INFINITY, f64::max));
     }
     out
 }
 
 fn symmetric_range(series: &[&[f64]]) -> f64 {
-    let m = series.iter().flat_map(|s| s.iter()).fold(0f64, |m, v| m.max(v.abs()));
+    let m = series
+        .iter()
+        .flat_map(|s| s.iter())
+        .fold(0f64, |m, v| m.max(v.abs()));
     if m > 0.0 {
         1.1 * m
     } else {
@@ -89,32 +116,65 @@ fn symmetric_range(series: &[&[f64]]) -> f64 {
 fn figure3(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
     let n = (0.008 * uc.rate_hz) as usize;
     let series = [
-        ("una corda, string 1", uc.channel(|f| f.obs.hammer_force_n[0])),
-        ("normal, string 1", normal.channel(|f| f.obs.hammer_force_n[0])),
-        ("normal, string 2 (mistuned)", normal.channel(|f| f.obs.hammer_force_n[1])),
+        (
+            "una corda, string 1",
+            uc.channel(|f| f.obs.hammer_force_n[0]),
+        ),
+        (
+            "normal, string 1",
+            normal.channel(|f| f.obs.hammer_force_n[0]),
+        ),
+        (
+            "normal, string 2 (mistuned)",
+            normal.channel(|f| f.obs.hammer_force_n[1]),
+        ),
     ];
     let mut csv = String::from("time_ms,una_corda_string1_n,normal_string1_n,normal_string2_n\n");
     for k in 0..n {
-        let _ = writeln!(csv, "{:.4},{:.5},{:.5},{:.5}", uc.time_s(k) * 1e3, series[0].1[k], series[1].1[k], series[2].1[k]);
+        let _ = writeln!(
+            csv,
+            "{:.4},{:.5},{:.5},{:.5}",
+            uc.time_s(k) * 1e3,
+            series[0].1[k],
+            series[1].1[k],
+            series[2].1[k]
+        );
     }
     let png = dir.join("fig3_hammer_force.png");
     let draw = || -> Result2<()> {
         let root = BitMapBackend::new(&png, (900, 560)).into_drawing_area();
         root.fill(&WHITE)?;
-        let y_max = 1.1 * series.iter().flat_map(|s| s.1[..n].iter()).fold(0f64, |m, &v| m.max(v));
+        let y_max = 1.1
+            * series
+                .iter()
+                .flat_map(|s| s.1[..n].iter())
+                .fold(0f64, |m, &v| m.max(v));
         let mut chart = ChartBuilder::on(&root)
-            .caption("Fig. 3 — hammer–string contact force (c2, 2.5 m/s)", (FONT, 22))
+            .caption(
+                "Fig. 3 — hammer–string contact force (c2, 2.5 m/s)",
+                (FONT, 22),
+            )
             .margin(15)
             .x_label_area_size(45)
             .y_label_area_size(60)
             .build_cartesian_2d(0.0..8.0, -0.02 * y_max..y_max)?;
-        chart.configure_mesh().x_desc("time (ms)").y_desc("force (N)").label_style((FONT, 15)).draw()?;
+        chart
+            .configure_mesh()
+            .x_desc("time (ms)")
+            .y_desc("force (N)")
+            .label_style((FONT, 15))
+            .draw()?;
         for (i, (label, data)) in series.iter().enumerate() {
             let color = COLORS[i];
             chart
-                .draw_series(LineSeries::new((0..n).map(|k| (uc.time_s(k) * 1e3, data[k])), color.stroke_width(2)))?
+                .draw_series(LineSeries::new(
+                    (0..n).map(|k| (uc.time_s(k) * 1e3, data[k])),
+                    color.stroke_width(2),
+                ))?
                 .label(*label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
         }
         chart
             .configure_series_labels()
@@ -126,21 +186,22 @@ fn figure3(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
         Ok(())
     };
     draw().map_err(plot_err(&png))?;
-    Ok(vec![png, write_text(dir.join("fig3_hammer_force.csv"), &csv)?])
+    Ok(vec![
+        png,
+        write_text(dir.join("fig3_hammer_force.csv"), &csv)?,
+    ])
 }
 
 /// One panel of min/max bins: a filled band per bin.
 fn draw_band(
     area: &DrawingArea<BitMapBackend, Shift>,
     caption: &str,
-    t: &[f64],
-    lo: &[f64],
-    hi: &[f64],
+    band: &MinMax,
     y: f64,
     color: RGBColor,
     x_label: bool,
 ) -> Result2<()> {
-    let t_end = t.last().copied().unwrap_or(1.0) + BIN_S;
+    let t_end = band.t.last().copied().unwrap_or(1.0) + BIN_S;
     let mut chart = ChartBuilder::on(area)
         .caption(caption, (FONT, 15))
         .margin(6)
@@ -154,8 +215,9 @@ fn draw_band(
     }
     mesh.draw()?;
     chart.draw_series(
-        t.iter()
-            .zip(lo.iter().zip(hi))
+        band.t
+            .iter()
+            .zip(band.lo.iter().zip(&band.hi))
             .map(|(&ti, (&a, &b))| Rectangle::new([(ti, a), (ti + BIN_S, b)], color.filled())),
     )?;
     Ok(())
@@ -169,9 +231,13 @@ fn figure4(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
         ("(c) normal, string 1", normal, 0),
         ("(d) normal, string 2", normal, 1),
     ];
-    let bins: Vec<[(Vec<f64>, Vec<f64>, Vec<f64>); 3]> = cases
+    let bins: Vec<[MinMax; 3]> = cases
         .iter()
-        .map(|(_, rec, s)| std::array::from_fn(|d| min_max_bins(rec, &rec.channel(|f| f.obs.bridge_force_n[*s][d]))))
+        .map(|(_, rec, s)| {
+            std::array::from_fn(|d| {
+                min_max_bins(rec, &rec.channel(|f| f.obs.bridge_force_n[*s][d]))
+            })
+        })
         .collect();
     let mut csv = String::from("time_s");
     for tag in ["a_uc_str1", "b_uc_str2", "c_normal_str1", "d_normal_str2"] {
@@ -180,11 +246,11 @@ fn figure4(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
         }
     }
     csv.push('\n');
-    for k in 0..bins[0][0].0.len() {
-        let _ = write!(csv, "{:.4}", bins[0][0].0[k]);
+    for k in 0..bins[0][0].t.len() {
+        let _ = write!(csv, "{:.4}", bins[0][0].t[k]);
         for b in &bins {
             for dir_bins in b {
-                let _ = write!(csv, ",{:.6},{:.6}", dir_bins.1[k], dir_bins.2[k]);
+                let _ = write!(csv, ",{:.6},{:.6}", dir_bins.lo[k], dir_bins.hi[k]);
             }
         }
         csv.push('\n');
@@ -194,29 +260,48 @@ fn figure4(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
         let root = BitMapBackend::new(&png, (1400, 900)).into_drawing_area();
         root.fill(&WHITE)?;
         let (title, body) = root.split_vertically(40);
-        title.titled("Fig. 4 — force of each string on the soundboard (rows T, L, P)", (FONT, 22))?;
+        title.titled(
+            "Fig. 4 — force of each string on the soundboard (rows T, L, P)",
+            (FONT, 22),
+        )?;
         let panels = body.split_evenly((3, 4));
         for d in 0..3 {
             // One scale per direction across the four cases, so that they compare.
-            let y = symmetric_range(&bins.iter().flat_map(|b| [&b[d].1[..], &b[d].2[..]]).collect::<Vec<_>>());
+            let y = symmetric_range(
+                &bins
+                    .iter()
+                    .flat_map(|b| [&b[d].lo[..], &b[d].hi[..]])
+                    .collect::<Vec<_>>(),
+            );
             for (c, (label, _, _)) in cases.iter().enumerate() {
-                let (t, lo, hi) = &bins[c][d];
-                draw_band(&panels[d * 4 + c], &format!("{label} — {}", DIRECTIONS[d]), t, lo, hi, y, COLORS[d], d == 2)?;
+                draw_band(
+                    &panels[d * 4 + c],
+                    &format!("{label} — {}", DIRECTIONS[d]),
+                    &bins[c][d],
+                    y,
+                    COLORS[d],
+                    d == 2,
+                )?;
             }
         }
         root.present()?;
         Ok(())
     };
     draw().map_err(plot_err(&png))?;
-    Ok(vec![png, write_text(dir.join("fig4_string_forces.csv"), &csv)?])
+    Ok(vec![
+        png,
+        write_text(dir.join("fig4_string_forces.csv"), &csv)?,
+    ])
 }
 
 /// Figure 5: total force transmitted to the soundboard, una corda (a) and normal (b).
 fn figure5(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
     let cases = [("(a) una corda", uc), ("(b) normal", normal)];
-    let bins: Vec<[(Vec<f64>, Vec<f64>, Vec<f64>); 3]> = cases
+    let bins: Vec<[MinMax; 3]> = cases
         .iter()
-        .map(|(_, rec)| std::array::from_fn(|d| min_max_bins(rec, &rec.channel(|f| f.obs.total_force_n[d]))))
+        .map(|(_, rec)| {
+            std::array::from_fn(|d| min_max_bins(rec, &rec.channel(|f| f.obs.total_force_n[d])))
+        })
         .collect();
     let mut csv = String::from("time_s");
     for tag in ["a_uc", "b_normal"] {
@@ -225,11 +310,11 @@ fn figure5(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
         }
     }
     csv.push('\n');
-    for k in 0..bins[0][0].0.len() {
-        let _ = write!(csv, "{:.4}", bins[0][0].0[k]);
+    for k in 0..bins[0][0].t.len() {
+        let _ = write!(csv, "{:.4}", bins[0][0].t[k]);
         for b in &bins {
             for dir_bins in b {
-                let _ = write!(csv, ",{:.6},{:.6}", dir_bins.1[k], dir_bins.2[k]);
+                let _ = write!(csv, ",{:.6},{:.6}", dir_bins.lo[k], dir_bins.hi[k]);
             }
         }
         csv.push('\n');
@@ -239,20 +324,37 @@ fn figure5(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
         let root = BitMapBackend::new(&png, (1100, 800)).into_drawing_area();
         root.fill(&WHITE)?;
         let (title, body) = root.split_vertically(40);
-        title.titled("Fig. 5 — total force transmitted to the soundboard (rows T, L, P)", (FONT, 22))?;
+        title.titled(
+            "Fig. 5 — total force transmitted to the soundboard (rows T, L, P)",
+            (FONT, 22),
+        )?;
         let panels = body.split_evenly((3, 2));
         for d in 0..3 {
-            let y = symmetric_range(&bins.iter().flat_map(|b| [&b[d].1[..], &b[d].2[..]]).collect::<Vec<_>>());
+            let y = symmetric_range(
+                &bins
+                    .iter()
+                    .flat_map(|b| [&b[d].lo[..], &b[d].hi[..]])
+                    .collect::<Vec<_>>(),
+            );
             for (c, (label, _)) in cases.iter().enumerate() {
-                let (t, lo, hi) = &bins[c][d];
-                draw_band(&panels[d * 2 + c], &format!("{label} — {}", DIRECTIONS[d]), t, lo, hi, y, COLORS[d], d == 2)?;
+                draw_band(
+                    &panels[d * 2 + c],
+                    &format!("{label} — {}", DIRECTIONS[d]),
+                    &bins[c][d],
+                    y,
+                    COLORS[d],
+                    d == 2,
+                )?;
             }
         }
         root.present()?;
         Ok(())
     };
     draw().map_err(plot_err(&png))?;
-    Ok(vec![png, write_text(dir.join("fig5_total_force.csv"), &csv)?])
+    Ok(vec![
+        png,
+        write_text(dir.join("fig5_total_force.csv"), &csv)?,
+    ])
 }
 
 /// A perceptually ordered colour map (viridis, five stops), `x` in [0, 1].
@@ -290,7 +392,11 @@ fn figure6(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
             let _ = writeln!(csv, "{t:.4},{f:.2},{:.2},{:.2}", s_uc[i][j], s_n[i][j]);
         }
     }
-    let top = s_uc.iter().chain(&s_n).flatten().fold(f64::NEG_INFINITY, |m, &v| m.max(v));
+    let top = s_uc
+        .iter()
+        .chain(&s_n)
+        .flatten()
+        .fold(f64::NEG_INFINITY, |m, &v| m.max(v));
     let range_db = 70.0;
     let png = dir.join("fig6_spectrograms.png");
     let df = fs / n_fft as f64;
@@ -305,7 +411,10 @@ fn figure6(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
             (FONT, 20),
         )?;
         let panels = body.split_evenly((1, 2));
-        for (panel, (label, rows)) in panels.iter().zip([("(a) una corda", &s_uc), ("(b) normal", &s_n)]) {
+        for (panel, (label, rows)) in panels
+            .iter()
+            .zip([("(a) una corda", &s_uc), ("(b) normal", &s_n)])
+        {
             let mut chart = ChartBuilder::on(panel)
                 .caption(label, (FONT, 17))
                 .margin(10)
@@ -332,5 +441,8 @@ fn figure6(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
         Ok(())
     };
     draw().map_err(plot_err(&png))?;
-    Ok(vec![png, write_text(dir.join("fig6_spectrograms.csv"), &csv)?])
+    Ok(vec![
+        png,
+        write_text(dir.join("fig6_spectrograms.csv"), &csv)?,
+    ])
 }

@@ -67,7 +67,13 @@ pub fn peak_frequency(x: &[f64], fs: f64, lo_hz: f64, hi_hz: f64) -> f64 {
 
 /// Amplitude envelope of the partial at `f_hz`: Hann-windowed DTFT magnitude over frames of
 /// `frame_s` every `hop_s`. Returns `(frame centre times, amplitudes)`.
-pub fn partial_envelope(x: &[f64], fs: f64, f_hz: f64, frame_s: f64, hop_s: f64) -> (Vec<f64>, Vec<f64>) {
+pub fn partial_envelope(
+    x: &[f64],
+    fs: f64,
+    f_hz: f64,
+    frame_s: f64,
+    hop_s: f64,
+) -> (Vec<f64>, Vec<f64>) {
     let n = (frame_s * fs) as usize;
     let hop = ((hop_s * fs) as usize).max(1);
     let mut times = Vec::new();
@@ -116,7 +122,10 @@ fn polyfit(x: &[f64], y: &[f64], deg: usize) -> Vec<f64> {
     // Normal equations on a centred, scaled abscissa are well enough conditioned for deg ≤ 3.
     let (x0, sx) = {
         let mean = x.iter().sum::<f64>() / x.len() as f64;
-        let span = x.iter().fold(0f64, |a, &v| a.max((v - mean).abs())).max(1e-12);
+        let span = x
+            .iter()
+            .fold(0f64, |a, &v| a.max((v - mean).abs()))
+            .max(1e-12);
         (mean, span)
     };
     let mut a = vec![vec![0.0; m + 1]; m];
@@ -132,7 +141,9 @@ fn polyfit(x: &[f64], y: &[f64], deg: usize) -> Vec<f64> {
     }
     // Gauss–Jordan with partial pivoting.
     for col in 0..m {
-        let piv = (col..m).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs())).unwrap_or(col);
+        let piv = (col..m)
+            .max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))
+            .unwrap_or(col);
         a.swap(col, piv);
         for r in 0..m {
             if r != col {
@@ -158,12 +169,20 @@ fn polyfit(x: &[f64], y: &[f64], deg: usize) -> Vec<f64> {
 
 /// Magnitude spectrogram (dB re 1) with a Hann window of `n_fft` samples every `hop` samples, up to
 /// `f_max_hz`. Returns `(frame times s, bin frequencies Hz, rows[frame][bin])`.
-pub fn spectrogram(x: &[f64], fs: f64, n_fft: usize, hop: usize, f_max_hz: f64) -> (Vec<f64>, Vec<f64>, Vec<Vec<f64>>) {
+pub fn spectrogram(
+    x: &[f64],
+    fs: f64,
+    n_fft: usize,
+    hop: usize,
+    f_max_hz: f64,
+) -> (Vec<f64>, Vec<f64>, Vec<Vec<f64>>) {
     let mut planner = RealFftPlanner::<f64>::new();
     let fft = planner.plan_fft_forward(n_fft);
     let mut input = fft.make_input_vec();
     let mut output = fft.make_output_vec();
-    let window: Vec<f64> = (0..n_fft).map(|k| 0.5 - 0.5 * (2.0 * PI * k as f64 / n_fft as f64).cos()).collect();
+    let window: Vec<f64> = (0..n_fft)
+        .map(|k| 0.5 - 0.5 * (2.0 * PI * k as f64 / n_fft as f64).cos())
+        .collect();
     let n_bins = ((f_max_hz / fs * n_fft as f64) as usize + 1).min(n_fft / 2 + 1);
     let freqs: Vec<f64> = (0..n_bins).map(|b| b as f64 * fs / n_fft as f64).collect();
     let (mut times, mut rows) = (Vec::new(), Vec::new());
@@ -172,7 +191,8 @@ pub fn spectrogram(x: &[f64], fs: f64, n_fft: usize, hop: usize, f_max_hz: f64) 
         for k in 0..n_fft {
             input[k] = x[start + k] * window[k];
         }
-        fft.process(&mut input, &mut output).expect("buffer sizes from the plan");
+        fft.process(&mut input, &mut output)
+            .expect("buffer sizes from the plan");
         rows.push(
             output[..n_bins]
                 .iter()
@@ -193,10 +213,12 @@ mod tests {
     fn peak_frequency_of_a_damped_sine() {
         let fs = 48000.0;
         let f = 523.2511;
-        let x: Vec<f64> = (0..48000).map(|k| {
-            let t = k as f64 / fs;
-            (-1.5 * t).exp() * (2.0 * PI * f * t + 0.3).sin()
-        }).collect();
+        let x: Vec<f64> = (0..48000)
+            .map(|k| {
+                let t = k as f64 / fs;
+                (-1.5 * t).exp() * (2.0 * PI * f * t + 0.3).sin()
+            })
+            .collect();
         let est = peak_frequency(&x, fs, 500.0, 550.0);
         let cents = 1200.0 * (est / f).log2();
         assert!(cents.abs() < 0.01, "estimate {est} ({cents} cents)");
@@ -207,9 +229,18 @@ mod tests {
     #[test]
     fn beating_depth_separates_beats_from_smooth_decay() {
         let t: Vec<f64> = (0..200).map(|k| k as f64 * 0.02).collect();
-        let smooth: Vec<f64> = t.iter().map(|&t| (-2.0 * t).exp() + 0.1 * (-0.3 * t).exp()).collect();
-        let beating: Vec<f64> = t.iter().map(|&t| (-0.5 * t).exp() * (1.0 + 0.8 * (2.0 * PI * 1.3 * t).cos()).abs()).collect();
-        let (s, b) = (beating_depth_db(&t, &smooth), beating_depth_db(&t, &beating));
+        let smooth: Vec<f64> = t
+            .iter()
+            .map(|&t| (-2.0 * t).exp() + 0.1 * (-0.3 * t).exp())
+            .collect();
+        let beating: Vec<f64> = t
+            .iter()
+            .map(|&t| (-0.5 * t).exp() * (1.0 + 0.8 * (2.0 * PI * 1.3 * t).cos()).abs())
+            .collect();
+        let (s, b) = (
+            beating_depth_db(&t, &smooth),
+            beating_depth_db(&t, &beating),
+        );
         assert!(s < 0.5 && b > 3.0, "smooth {s} dB, beating {b} dB");
     }
 }

@@ -10,7 +10,11 @@ use unacorda::preset::Preset;
 use unacorda::render::simulate;
 
 #[derive(Parser)]
-#[command(name = "unacorda", version, about = "Physical-modelling piano: the una-corda effect")]
+#[command(
+    name = "unacorda",
+    version,
+    about = "Physical-modelling piano: the una-corda effect"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -30,10 +34,23 @@ enum Command {
         #[arg(long)]
         una_corda: bool,
         /// Hammer speed at the strings (m/s), 0.01–10; default: the preset's.
-        #[arg(long, value_name = "M/S", allow_negative_numbers = true)]
+        #[arg(
+            long,
+            value_name = "M/S",
+            allow_negative_numbers = true,
+            conflicts_with = "midi_velocity"
+        )]
         velocity: Option<f64>,
+        /// Hammer speed from a MIDI velocity 1–127 (0.5–6 m/s, exponential curve).
+        #[arg(long, value_name = "1-127")]
+        midi_velocity: Option<u8>,
         /// Length of the render (s), 0.001–600.
-        #[arg(long, default_value_t = 4.0, value_name = "S", allow_negative_numbers = true)]
+        #[arg(
+            long,
+            default_value_t = 4.0,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
         seconds: f64,
         /// Output WAV file.
         #[arg(long)]
@@ -88,6 +105,7 @@ fn run(cli: Cli) -> Result<()> {
             preset,
             una_corda,
             velocity,
+            midi_velocity,
             seconds,
             out,
         } => {
@@ -98,17 +116,32 @@ fn run(cli: Cli) -> Result<()> {
                 bail!("--seconds {seconds}: expected a duration in [0.001, 600] s");
             }
             let loaded = Preset::resolve(&preset)?;
-            let velocity_m_s = velocity.unwrap_or(loaded.preset.hammer.velocity_m_s);
+            let velocity_m_s = match (velocity, midi_velocity) {
+                (_, Some(v)) => unacorda::midi::hammer_speed_m_s(v)
+                    .with_context(|| format!("--midi-velocity {v}: expected 1–127"))?,
+                (Some(v), None) => v,
+                (None, None) => loaded.preset.hammer.velocity_m_s,
+            };
             if !(0.01..=10.0).contains(&velocity_m_s) {
                 bail!("--velocity {velocity_m_s}: expected a hammer speed in [0.01, 10] m/s");
             }
             let pb = progress_bar(seconds, "rendering");
-            let rec = simulate(&loaded, Strike { velocity_m_s, una_corda }, seconds, |f| {
-                pb.set_position((f * 1000.0) as u64)
-            })?;
+            let rec = simulate(
+                &loaded,
+                Strike {
+                    velocity_m_s,
+                    una_corda,
+                },
+                seconds,
+                |f| pb.set_position((f * 1000.0) as u64),
+            )?;
             pb.finish_and_clear();
             let full_scale = loaded.preset.radiation.full_scale_pa;
-            let samples: Vec<f32> = rec.frames.iter().map(|f| (f.pressure_pa / full_scale) as f32).collect();
+            let samples: Vec<f32> = rec
+                .frames
+                .iter()
+                .map(|f| (f.pressure_pa / full_scale) as f32)
+                .collect();
             let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
             unacorda::audio::wav::write_f32(&out, rec.rate_hz as u32, &samples)
                 .with_context(|| format!("writing {}", out.display()))?;
@@ -130,24 +163,32 @@ fn run(cli: Cli) -> Result<()> {
                 bail!("--seconds {seconds}: expected a duration in [0.1, 20] s");
             }
             let loaded = Preset::resolve(&preset)?;
-            std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+            std::fs::create_dir_all(&out_dir)
+                .with_context(|| format!("creating {}", out_dir.display()))?;
             let v = loaded.preset.hammer.velocity_m_s;
             // The two cases are independent: simulate them on two threads.
             let bars = MultiProgress::new();
             let [una_corda, normal] = std::thread::scope(|scope| {
-                [true, false].map(|una_corda| {
-                    let label = if una_corda { "una corda" } else { "normal" };
-                    let pb = bars.add(progress_bar(seconds, label));
-                    let loaded = &loaded;
-                    scope.spawn(move || {
-                        let rec = simulate(loaded, Strike { velocity_m_s: v, una_corda }, seconds, |f| {
-                            pb.set_position((f * 1000.0) as u64)
-                        });
-                        pb.finish_and_clear();
-                        rec
+                [true, false]
+                    .map(|una_corda| {
+                        let label = if una_corda { "una corda" } else { "normal" };
+                        let pb = bars.add(progress_bar(seconds, label));
+                        let loaded = &loaded;
+                        scope.spawn(move || {
+                            let rec = simulate(
+                                loaded,
+                                Strike {
+                                    velocity_m_s: v,
+                                    una_corda,
+                                },
+                                seconds,
+                                |f| pb.set_position((f * 1000.0) as u64),
+                            );
+                            pb.finish_and_clear();
+                            rec
+                        })
                     })
-                })
-                .map(|h| h.join().expect("simulation thread"))
+                    .map(|h| h.join().expect("simulation thread"))
             });
             let runs = [una_corda?, normal?];
             let written = unacorda::analysis::figures::write_all(&out_dir, &runs[0], &runs[1])?;

@@ -64,7 +64,10 @@ mod tests {
                 })
                 .sum();
             let exact = c[m * n + k];
-            assert!((q - exact).abs() <= 1e-6 * exact.abs().max(1e-3), "({m},{k}) {q} vs {exact}");
+            assert!(
+                (q - exact).abs() <= 1e-6 * exact.abs().max(1e-3),
+                "({m},{k}) {q} vs {exact}"
+            );
         }
     }
 }

@@ -91,7 +91,8 @@ impl PlateParams {
         let (a, b) = (self.width_m, self.length_m);
         let (km, kn) = (m as f64 / a, n as f64 / b);
         let rho_h = self.density_kg_m3 * self.thickness_m;
-        let w2 = PI.powi(4) / rho_h * (d1 * km.powi(4) + 2.0 * h * km * km * kn * kn + d2 * kn.powi(4));
+        let w2 =
+            PI.powi(4) / rho_h * (d1 * km.powi(4) + 2.0 * h * km * km * kn * kn + d2 * kn.powi(4));
         w2.sqrt() / (2.0 * PI)
     }
 
@@ -158,7 +159,12 @@ impl PlateParams {
 /// The paper's reduction (§2.2): in each 1/12-octave band from `f_min_hz` to `f_max_hz` and in each
 /// direction, keep the mode whose driving-point peak `phi_d^2 / (2 zeta omega)` at `point` is the
 /// largest. Modes chosen in several directions are kept once.
-pub fn reduce(full: &SoundboardModes, point: &str, f_min_hz: f64, f_max_hz: f64) -> SoundboardModes {
+pub fn reduce(
+    full: &SoundboardModes,
+    point: &str,
+    f_min_hz: f64,
+    f_max_hz: f64,
+) -> SoundboardModes {
     let p = full.point(point).expect("reduction point exists");
     let n_bands = (12.0 * (f_max_hz / f_min_hz).log2()).ceil() as usize;
     let mut keep = vec![false; full.len()];
@@ -169,7 +175,9 @@ pub fn reduce(full: &SoundboardModes, point: &str, f_min_hz: f64, f_max_hz: f64)
             let best = (0..full.len())
                 .filter(|&k| full.freq_hz[k] >= lo && full.freq_hz[k] < hi)
                 .max_by(|&i, &j| {
-                    let peak = |k: usize| p.shape[d][k].powi(2) / (full.damping_ratio[k] * full.freq_hz[k]);
+                    let peak = |k: usize| {
+                        p.shape[d][k].powi(2) / (full.damping_ratio[k] * full.freq_hz[k])
+                    };
                     peak(i).total_cmp(&peak(j))
                 });
             if let Some(k) = best {
@@ -177,7 +185,13 @@ pub fn reduce(full: &SoundboardModes, point: &str, f_min_hz: f64, f_max_hz: f64)
             }
         }
     }
-    let pick = |v: &Vec<f64>| -> Vec<f64> { v.iter().zip(&keep).filter(|(_, &k)| k).map(|(x, _)| *x).collect() };
+    let pick = |v: &Vec<f64>| -> Vec<f64> {
+        v.iter()
+            .zip(&keep)
+            .filter(|(_, &k)| k)
+            .map(|(x, _)| *x)
+            .collect()
+    };
     SoundboardModes {
         freq_hz: pick(&full.freq_hz),
         damping_ratio: pick(&full.damping_ratio),
@@ -196,7 +210,12 @@ pub fn reduce(full: &SoundboardModes, point: &str, f_min_hz: f64, f_max_hz: f64)
 /// Generate the reduced asset text for `params`, with a header saying how it was made.
 pub fn generate_asset(params: &PlateParams, command: &str) -> (SoundboardModes, String) {
     let full = params.all_modes();
-    let reduced = reduce(&full.modes, &params.points[0].0, params.f_min_hz, params.f_max_hz);
+    let reduced = reduce(
+        &full.modes,
+        &params.points[0].0,
+        params.f_min_hz,
+        params.f_max_hz,
+    );
     let header = vec![
         "unacorda reduced soundboard model (DESIGN.md §1.3, format in src/engine/soundboard.rs)".to_string(),
         format!("regenerate with: {command}"),

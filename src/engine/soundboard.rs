@@ -82,7 +82,10 @@ impl SoundboardModes {
         for k in 0..self.len() {
             let wk = 2.0 * PI * self.freq_hz[k];
             // i w / (wk^2 - w^2 + 2 i zeta wk w)
-            let (re_d, im_d) = (wk * wk - omega * omega, 2.0 * self.damping_ratio[k] * wk * omega);
+            let (re_d, im_d) = (
+                wk * wk - omega * omega,
+                2.0 * self.damping_ratio[k] * wk * omega,
+            );
             let den = re_d * re_d + im_d * im_d;
             let (re, im) = (omega * im_d / den, omega * re_d / den);
             for i in 0..3 {
@@ -126,14 +129,20 @@ impl SoundboardModes {
                 if v.trim() != FORMAT_TAG {
                     return Err(syntax(
                         line_no,
-                        format!("field `format`: expected `{FORMAT_TAG}`, got `{}`", v.trim()),
+                        format!(
+                            "field `format`: expected `{FORMAT_TAG}`, got `{}`",
+                            v.trim()
+                        ),
                     ));
                 }
                 format_seen = true;
             } else if let Some(v) = line.strip_prefix("points:") {
                 let names: Vec<String> = v.split_whitespace().map(str::to_owned).collect();
                 if names.is_empty() {
-                    return Err(syntax(line_no, "field `points`: no bridge point named".into()));
+                    return Err(syntax(
+                        line_no,
+                        "field `points`: no bridge point named".into(),
+                    ));
                 }
                 points = Some(names);
             } else if let Some(v) = line.strip_prefix("columns:") {
@@ -161,7 +170,10 @@ impl SoundboardModes {
                     ));
                 }
                 let Some(cols) = &columns else {
-                    return Err(syntax(line_no, "mode row before the `columns:` header".into()));
+                    return Err(syntax(
+                        line_no,
+                        "mode row before the `columns:` header".into(),
+                    ));
                 };
                 let fields: Vec<&str> = line.split_whitespace().collect();
                 if fields.len() != cols.len() {
@@ -179,14 +191,20 @@ impl SoundboardModes {
                         )
                     })?;
                     let (ok, range) = match c {
-                        0 => (value.is_finite() && value > 0.0, "a finite frequency > 0 Hz"),
+                        0 => (
+                            value.is_finite() && value > 0.0,
+                            "a finite frequency > 0 Hz",
+                        ),
                         1 => ((0.0..1.0).contains(&value), "a damping ratio in [0, 1)"),
                         _ => (value.is_finite(), "a finite number"),
                     };
                     if !ok {
                         return Err(syntax(
                             line_no,
-                            format!("field `{name}` (column {}): expected {range}, got {s}", c + 1),
+                            format!(
+                                "field `{name}` (column {}): expected {range}, got {s}",
+                                c + 1
+                            ),
                         ));
                     }
                     row.push(value);
@@ -199,7 +217,9 @@ impl SoundboardModes {
             message: message.to_owned(),
         };
         if !format_seen {
-            return Err(content("missing header line `format: unacorda-soundboard-modes 1`"));
+            return Err(content(
+                "missing header line `format: unacorda-soundboard-modes 1`",
+            ));
         }
         let names = points.ok_or_else(|| content("missing header line `points:`"))?;
         if columns.is_none() {

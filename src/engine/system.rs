@@ -180,10 +180,18 @@ impl Unison {
         for (s, string) in spec.strings.iter().enumerate() {
             let base = s * per_string;
             // Flat layout [T | P | L]; direction index d is T = 0, L = 1, P = 2.
-            ranges[s] = [base..base + nt, base + nt + np..base + per_string, base + nt..base + nt + np];
+            ranges[s] = [
+                base..base + nt,
+                base + nt + np..base + per_string,
+                base + nt..base + nt + np,
+            ];
             let ls = string.speaking_length_m;
-            let fill = |range: &Range<usize>, zeta: f64, omega: &dyn Fn(usize) -> f64,
-                        omega2: &mut [f64], damp: &mut [f64], shape: &mut [f64]| {
+            let fill = |range: &Range<usize>,
+                        zeta: f64,
+                        omega: &dyn Fn(usize) -> f64,
+                        omega2: &mut [f64],
+                        damp: &mut [f64],
+                        shape: &mut [f64]| {
                 for (k, i) in range.clone().enumerate() {
                     let w = omega(k + 1);
                     omega2[i] = w * w;
@@ -193,9 +201,30 @@ impl Unison {
             };
             let t = |k| string.transverse_omega(k);
             let l = |k| string.longitudinal_omega(k);
-            fill(&ranges[s][0], spec.modes.damping_ratio_t, &t, &mut omega2, &mut damp, &mut bridge_shape);
-            fill(&ranges[s][2], spec.modes.damping_ratio_p, &t, &mut omega2, &mut damp, &mut bridge_shape);
-            fill(&ranges[s][1], spec.modes.damping_ratio_l, &l, &mut omega2, &mut damp, &mut bridge_shape);
+            fill(
+                &ranges[s][0],
+                spec.modes.damping_ratio_t,
+                &t,
+                &mut omega2,
+                &mut damp,
+                &mut bridge_shape,
+            );
+            fill(
+                &ranges[s][2],
+                spec.modes.damping_ratio_p,
+                &t,
+                &mut omega2,
+                &mut damp,
+                &mut bridge_shape,
+            );
+            fill(
+                &ranges[s][1],
+                spec.modes.damping_ratio_l,
+                &l,
+                &mut omega2,
+                &mut damp,
+                &mut bridge_shape,
+            );
         }
         let board = ns * per_string..n;
         for (k, i) in board.clone().enumerate() {
@@ -218,7 +247,12 @@ impl Unison {
         // The stiffest coupled mode: a string's bridge point on its contact spring, with the
         // effective point mass of the retained modes, 1 / sum psi_n(L_s)^2 (DESIGN.md §5).
         let inv_mass: f64 = ranges[0][0].clone().map(|i| bridge_shape[i].powi(2)).sum();
-        let k_max = spec.contact.stiffness_n_m.iter().copied().fold(0.0, f64::max);
+        let k_max = spec
+            .contact
+            .stiffness_n_m
+            .iter()
+            .copied()
+            .fold(0.0, f64::max);
         let w_contact = (k_max * inv_mass + omega2.iter().copied().fold(0.0, f64::max)).sqrt();
         let omega_h = w_contact * h;
         if omega_h > 2.78 {
@@ -311,7 +345,11 @@ impl Unison {
     /// their current displacement and moves towards them at `velocity_m_s`.
     pub fn strike(&mut self, strike: Strike) {
         let ns = self.model.n_strings;
-        let n_struck = if strike.una_corda && ns > 1 { ns - 1 } else { ns };
+        let n_struck = if strike.una_corda && ns > 1 {
+            ns - 1
+        } else {
+            ns
+        };
         self.struck = [false; MAX_STRINGS];
         let mut contact_y = f64::NEG_INFINITY;
         for s in 0..n_struck {
@@ -397,7 +435,10 @@ impl Unison {
         }
         for s in 0..self.model.n_strings {
             if self.struck[s] {
-                let ye = dot(&self.model.hammer_shape, &self.q[self.model.ranges[s][0].clone()]);
+                let ye = dot(
+                    &self.model.hammer_shape,
+                    &self.q[self.model.ranges[s][0].clone()],
+                );
                 if ye - self.hammer_y < self.model.hammer.release_gap_m {
                     return;
                 }
@@ -409,7 +450,15 @@ impl Unison {
     /// Forces, bridge velocity and volume velocity at the current state (Eq. 19).
     pub fn observe(&self) -> Observation {
         let mut obs = Observation::default();
-        evaluate_outputs(&self.model, &self.struck, self.hammer_on, &self.q, &self.v, self.hammer_y, &mut obs);
+        evaluate_outputs(
+            &self.model,
+            &self.struck,
+            self.hammer_on,
+            &self.q,
+            &self.v,
+            self.hammer_y,
+            &mut obs,
+        );
         obs
     }
 
@@ -417,7 +466,8 @@ impl Unison {
     pub fn energy(&self) -> Energy {
         let m = &self.model;
         let modal = |r: Range<usize>| -> f64 {
-            r.map(|i| 0.5 * (self.v[i] * self.v[i] + m.omega2[i] * self.q[i] * self.q[i])).sum()
+            r.map(|i| 0.5 * (self.v[i] * self.v[i] + m.omega2[i] * self.q[i] * self.q[i]))
+                .sum()
         };
         let ns = m.n_strings;
         let strings_j = modal(0..m.board.start);
@@ -482,16 +532,14 @@ fn evaluate(
             let r = m.ranges[s][d].clone();
             let shape = &m.bridge_shape[r.clone()];
             let (rs, rs_dot) = dot2(shape, &q[r.clone()], &v[r.clone()]);
-            let f = m.contact.stiffness_n_m[d] * (rs - rb[d]) + m.contact.damping_n_s_m[d] * (rs_dot - rb_dot[d]);
+            let f = m.contact.stiffness_n_m[d] * (rs - rb[d])
+                + m.contact.damping_n_s_m[d] * (rs_dot - rb_dot[d]);
             total[d] += f;
             axpy(&mut acc[r], shape, -f);
         }
-        // Duplex damping on both transverse polarisations (Eq. 13).
-        for d in [0, 2] {
-            let r = m.ranges[s][d].clone();
-            sym_matvec_sub(&m.duplex, m.duplex_n, &v[r.clone()], &mut acc[r]);
-        }
     }
+    // Duplex damping on both transverse polarisations of every string (Eq. 13).
+    duplex_damping(m, v, acc);
     // The board receives the sum of the strings' forces (Eq. 17).
     let ab = &mut acc[m.board.clone()];
     for d in 0..3 {
@@ -568,7 +616,10 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     let (a, b) = (&a[..n], &b[..n]);
     let mut lanes = [0.0; LANES];
     let split = n - n % LANES;
-    for (ca, cb) in a[..split].chunks_exact(LANES).zip(b[..split].chunks_exact(LANES)) {
+    for (ca, cb) in a[..split]
+        .chunks_exact(LANES)
+        .zip(b[..split].chunks_exact(LANES))
+    {
         for l in 0..LANES {
             lanes[l] += ca[l] * cb[l];
         }
@@ -594,11 +645,73 @@ fn axpy(y: &mut [f64], x: &[f64], alpha: f64) {
     }
 }
 
-/// `y -= C x` for the leading `x.len()` block of the symmetric `n × n` matrix `C`.
+/// `acc -= C_d v` on the T and P blocks of every string (Eq. 13). All blocks share the matrix, so
+/// when they have the same length each row of `C_d` is loaded once for all of them.
 #[inline(always)]
-fn sym_matvec_sub(c: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
-    let k = x.len();
-    for (i, yi) in y.iter_mut().enumerate().take(k) {
-        *yi -= dot(&c[i * n..i * n + k], x);
+fn duplex_damping(m: &Model, v: &[f64], acc: &mut [f64]) {
+    let starts = |d: usize| (0..m.n_strings).map(move |s| m.ranges[s][d].start);
+    let (nt, np) = (m.ranges[0][0].len(), m.ranges[0][2].len());
+    if nt == np {
+        let mut offsets = [0; 2 * MAX_STRINGS];
+        for (o, start) in offsets.iter_mut().zip(starts(0).chain(starts(2))) {
+            *o = start;
+        }
+        match m.n_strings {
+            1 => duplex_rows::<2>(
+                &m.duplex,
+                m.duplex_n,
+                nt,
+                v,
+                offsets[..2].try_into().unwrap(),
+                acc,
+            ),
+            2 => duplex_rows::<4>(
+                &m.duplex,
+                m.duplex_n,
+                nt,
+                v,
+                offsets[..4].try_into().unwrap(),
+                acc,
+            ),
+            _ => duplex_rows::<6>(&m.duplex, m.duplex_n, nt, v, offsets, acc),
+        }
+    } else {
+        for (start, len) in starts(0).map(|o| (o, nt)).chain(starts(2).map(|o| (o, np))) {
+            duplex_rows::<1>(&m.duplex, m.duplex_n, len, v, [start], acc);
+        }
+    }
+}
+
+/// For `K` blocks of length `len` starting at `offsets`: `acc[block] -= C[..len, ..len] v[block]`,
+/// with `C` symmetric `n × n`, row by row, the row shared by the `K` dot products.
+#[inline(always)]
+fn duplex_rows<const K: usize>(
+    c: &[f64],
+    n: usize,
+    len: usize,
+    v: &[f64],
+    offsets: [usize; K],
+    acc: &mut [f64],
+) {
+    let split = len - len % LANES;
+    for i in 0..len {
+        let row = &c[i * n..i * n + len];
+        let mut lanes = [[0.0; LANES]; K];
+        for j in (0..split).step_by(LANES) {
+            let cr = &row[j..j + LANES];
+            for k in 0..K {
+                let x = &v[offsets[k] + j..offsets[k] + j + LANES];
+                for l in 0..LANES {
+                    lanes[k][l] += cr[l] * x[l];
+                }
+            }
+        }
+        for k in 0..K {
+            let mut sum = (lanes[k][0] + lanes[k][2]) + (lanes[k][1] + lanes[k][3]);
+            for j in split..len {
+                sum += row[j] * v[offsets[k] + j];
+            }
+            acc[offsets[k] + i] -= sum;
+        }
     }
 }
