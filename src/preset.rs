@@ -6,6 +6,7 @@
 
 use crate::engine::contact::{hertz_stiffness_n_m, Contact};
 use crate::engine::hammer::HammerParams;
+use crate::engine::plate::BoardSpec;
 use crate::engine::soundboard::{AssetError, SoundboardModes};
 use crate::engine::string::{ModeSet, StringParams};
 use crate::engine::system::UnisonSpec;
@@ -17,9 +18,29 @@ const BUILTIN_PRESETS: &[(&str, &str)] = &[("c2", include_str!("../presets/c2.to
 
 /// Built-in soundboard assets, by name.
 const BUILTIN_ASSETS: &[(&str, &str)] = &[(
-    "plate_ss",
-    include_str!("../assets/soundboard_modes/plate_ss.txt"),
+    "grand",
+    include_str!("../assets/soundboard_modes/grand.txt"),
 )];
+
+/// The built-in board description that `grand.txt` is generated from.
+pub const GRAND_BOARD_TOML: &str = include_str!("../assets/soundboard_modes/grand.toml");
+
+/// Read a soundboard description (the generator's input).
+pub fn load_board_spec(path: &Path) -> Result<BoardSpec, PresetError> {
+    let text = std::fs::read_to_string(path).map_err(|source| PresetError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    parse_board_spec(&text, path)
+}
+
+/// Parse a soundboard description; `path` names it in errors.
+pub fn parse_board_spec(text: &str, path: &Path) -> Result<BoardSpec, PresetError> {
+    toml::from_str(text).map_err(|e| PresetError::Parse {
+        path: path.to_owned(),
+        message: e.to_string().trim_end().to_owned(),
+    })
+}
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]

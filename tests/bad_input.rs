@@ -27,11 +27,11 @@ fn preset_error(name: &str) -> String {
 #[test]
 fn malformed_assets_are_rejected_with_file_line_and_field() {
     let e = asset_error("bad_asset_columns.txt");
-    assert!(e.contains("bad_asset_columns.txt:10:") && e.contains("expected 6 columns, found 5"));
+    assert!(e.contains("bad_asset_columns.txt:6:") && e.contains("expected 6 columns, found 5"));
     let e = asset_error("bad_asset_nan.txt");
-    assert!(e.contains("bad_asset_nan.txt:11:") && e.contains("`T@C2`") && e.contains("finite"));
+    assert!(e.contains("bad_asset_nan.txt:7:") && e.contains("`T@C2`") && e.contains("finite"));
     let e = asset_error("bad_asset_zeta.txt");
-    assert!(e.contains(":10:") && e.contains("`zeta`") && e.contains("[0, 1)"));
+    assert!(e.contains("bad_asset_zeta.txt:6:") && e.contains("`zeta`") && e.contains("[0, 1)"));
     let e = asset_error("bad_asset_no_modes.txt");
     assert!(e.contains("bad_asset_no_modes.txt") && e.contains("no modes"));
     let e = asset_error("does_not_exist.txt");
@@ -44,16 +44,16 @@ fn malformed_presets_are_rejected_with_field_and_range() {
     assert!(
         e.contains("bad_preset_unknown_field.toml")
             && e.contains("felt_colour")
-            && e.contains("line 49")
+            && e.contains("line 50")
     );
     let e = preset_error("bad_preset_missing_field.toml");
     assert!(e.contains("missing field `mass_kg`"));
     let e = preset_error("bad_preset_range.toml");
-    assert!(e.contains("`strings.tension_n` = -724.1") && e.contains("[1e1, 5e3]"));
+    assert!(e.contains("`strings.tension_n` = -747.8") && e.contains("[1e1, 5e3]"));
     let e = preset_error("bad_preset_asset.toml");
-    assert!(e.contains("bad_asset_nan.txt:11:"));
+    assert!(e.contains("bad_asset_nan.txt:7:"));
     let e = preset_error("bad_preset_point.toml");
-    assert!(e.contains("`soundboard.bridge_point` = `C9`") && e.contains("points C2"));
+    assert!(e.contains("`soundboard.bridge_point` = `C9`") && e.contains("has points A0, Bb0"));
     let e = Preset::resolve("c3").unwrap_err().to_string();
     println!("c3: {e}");
     assert!(e.contains("unknown preset `c3`") && e.contains("c2"));

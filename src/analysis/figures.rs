@@ -1,10 +1,13 @@
-//! The paper's Figures 3–6, una corda vs normal playing: each as a PNG and the CSV of its data.
+//! The paper's Figures 2–6: the soundboard's mobility (full vs reduced model) and, una corda vs
+//! normal playing, Figures 3–6; each as a PNG and the CSV of its data.
 //!
 //! Figures 4 and 5 span seconds of a signal that oscillates at 65 Hz and up; they are drawn (and
 //! tabulated) as the minimum and maximum of the force in each 5 ms bin, which is what a plot of
 //! every sample shows.
 
+use super::mobility::{mobility_curves, TERM_NAMES};
 use super::spectral::spectrogram;
+use crate::engine::soundboard::SoundboardModes;
 use crate::engine::DIRECTIONS;
 use crate::render::Recording;
 use plotters::coord::Shift;
@@ -41,6 +44,98 @@ fn register_font() {
         plotters::style::register_font(FONT, FontStyle::Normal, bytes)
             .unwrap_or_else(|_| panic!("bundled font is a valid TTF"));
     });
+}
+
+/// Figure 2: the six distinct terms of the 3×3 driving-point mobility at `point`, full model
+/// (every mode below f_max) vs the reduced one, 20–7000 Hz, log-log.
+pub fn figure2(
+    dir: &Path,
+    full: &SoundboardModes,
+    reduced: &SoundboardModes,
+    point: &str,
+) -> Result<Vec<PathBuf>, FigureError> {
+    register_font();
+    let png = dir.join("fig2_mobility.png");
+    let missing = || FigureError::Plot {
+        path: png.clone(),
+        message: format!("bridge point {point} is not in the soundboard model"),
+    };
+    let cf = mobility_curves(
+        full,
+        full.point(point).ok_or_else(missing)?,
+        20.0,
+        7000.0,
+        1200,
+    );
+    let cr = mobility_curves(
+        reduced,
+        reduced.point(point).ok_or_else(missing)?,
+        20.0,
+        7000.0,
+        1200,
+    );
+    let mut csv = String::from("freq_hz");
+    for t in TERM_NAMES {
+        let _ = write!(csv, ",{t}_full_m_per_n_s,{t}_reduced_m_per_n_s");
+    }
+    csv.push('\n');
+    for k in 0..cf.freq_hz.len() {
+        let _ = write!(csv, "{:.3}", cf.freq_hz[k]);
+        for t in 0..6 {
+            let _ = write!(
+                csv,
+                ",{:.6e},{:.6e}",
+                cf.magnitude[t][k], cr.magnitude[t][k]
+            );
+        }
+        csv.push('\n');
+    }
+    let draw = || -> Result2<()> {
+        let root = BitMapBackend::new(&png, (1300, 800)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (title, body) = root.split_vertically(40);
+        title.titled(
+            &format!("Fig. 2 — driving-point mobility at {point}: full model ({} modes, blue) vs reduced ({} modes, red)", full.len(), reduced.len()),
+            (FONT, 20),
+        )?;
+        let all = cf
+            .magnitude
+            .iter()
+            .chain(&cr.magnitude)
+            .flatten()
+            .copied()
+            .filter(|v| *v > 0.0);
+        let (lo, hi) = all.fold((f64::INFINITY, 0f64), |(a, b), v| (a.min(v), b.max(v)));
+        let y_range = (lo.max(hi * 1e-6) * 0.5)..(hi * 2.0);
+        for (t, panel) in body.split_evenly((2, 3)).iter().enumerate() {
+            let mut chart = ChartBuilder::on(panel)
+                .caption(format!("|Y_{}|", TERM_NAMES[t]), (FONT, 16))
+                .margin(8)
+                .x_label_area_size(35)
+                .y_label_area_size(65)
+                .build_cartesian_2d((20.0..7000.0).log_scale(), y_range.clone().log_scale())?;
+            chart
+                .configure_mesh()
+                .x_desc("frequency (Hz)")
+                .y_desc("m/(N s)")
+                .y_label_formatter(&|v| format!("{v:.0e}"))
+                .label_style((FONT, 12))
+                .draw()?;
+            for (curves, color) in [(&cf, COLORS[0]), (&cr, COLORS[2])] {
+                let pts = curves
+                    .freq_hz
+                    .iter()
+                    .zip(&curves.magnitude[t])
+                    .filter(|(_, m)| **m > 0.0)
+                    .map(|(f, m)| (*f, *m));
+                chart.draw_series(LineSeries::new(pts, color.stroke_width(1)))?;
+            }
+        }
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(plot_err(&png))?;
+    Ok(vec![png, write_text(dir.join("fig2_mobility.csv"), &csv)?])
 }
 
 /// Write Figures 3–6 into `dir`; returns the files written.

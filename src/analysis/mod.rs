@@ -1,4 +1,5 @@
 //! Signal analysis for tests and figures: spectra, partial tracking, envelopes.
 
 pub mod figures;
+pub mod mobility;
 pub mod spectral;

@@ -3,10 +3,11 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
-use std::path::PathBuf;
-use unacorda::engine::plate::{generate_asset, PlateParams};
+use std::path::{Path, PathBuf};
+use unacorda::engine::plate::generate_asset;
 use unacorda::engine::Strike;
 use unacorda::preset::Preset;
+use unacorda::preset::GRAND_BOARD_TOML;
 use unacorda::render::simulate;
 
 #[derive(Parser)]
@@ -56,19 +57,26 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Regenerate the paper's Figures 3–6 (PNG + CSV) for a preset, una corda vs normal.
+    /// Regenerate the paper's Figures 2–6 (PNG + CSV): the board's mobility, full vs reduced, and
+    /// a preset struck una corda vs normal.
     Figures {
         #[arg(long, default_value = "figures")]
         out_dir: PathBuf,
+        /// Board description for Figure 2 (default: the built-in grand board of the c2 preset).
+        #[arg(long)]
+        board: Option<PathBuf>,
         #[arg(long, default_value = "c2")]
         preset: String,
         /// Simulated length of each case (s), 0.1–20; the paper's spectrograms span 4 s.
         #[arg(long, default_value_t = 4.0, allow_negative_numbers = true)]
         seconds: f64,
     },
-    /// Generate the reduced soundboard asset (simply-supported orthotropic plate, Table 1).
+    /// Generate a reduced soundboard asset from a board description (TOML): clamped, ribbed
+    /// orthotropic plate with bridges, all modes below f_max, reduced by the paper's rule.
     Soundboard {
-        #[arg(long, default_value = "assets/soundboard_modes/plate_ss.txt")]
+        #[arg(long, default_value = "assets/soundboard_modes/grand.toml")]
+        input: PathBuf,
+        #[arg(long, default_value = "assets/soundboard_modes/grand.txt")]
         out: PathBuf,
     },
 }
@@ -156,6 +164,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Figures {
             out_dir,
+            board,
             preset,
             seconds,
         } => {
@@ -191,16 +200,45 @@ fn run(cli: Cli) -> Result<()> {
                     .map(|h| h.join().expect("simulation thread"))
             });
             let runs = [una_corda?, normal?];
-            let written = unacorda::analysis::figures::write_all(&out_dir, &runs[0], &runs[1])?;
+            let spec = match &board {
+                Some(path) => unacorda::preset::load_board_spec(path)?,
+                None => unacorda::preset::parse_board_spec(
+                    GRAND_BOARD_TOML,
+                    Path::new("assets/soundboard_modes/grand.toml"),
+                )?,
+            };
+            let (solved, reduced, _) = generate_asset(&spec, "")?;
+            let mut written = unacorda::analysis::figures::figure2(
+                &out_dir,
+                &solved.modes,
+                &reduced,
+                &loaded.preset.soundboard.bridge_point,
+            )?;
+            written.extend(unacorda::analysis::figures::write_all(
+                &out_dir, &runs[0], &runs[1],
+            )?);
             for w in written {
                 eprintln!("wrote {}", w.display());
             }
         }
-        Command::Soundboard { out } => {
-            let command = format!("cargo run --release -- soundboard --out {}", out.display());
-            let (reduced, text) = generate_asset(&PlateParams::default(), &command);
+        Command::Soundboard { input, out } => {
+            let spec = unacorda::preset::load_board_spec(&input)?;
+            let command = format!(
+                "cargo run --release -- soundboard --input {} --out {}",
+                input.display(),
+                out.display()
+            );
+            let (solved, reduced, text) =
+                generate_asset(&spec, &command).with_context(|| format!("{}", input.display()))?;
             std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
-            eprintln!("wrote {} ({} modes)", out.display(), reduced.len());
+            eprintln!(
+                "wrote {}: {} modes below {} Hz reduced to {} at {} keys",
+                out.display(),
+                solved.modes.len(),
+                spec.reduction.f_max_hz,
+                reduced.len(),
+                solved.keys.len()
+            );
         }
     }
     Ok(())
