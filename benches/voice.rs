@@ -1,4 +1,4 @@
-//! Real-time factor of one paper-faithful c2 voice (2 strings × 205 modes, 146 board modes, dense
+//! Real-time factor of one paper-faithful c2 voice (2 strings × 205 modes, 130 board modes, dense
 //! duplex damping, RK4 at 96 kHz). Throughput is reported in output samples (48 kHz) per second:
 //! the real-time factor is that figure divided by 48 000.
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Render the una-corda demo on a fresh machine: two WAVs (normal, una corda) and the paper's
-# Figures 3–6, into ./demo-out. Needs only a Rust toolchain (rustup's default profile).
+# Figures 2–6, into ./demo-out. Needs only a Rust toolchain (rustup's default profile).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=demo-out

@@ -1,7 +1,7 @@
 //! Preset files (TOML): every parameter of a note, with units in the field names.
 //!
 //! Unknown fields, missing fields and out-of-range values are errors that name the file, the field
-//! and the allowed range. A preset names its soundboard asset either as a built-in (`plate_ss`) or
+//! and the allowed range. A preset names its soundboard asset either as a built-in (`grand`) or
 //! as a path relative to the preset file.
 
 use crate::engine::contact::{hertz_stiffness_n_m, Contact};
