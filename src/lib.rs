@@ -7,7 +7,7 @@
 //! - [`render`]: strikes to frames at the output rate,
 //! - [`analysis`]: spectra, envelopes and the paper's figures,
 //! - [`audio`]: decimation and WAV output,
-//! - [`midi`]: MIDI-facing mappings (the velocity curve).
+//! - [`midi`]: MIDI input — live byte parser, MIDI files, mapping to piano events.
 
 // Index loops mirror the equations' indices (modes k, directions d, strings s) across parallel
 // arrays; iterator chains over three or four of them read worse.
