@@ -5,6 +5,7 @@
 //! - [`engine`]: the physics (pure, no I/O),
 //! - [`preset`]: parameter files,
 //! - [`render`]: strikes to frames at the output rate,
+//! - [`scaling`]: every key of the keyboard from a few anchor keys,
 //! - [`analysis`]: spectra, envelopes and the paper's figures,
 //! - [`audio`]: decimation and WAV output,
 //! - [`midi`]: MIDI input — live byte parser, MIDI files, mapping to piano events.
@@ -19,3 +20,4 @@ pub mod engine;
 pub mod midi;
 pub mod preset;
 pub mod render;
+pub mod scaling;

@@ -42,7 +42,7 @@ pub fn parse_board_spec(text: &str, path: &Path) -> Result<BoardSpec, PresetErro
     })
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Preset {
     pub name: String,
@@ -54,7 +54,7 @@ pub struct Preset {
     pub radiation: RadiationSection,
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StringsSection {
     pub count: usize,
@@ -77,7 +77,7 @@ pub struct StringsSection {
     pub duplex_damping_n_s_m2: f64,
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HammerSection {
     pub mass_kg: f64,
@@ -88,7 +88,7 @@ pub struct HammerSection {
     pub release_gap_m: f64,
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ContactSection {
     pub length_m: f64,
@@ -99,21 +99,21 @@ pub struct ContactSection {
     pub damping_n_s_m: [f64; 3],
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SoundboardSection {
     pub asset: String,
     pub bridge_point: String,
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SimulationSection {
     pub output_rate_hz: u32,
     pub min_rate_over_fmax: f64,
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RadiationSection {
     pub distance_m: f64,
@@ -227,7 +227,7 @@ impl Preset {
         })
     }
 
-    fn validate(&self, path: &Path) -> Result<(), PresetError> {
+    pub(crate) fn validate(&self, path: &Path) -> Result<(), PresetError> {
         let range =
             |field: &'static str, value: f64, lo: f64, hi: f64| -> Result<(), PresetError> {
                 if value.is_finite() && value >= lo && value <= hi {

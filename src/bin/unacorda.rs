@@ -9,6 +9,7 @@ use unacorda::engine::Strike;
 use unacorda::preset::Preset;
 use unacorda::preset::GRAND_BOARD_TOML;
 use unacorda::render::simulate;
+use unacorda::scaling::Scaling;
 
 #[derive(Parser)]
 #[command(
@@ -31,6 +32,13 @@ enum Command {
         /// Built-in preset name (c2) or path to a preset .toml file.
         #[arg(long, default_value = "c2")]
         preset: String,
+        /// Render this key of the keyboard scaling instead of the preset: a name (C4, Bb0, F#6)
+        /// or a number 1 (A0) – 88 (C8).
+        #[arg(long)]
+        key: Option<String>,
+        /// Keyboard scaling for --key: built-in name (grand) or path to a .toml file.
+        #[arg(long, default_value = "grand", requires = "key")]
+        keyboard: String,
         /// Soft pedal: the hammer strikes one string of two (two of three).
         #[arg(long)]
         una_corda: bool,
@@ -111,6 +119,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Render {
             offline,
             preset,
+            key,
+            keyboard,
             una_corda,
             velocity,
             midi_velocity,
@@ -123,7 +133,15 @@ fn run(cli: Cli) -> Result<()> {
             if !(0.001..=600.0).contains(&seconds) {
                 bail!("--seconds {seconds}: expected a duration in [0.001, 600] s");
             }
-            let loaded = Preset::resolve(&preset)?;
+            let loaded = match &key {
+                Some(name) => {
+                    let k = unacorda::scaling::parse_key(name).with_context(|| {
+                        format!("--key {name}: expected A0–C8 (e.g. C4, Bb0, F#6) or 1–88")
+                    })?;
+                    Scaling::resolve(&keyboard)?.key_preset(k)?
+                }
+                None => Preset::resolve(&preset)?,
+            };
             let velocity_m_s = match (velocity, midi_velocity) {
                 (_, Some(v)) => unacorda::midi::hammer_speed_m_s(v)
                     .with_context(|| format!("--midi-velocity {v}: expected 1–127"))?,
@@ -154,8 +172,9 @@ fn run(cli: Cli) -> Result<()> {
             unacorda::audio::wav::write_f32(&out, rec.rate_hz as u32, &samples)
                 .with_context(|| format!("writing {}", out.display()))?;
             eprintln!(
-                "wrote {} ({:.2} s at {} Hz, peak {:.1} dBFS, {})",
+                "wrote {} ({}, {:.2} s at {} Hz, peak {:.1} dBFS, {})",
                 out.display(),
+                loaded.preset.name,
                 seconds,
                 rec.rate_hz,
                 20.0 * peak.max(1e-12).log10(),

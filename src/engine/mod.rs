@@ -7,7 +7,8 @@
 //! - [`plate`]: the generator of that asset from an orthotropic plate,
 //! - [`contact`]: the string–bridge contact springs and dampers (Eq. 6–7),
 //! - [`hammer`]: the nonlinear felt hammer (Eq. 8–9),
-//! - [`system`]: the state-space assembly (Eq. 10–19) advanced with classical RK4.
+//! - [`system`]: the state-space assembly (Eq. 10–19) advanced with classical RK4,
+//! - [`tuning`]: the coupled first partial, from the undamped linear system.
 
 pub mod contact;
 pub mod duplex;
@@ -16,6 +17,7 @@ pub mod plate;
 pub mod soundboard;
 pub mod string;
 pub mod system;
+pub mod tuning;
 
 pub use system::{Observation, Strike, Unison};
 

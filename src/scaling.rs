@@ -1,0 +1,309 @@
+//! Keyboard scaling: the strings and hammer of every key A0 (1) … C8 (88) from a few anchor keys.
+//!
+//! A scaling file (TOML, `presets/keyboard.toml`) names a base preset for what does not vary along
+//! the keyboard (damping ratios, contact, soundboard, rates), the string layout (single, bichord,
+//! trichord; wound or plain; muted or free duplex) and anchor keys. Between anchors every quantity
+//! is interpolated linearly in key number on a log scale; the linear density follows the pitch,
+//! `mu = T0 / (2 L_s f_ET)^2`, times a correction exact at the anchors. Each key becomes an ordinary
+//! per-note [`Preset`] bridged at its own point of the soundboard.
+
+use crate::engine::string::StringParams;
+use crate::engine::tuning::bridged_first_partial_hz;
+use crate::preset::{LoadedPreset, Preset, PresetError};
+use serde::Deserialize;
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+
+const BUILTIN: &[(&str, &str)] = &[("grand", include_str!("../presets/keyboard.toml"))];
+
+/// The number of keys.
+pub const KEYS: usize = 88;
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scaling {
+    pub name: String,
+    pub base_preset: String,
+    pub layout: Layout,
+    pub anchors: Vec<Anchor>,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Layout {
+    pub single_until_key: usize,
+    pub bichord_until_key: usize,
+    pub wound_until_key: usize,
+    pub duplex_damped_until_key: usize,
+    pub mistuning_cents: [f64; 3],
+    pub max_mode_freq_hz: f64,
+    pub max_modes_t: usize,
+    pub max_modes_l: usize,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Anchor {
+    pub key: usize,
+    pub speaking_length_m: f64,
+    pub duplex_length_m: f64,
+    pub tension_n: f64,
+    /// The anchor's tension is final (tuned on the coupled system); otherwise the key is tuned
+    /// on its bridge spring like every key between anchors.
+    pub tension_tuned: bool,
+    pub linear_density_kg_m: f64,
+    pub core_diameter_m: f64,
+    pub hammer_mass_kg: f64,
+    pub hammer_stiffness_n_m_p: f64,
+    pub hammer_exponent: f64,
+    pub strike_ratio: f64,
+}
+
+/// A scaling with its base preset resolved.
+#[derive(Debug, Clone)]
+pub struct LoadedScaling {
+    pub scaling: Scaling,
+    pub source: PathBuf,
+    pub base: LoadedPreset,
+}
+
+/// Equal-tempered frequency of key `k` (A4 = key 49 = 440 Hz).
+pub fn equal_tempered_hz(key: usize) -> f64 {
+    440.0 * 2f64.powf((key as f64 - 49.0) / 12.0)
+}
+
+/// Key number of a name (`C4`, `Bb3`, `Db2`; flats or sharps) or of a number 1–88.
+pub fn parse_key(text: &str) -> Option<usize> {
+    if let Ok(k) = text.parse::<usize>() {
+        return (1..=KEYS).contains(&k).then_some(k);
+    }
+    let names = [
+        "C", "C#", "D", "D#", "E", "F", "F#", "G", "G#", "A", "A#", "B",
+    ];
+    let flats = [
+        "C", "Db", "D", "Eb", "E", "F", "Gb", "G", "Ab", "A", "Bb", "B",
+    ];
+    let split = text.find(|c: char| c.is_ascii_digit() || c == '-')?;
+    let (pitch, octave) = text.split_at(split);
+    let octave: i32 = octave.parse().ok()?;
+    let pc = names
+        .iter()
+        .position(|n| *n == pitch)
+        .or_else(|| flats.iter().position(|n| *n == pitch))? as i32;
+    let key = (octave + 1) * 12 + pc - 20;
+    (1..=KEYS as i32).contains(&key).then_some(key as usize)
+}
+
+impl Scaling {
+    /// A built-in scaling by name (`grand`) or a TOML file by path.
+    pub fn resolve(name_or_path: &str) -> Result<LoadedScaling, PresetError> {
+        let (text, path) = match BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
+            Some((_, text)) => (text.to_string(), PathBuf::from("presets/keyboard.toml")),
+            None => {
+                let path = PathBuf::from(name_or_path);
+                let text = std::fs::read_to_string(&path).map_err(|source| PresetError::Io {
+                    path: path.clone(),
+                    source,
+                })?;
+                (text, path)
+            }
+        };
+        let scaling: Scaling = toml::from_str(&text).map_err(|e| PresetError::Parse {
+            path: path.clone(),
+            message: e.to_string().trim_end().to_owned(),
+        })?;
+        scaling.validate(&path)?;
+        let base = Preset::resolve(&scaling.base_preset)?;
+        Ok(LoadedScaling {
+            scaling,
+            source: path,
+            base,
+        })
+    }
+
+    fn validate(&self, path: &Path) -> Result<(), PresetError> {
+        let bad = |field: &'static str, value: String, allowed: &str| PresetError::Range {
+            path: path.to_owned(),
+            field,
+            value,
+            allowed: allowed.to_owned(),
+        };
+        let keys: Vec<usize> = self.anchors.iter().map(|a| a.key).collect();
+        if keys.first() != Some(&1)
+            || keys.last() != Some(&KEYS)
+            || keys.windows(2).any(|w| w[0] >= w[1])
+        {
+            return Err(bad(
+                "anchors.key",
+                format!("{keys:?}"),
+                "increasing keys from 1 (A0) to 88 (C8)",
+            ));
+        }
+        for a in &self.anchors {
+            for (field, v) in [
+                ("anchors.speaking_length_m", a.speaking_length_m),
+                ("anchors.duplex_length_m", a.duplex_length_m),
+                ("anchors.tension_n", a.tension_n),
+                ("anchors.linear_density_kg_m", a.linear_density_kg_m),
+                ("anchors.core_diameter_m", a.core_diameter_m),
+                ("anchors.hammer_mass_kg", a.hammer_mass_kg),
+                ("anchors.hammer_stiffness_n_m_p", a.hammer_stiffness_n_m_p),
+                ("anchors.hammer_exponent", a.hammer_exponent),
+                ("anchors.strike_ratio", a.strike_ratio),
+            ] {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(bad(
+                        field,
+                        format!("{v} (key {})", a.key),
+                        "a finite number > 0",
+                    ));
+                }
+            }
+        }
+        let l = &self.layout;
+        if !(l.single_until_key < l.bichord_until_key && l.bichord_until_key <= KEYS) {
+            return Err(bad(
+                "layout.bichord_until_key",
+                l.bichord_until_key.to_string(),
+                "above layout.single_until_key and at most 88",
+            ));
+        }
+        if !(l.max_mode_freq_hz.is_finite() && l.max_mode_freq_hz > 100.0) {
+            return Err(bad(
+                "layout.max_mode_freq_hz",
+                l.max_mode_freq_hz.to_string(),
+                "a frequency above 100 Hz",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl LoadedScaling {
+    /// Interpolate an anchor quantity at `key`: exact at anchors, log-linear between them.
+    fn interpolate(&self, key: usize, f: impl Fn(&Anchor) -> f64) -> f64 {
+        let anchors = &self.scaling.anchors;
+        let hi = anchors
+            .partition_point(|a| a.key < key)
+            .min(anchors.len() - 1);
+        let b = &anchors[hi];
+        if b.key == key || hi == 0 {
+            return f(b);
+        }
+        let a = &anchors[hi - 1];
+        let t = (key - a.key) as f64 / (b.key - a.key) as f64;
+        (f(a).ln() * (1.0 - t) + f(b).ln() * t).exp()
+    }
+
+    /// The per-note preset of `key` (1–88), bridged at its own soundboard point.
+    pub fn key_preset(&self, key: usize) -> Result<LoadedPreset, PresetError> {
+        let l = &self.scaling.layout;
+        let mut preset = self.base.preset.clone();
+        preset.name = format!(
+            "{} {}",
+            self.scaling.name,
+            crate::engine::plate::key_name(key)
+        );
+        let s = &mut preset.strings;
+        s.count = if key <= l.single_until_key {
+            1
+        } else if key <= l.bichord_until_key {
+            2
+        } else {
+            3
+        };
+        s.mistuning_cents = l.mistuning_cents[..s.count].to_vec();
+        s.wound = key <= l.wound_until_key;
+        s.speaking_length_m = self.interpolate(key, |a| a.speaking_length_m);
+        s.duplex_length_m = self.interpolate(key, |a| a.duplex_length_m);
+        s.tension_n = self.interpolate(key, |a| a.tension_n);
+        let f_et = equal_tempered_hz(key);
+        let ideal = |a: &Anchor| {
+            a.tension_n / (2.0 * a.speaking_length_m * equal_tempered_hz(a.key)).powi(2)
+        };
+        let correction = self.interpolate(key, |a| a.linear_density_kg_m / ideal(a));
+        s.linear_density_kg_m = match self.scaling.anchors.iter().find(|a| a.key == key) {
+            Some(a) => a.linear_density_kg_m,
+            None => correction * s.tension_n / (2.0 * s.speaking_length_m * f_et).powi(2),
+        };
+        s.core_diameter_m = if s.wound {
+            self.interpolate(key, |a| a.core_diameter_m)
+        } else {
+            // A plain wire is all core: its diameter follows from its mass.
+            (4.0 * s.linear_density_kg_m / (PI * s.density_kg_m3)).sqrt()
+        };
+        if key > l.duplex_damped_until_key {
+            s.duplex_damping_n_s_m2 = 0.0;
+        }
+        // Modes below the frequency limit (for the sharpest string of the unison), at most the
+        // paper's counts.
+        let mut string = StringParams {
+            speaking_length_m: s.speaking_length_m,
+            duplex_length_m: s.duplex_length_m,
+            tension_n: s.tension_n,
+            linear_density_kg_m: s.linear_density_kg_m,
+            core_diameter_m: s.core_diameter_m,
+            young_modulus_pa: s.young_modulus_pa,
+            density_kg_m3: s.density_kg_m3,
+            wound: s.wound,
+        };
+        let sharpest = s.mistuning_cents.iter().copied().fold(0.0, f64::max);
+        let f_lim = 2.0 * PI * l.max_mode_freq_hz;
+        let count_modes = |string: &StringParams| {
+            let top = string.detuned(sharpest);
+            let t = (1..=l.max_modes_t)
+                .take_while(|&n| top.transverse_omega(n) < f_lim)
+                .count()
+                .max(1);
+            let lon = (1..=l.max_modes_l)
+                .take_while(|&n| top.longitudinal_omega(n) < f_lim)
+                .count();
+            (t, lon)
+        };
+        let tuned = self
+            .scaling
+            .anchors
+            .iter()
+            .any(|a| a.key == key && a.tension_tuned);
+        if !tuned {
+            // Tune the tension until the first partial on the bridge and board is on pitch (it
+            // converges in a few rounds: the partial goes as sqrt(T0), with a small stiffness term).
+            let k_contact = self.base.contact().stiffness_n_m[0];
+            let point = self.base.board.point(&crate::engine::plate::key_name(key));
+            let board = point.map(|p| (&self.base.board, p));
+            for _ in 0..4 {
+                let (modes, _) = count_modes(&string);
+                let f1 = bridged_first_partial_hz(&string, modes, k_contact, board, f_et);
+                string.tension_n *= (f_et / f1).powi(2);
+            }
+            s.tension_n = string.tension_n;
+        }
+        (s.modes_t, s.modes_l) = count_modes(&string);
+        s.modes_p = s.modes_t;
+        let h = &mut preset.hammer;
+        h.mass_kg = self.interpolate(key, |a| a.hammer_mass_kg);
+        h.stiffness_n_m_p = self.interpolate(key, |a| a.hammer_stiffness_n_m_p);
+        h.exponent = self.interpolate(key, |a| a.hammer_exponent);
+        h.strike_ratio = self.interpolate(key, |a| a.strike_ratio);
+        preset.soundboard.bridge_point = crate::engine::plate::key_name(key);
+        preset.validate(&self.source)?;
+        let bridge_point = self
+            .base
+            .board
+            .points
+            .iter()
+            .position(|p| p.name == preset.soundboard.bridge_point)
+            .ok_or_else(|| PresetError::BridgePoint {
+                path: self.source.clone(),
+                point: preset.soundboard.bridge_point.clone(),
+                asset: preset.soundboard.asset.clone(),
+                available: self.base.board.points.len().to_string() + " other points",
+            })?;
+        Ok(LoadedPreset {
+            preset,
+            source: self.source.clone(),
+            board: self.base.board.clone(),
+            bridge_point,
+        })
+    }
+}

@@ -1,0 +1,114 @@
+//! The 88-key scaling: C2 is the c2 preset, every key builds a stable voice with its own bridge
+//! point, string layout and mode counts follow the documented rules, and the keys sound near pitch.
+
+use unacorda::analysis::spectral::peak_frequency;
+use unacorda::engine::system::Unison;
+use unacorda::engine::Strike;
+use unacorda::preset::Preset;
+use unacorda::render::simulate;
+use unacorda::scaling::{equal_tempered_hz, parse_key, Scaling, KEYS};
+
+#[test]
+fn c2_key_is_the_c2_preset() {
+    let keyboard = Scaling::resolve("grand").unwrap();
+    let key = keyboard.key_preset(parse_key("C2").unwrap()).unwrap();
+    let c2 = Preset::resolve("c2").unwrap();
+    println!(
+        "key 16 = {}: strings {:?}",
+        key.preset.name, key.preset.strings
+    );
+    assert_eq!(key.preset.strings, c2.preset.strings);
+    assert_eq!(key.preset.hammer, c2.preset.hammer);
+    assert_eq!(key.preset.contact, c2.preset.contact);
+    assert_eq!(key.preset.soundboard, c2.preset.soundboard);
+    assert_eq!(key.bridge_point, c2.bridge_point);
+}
+
+#[test]
+fn every_key_builds_with_the_documented_layout() {
+    let keyboard = Scaling::resolve("grand").unwrap();
+    let layout = &keyboard.scaling.layout;
+    println!("key  name  strings wound  L_s m   T0 N   mu g/m  d mm   B        modes T/L  f_max Hz  m_H g  K_H        p    rate kHz  L_s pitch cents");
+    for k in 1..=KEYS {
+        let lp = keyboard.key_preset(k).unwrap();
+        let s = &lp.preset.strings;
+        let spec = lp.unison_spec();
+        let unison = Unison::new(&spec).unwrap_or_else(|e| panic!("key {k}: {e}"));
+        let string = &spec.strings[0];
+        let f_speaking = (s.tension_n / s.linear_density_kg_m).sqrt() / (2.0 * s.speaking_length_m);
+        let cents = 1200.0 * (f_speaking / equal_tempered_hz(k)).log2();
+        let b = string.inharmonicity() * (string.length_m() / s.speaking_length_m).powi(2);
+        if k % 6 == 1 || [16, 40, 76, KEYS].contains(&k) {
+            println!(
+                "{k:3}  {:5} {:7} {:5} {:7.3} {:6.0} {:7.2} {:5.2} {:8.1e} {:4}/{:<4} {:9.0} {:6.2} {:9.2e} {:4.2} {:8.0} {:+8.2}",
+                spec.board.points[spec.bridge_point].name,
+                s.count,
+                s.wound,
+                s.speaking_length_m,
+                s.tension_n,
+                s.linear_density_kg_m * 1e3,
+                s.core_diameter_m * 1e3,
+                b,
+                s.modes_t,
+                s.modes_l,
+                spec.max_mode_freq_hz(),
+                lp.preset.hammer.mass_kg * 1e3,
+                lp.preset.hammer.stiffness_n_m_p,
+                lp.preset.hammer.exponent,
+                1.0 / unison.step_s() / 1e3,
+                cents
+            );
+        }
+        let expected_strings = if k <= layout.single_until_key {
+            1
+        } else if k <= layout.bichord_until_key {
+            2
+        } else {
+            3
+        };
+        assert_eq!(s.count, expected_strings, "key {k}");
+        assert_eq!(unison.n_strings(), expected_strings);
+        assert!(s.modes_t <= 100 && s.modes_l <= 5);
+        assert!(
+            spec.max_mode_freq_hz() < 9600.0 || s.modes_t == 1,
+            "key {k}: modes above the limit"
+        );
+        assert_eq!(
+            1.0 / unison.step_s(),
+            96_000.0,
+            "key {k}: every key at the c2 internal rate"
+        );
+        assert_eq!(
+            spec.board.points[spec.bridge_point].name,
+            unacorda::engine::plate::key_name(k)
+        );
+    }
+}
+
+#[test]
+fn keys_sound_near_their_pitch() {
+    let keyboard = Scaling::resolve("grand").unwrap();
+    println!("first partial of the struck unison (normal playing, 0.6 s):");
+    for name in ["A1", "C4", "A5", "C7"] {
+        let k = parse_key(name).unwrap();
+        let lp = keyboard.key_preset(k).unwrap();
+        let rec = simulate(
+            &lp,
+            Strike {
+                velocity_m_s: 2.5,
+                una_corda: false,
+            },
+            0.6,
+            |_| {},
+        )
+        .unwrap();
+        let x = rec.channel(|f| f.obs.total_force_n[0]);
+        let x = &x[(0.1 * rec.rate_hz) as usize..];
+        let f_et = equal_tempered_hz(k);
+        let f = peak_frequency(x, rec.rate_hz, f_et * 0.97, f_et * 1.03);
+        let cents = 1200.0 * (f / f_et).log2();
+        println!("  {name}: {f:9.3} Hz, ET {f_et:9.3} Hz, {cents:+6.1} cents");
+        // Keys are tuned on the undamped bridge and board; damping and the unison spread remain.
+        assert!(cents.abs() < 5.0);
+    }
+}
