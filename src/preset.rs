@@ -5,6 +5,7 @@
 //! as a path relative to the preset file.
 
 use crate::engine::contact::{hertz_stiffness_n_m, Contact};
+use crate::engine::damper::DamperParams;
 use crate::engine::hammer::HammerParams;
 use crate::engine::plate::BoardSpec;
 use crate::engine::soundboard::{AssetError, SoundboardModes};
@@ -48,6 +49,7 @@ pub struct Preset {
     pub name: String,
     pub strings: StringsSection,
     pub hammer: HammerSection,
+    pub damper: DamperSection,
     pub contact: ContactSection,
     pub soundboard: SoundboardSection,
     pub simulation: SimulationSection,
@@ -86,6 +88,15 @@ pub struct HammerSection {
     pub strike_ratio: f64,
     pub velocity_m_s: f64,
     pub release_gap_m: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DamperSection {
+    /// Whether the key has a damper (the top keys of a piano have none).
+    pub present: bool,
+    pub position_ratio: f64,
+    pub damping_n_s_m: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -286,6 +297,13 @@ impl Preset {
         range("hammer.strike_ratio", h.strike_ratio, 0.01, 0.5)?;
         range("hammer.velocity_m_s", h.velocity_m_s, 0.01, 10.0)?;
         range("hammer.release_gap_m", h.release_gap_m, 0.0, 0.05)?;
+        range(
+            "damper.position_ratio",
+            self.damper.position_ratio,
+            0.0,
+            1.0,
+        )?;
+        range("damper.damping_n_s_m", self.damper.damping_n_s_m, 0.0, 1e3)?;
         let c = &self.contact;
         range("contact.length_m", c.length_m, 1e-4, 0.1)?;
         range(
@@ -390,6 +408,10 @@ impl LoadedPreset {
                 strike_ratio: h.strike_ratio,
                 release_gap_m: h.release_gap_m,
             },
+            damper: self.preset.damper.present.then_some(DamperParams {
+                position_ratio: self.preset.damper.position_ratio,
+                damping_n_s_m: self.preset.damper.damping_n_s_m,
+            }),
             contact: self.contact(),
             board: self.board.clone(),
             bridge_point: self.bridge_point,

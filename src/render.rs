@@ -153,19 +153,25 @@ impl Recording {
     }
 }
 
-/// Strike the preset's unison and record `seconds` of output; `progress` receives the fraction done.
+/// Strike the preset's unison, release the key after `release_s` (the damper drops; `None` holds
+/// the key) and record `seconds` of output; `progress` receives the fraction done.
 pub fn simulate(
     preset: &LoadedPreset,
     strike: Strike,
+    release_s: Option<f64>,
     seconds: f64,
     mut progress: impl FnMut(f64),
 ) -> Result<Recording, BuildError> {
     let mut r = Renderer::new(preset)?;
     r.strike(strike);
     let n = (seconds * r.output_rate_hz()).round() as usize;
+    let release_frame = release_s.map(|s| (s * r.output_rate_hz()).round() as usize);
     let mut frames = Vec::with_capacity(n);
     let every = (r.output_rate_hz() as usize / 20).max(1);
     for k in 0..n {
+        if Some(k) == release_frame {
+            r.unison_mut().set_damper(true);
+        }
         frames.push(r.next_frame());
         if k % every == 0 {
             progress(k as f64 / n as f64);

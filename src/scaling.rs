@@ -35,6 +35,7 @@ pub struct Layout {
     pub bichord_until_key: usize,
     pub wound_until_key: usize,
     pub duplex_damped_until_key: usize,
+    pub dampers_until_key: usize,
     pub mistuning_cents: [f64; 3],
     pub max_mode_freq_hz: f64,
     pub max_modes_t: usize,
@@ -204,6 +205,7 @@ impl LoadedScaling {
             self.scaling.name,
             crate::engine::plate::key_name(key)
         );
+        preset.damper.present = key <= l.dampers_until_key;
         let s = &mut preset.strings;
         s.count = if key <= l.single_until_key {
             1

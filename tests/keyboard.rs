@@ -98,6 +98,7 @@ fn keys_sound_near_their_pitch() {
                 velocity_m_s: 2.5,
                 una_corda: false,
             },
+            None,
             0.6,
             |_| {},
         )

@@ -30,6 +30,7 @@ fn runs() -> &'static Runs {
                     velocity_m_s: v,
                     una_corda,
                 },
+                None,
                 SECONDS,
                 |_| {},
             )

@@ -270,6 +270,7 @@ fn c2_first_partial_is_on_pitch() {
             velocity_m_s: 2.5,
             una_corda: false,
         },
+        None,
         1.5,
         |_| {},
     )

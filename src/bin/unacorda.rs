@@ -61,6 +61,9 @@ enum Command {
             allow_negative_numbers = true
         )]
         seconds: f64,
+        /// Release the key after this many seconds: the damper falls on the strings.
+        #[arg(long, value_name = "S", allow_negative_numbers = true)]
+        release_at: Option<f64>,
         /// Output WAV file.
         #[arg(long)]
         out: PathBuf,
@@ -125,6 +128,7 @@ fn run(cli: Cli) -> Result<()> {
             velocity,
             midi_velocity,
             seconds,
+            release_at,
             out,
         } => {
             if !offline {
@@ -151,6 +155,13 @@ fn run(cli: Cli) -> Result<()> {
             if !(0.01..=10.0).contains(&velocity_m_s) {
                 bail!("--velocity {velocity_m_s}: expected a hammer speed in [0.01, 10] m/s");
             }
+            if let Some(r) = release_at {
+                if !(0.0..=seconds).contains(&r) {
+                    bail!(
+                        "--release-at {r}: expected a time in [0, {seconds}] s (within --seconds)"
+                    );
+                }
+            }
             let pb = progress_bar(seconds, "rendering");
             let rec = simulate(
                 &loaded,
@@ -158,6 +169,7 @@ fn run(cli: Cli) -> Result<()> {
                     velocity_m_s,
                     una_corda,
                 },
+                release_at,
                 seconds,
                 |f| pb.set_position((f * 1000.0) as u64),
             )?;
@@ -209,6 +221,7 @@ fn run(cli: Cli) -> Result<()> {
                                     velocity_m_s: v,
                                     una_corda,
                                 },
+                                None,
                                 seconds,
                                 |f| pb.set_position((f * 1000.0) as u64),
                             );

@@ -7,10 +7,12 @@
 //! - [`plate`]: the generator of that asset from an orthotropic plate,
 //! - [`contact`]: the string–bridge contact springs and dampers (Eq. 6–7),
 //! - [`hammer`]: the nonlinear felt hammer (Eq. 8–9),
+//! - [`damper`]: the felt that silences a released key,
 //! - [`system`]: the state-space assembly (Eq. 10–19) advanced with classical RK4,
 //! - [`tuning`]: the coupled first partial, from the undamped linear system.
 
 pub mod contact;
+pub mod damper;
 pub mod duplex;
 pub mod hammer;
 pub mod plate;

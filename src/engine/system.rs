@@ -12,6 +12,7 @@
 //! ```
 
 use super::contact::Contact;
+use super::damper::DamperParams;
 use super::duplex::duplex_damping_matrix;
 use super::hammer::HammerParams;
 use super::soundboard::SoundboardModes;
@@ -29,6 +30,8 @@ pub struct UnisonSpec {
     /// Damping per unit length on the duplex segment, c_d (N s/m^2) (Eq. 13).
     pub duplex_damping_n_s_m2: f64,
     pub hammer: HammerParams,
+    /// The key's damper; `None` for the top keys, which have none.
+    pub damper: Option<DamperParams>,
     pub contact: Contact,
     /// The reduced soundboard and the index of the bridge point where this unison rests.
     pub board: SoundboardModes,
@@ -106,6 +109,9 @@ struct Model {
     board_volume: Vec<f64>,
     /// `psi_n(L_e)` of the T modes (identical for every string: same length).
     hammer_shape: Vec<f64>,
+    /// `psi_n(x_d)` of the transverse modes, and the felt's coefficient (N s/m); empty without damper.
+    damper_shape: Vec<f64>,
+    damper_n_s_m: f64,
     /// Dense duplex matrix, `duplex_n × duplex_n` (Eq. 13).
     duplex: Vec<f64>,
     duplex_n: usize,
@@ -124,6 +130,7 @@ pub struct Unison {
     hammer_v: f64,
     hammer_on: bool,
     struck: [bool; MAX_STRINGS],
+    damper_down: bool,
     // RK4 scratch, sized once.
     qs: Vec<f64>,
     vs: Vec<f64>,
@@ -235,6 +242,16 @@ impl Unison {
         let s0 = &spec.strings[0];
         let strike_x = spec.hammer.strike_ratio * s0.speaking_length_m;
         let hammer_shape = (1..=nt).map(|k| s0.mode_shape(k, strike_x)).collect();
+        let (damper_shape, damper_n_s_m) = match spec.damper {
+            Some(d) => {
+                let x = d.position_ratio * s0.speaking_length_m;
+                (
+                    (1..=nt.max(np)).map(|k| s0.mode_shape(k, x)).collect(),
+                    d.damping_n_s_m,
+                )
+            }
+            None => (Vec::new(), 0.0),
+        };
         let duplex_n = nt.max(np);
         let duplex = duplex_damping_matrix(
             duplex_n,
@@ -272,6 +289,8 @@ impl Unison {
             board_shape: point.shape.clone(),
             board_volume: spec.board.volume_m2_per_sqrt_kg.clone(),
             hammer_shape,
+            damper_shape,
+            damper_n_s_m,
             duplex,
             duplex_n,
             hammer: spec.hammer,
@@ -286,6 +305,7 @@ impl Unison {
             hammer_v: 0.0,
             hammer_on: false,
             struck: [false; MAX_STRINGS],
+            damper_down: false,
             qs: vec![0.0; n],
             vs: vec![0.0; n],
             acc: vec![0.0; n],
@@ -362,6 +382,17 @@ impl Unison {
         self.hammer_on = true;
     }
 
+    /// Lower (key released) or lift (key down, or a pedal holding it) the damper. Keys without a
+    /// damper ignore it.
+    pub fn set_damper(&mut self, down: bool) {
+        self.damper_down = down && !self.model.damper_shape.is_empty();
+    }
+
+    /// Whether the damper rests on the strings.
+    pub fn damper_down(&self) -> bool {
+        self.damper_down
+    }
+
     /// Advance one RK4 step; never allocates.
     pub fn step(&mut self) {
         #[cfg(target_arch = "x86_64")]
@@ -383,12 +414,21 @@ impl Unison {
     #[inline(always)]
     fn step_impl(&mut self) {
         let h = self.model.h;
-        let hammer_on = self.hammer_on;
+        let (hammer_on, damper_down) = (self.hammer_on, self.damper_down);
         let (q0, v0, yh0, vh0) = (&self.q, &self.v, self.hammer_y, self.hammer_v);
         let (qs, vs, acc) = (&mut self.qs, &mut self.vs, &mut self.acc);
         let (sum_q, sum_v) = (&mut self.sum_q, &mut self.sum_v);
         // Stage 1 at the current state.
-        let ah1 = evaluate(&self.model, &self.struck, hammer_on, q0, v0, yh0, acc);
+        let ah1 = evaluate(
+            &self.model,
+            &self.struck,
+            hammer_on,
+            damper_down,
+            q0,
+            v0,
+            yh0,
+            acc,
+        );
         for i in 0..q0.len() {
             sum_q[i] = v0[i];
             sum_v[i] = acc[i];
@@ -399,7 +439,16 @@ impl Unison {
         let (mut sum_yh, mut sum_vh) = (vh0, ah1);
         // Stages 2 and 3: weights 2, next stage at h/2 then h.
         for c in [0.5, 1.0] {
-            let ah = evaluate(&self.model, &self.struck, hammer_on, qs, vs, yh_s, acc);
+            let ah = evaluate(
+                &self.model,
+                &self.struck,
+                hammer_on,
+                damper_down,
+                qs,
+                vs,
+                yh_s,
+                acc,
+            );
             for i in 0..q0.len() {
                 let vsi = vs[i];
                 sum_q[i] += 2.0 * vsi;
@@ -413,7 +462,16 @@ impl Unison {
             vh_s = vh0 + c * h * ah;
         }
         // Stage 4 and the combination.
-        let ah4 = evaluate(&self.model, &self.struck, hammer_on, qs, vs, yh_s, acc);
+        let ah4 = evaluate(
+            &self.model,
+            &self.struck,
+            hammer_on,
+            damper_down,
+            qs,
+            vs,
+            yh_s,
+            acc,
+        );
         let w = h / 6.0;
         let (q, v) = (&mut self.q, &mut self.v);
         for i in 0..q.len() {
@@ -508,6 +566,7 @@ fn evaluate(
     m: &Model,
     struck: &[bool; MAX_STRINGS],
     hammer_on: bool,
+    damper_down: bool,
     q: &[f64],
     v: &[f64],
     hammer_y: f64,
@@ -540,6 +599,17 @@ fn evaluate(
     }
     // Duplex damping on both transverse polarisations of every string (Eq. 13).
     duplex_damping(m, v, acc);
+    // The damper felt, while it is down: a point damper on T and P of every string.
+    if damper_down {
+        for s in 0..m.n_strings {
+            for d in [0, 2] {
+                let r = m.ranges[s][d].clone();
+                let shape = &m.damper_shape[..r.len()];
+                let f = m.damper_n_s_m * dot(shape, &v[r.clone()]);
+                axpy(&mut acc[r], shape, -f);
+            }
+        }
+    }
     // The board receives the sum of the strings' forces (Eq. 17).
     let ab = &mut acc[m.board.clone()];
     for d in 0..3 {
