@@ -79,6 +79,22 @@ pub struct StringsSection {
     pub duplex_damping_n_s_m2: f64,
 }
 
+impl StringsSection {
+    /// The string at nominal tension (before the unison's mistuning).
+    pub fn nominal_string(&self) -> StringParams {
+        StringParams {
+            speaking_length_m: self.speaking_length_m,
+            duplex_length_m: self.duplex_length_m,
+            tension_n: self.tension_n,
+            linear_density_kg_m: self.linear_density_kg_m,
+            core_diameter_m: self.core_diameter_m,
+            young_modulus_pa: self.young_modulus_pa,
+            density_kg_m3: self.density_kg_m3,
+            wound: self.wound,
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HammerSection {
@@ -352,16 +368,7 @@ impl LoadedPreset {
     /// The strings of the unison, string `i` retuned by `mistuning_cents[i]` through its tension.
     pub fn strings(&self) -> Vec<StringParams> {
         let s = &self.preset.strings;
-        let nominal = StringParams {
-            speaking_length_m: s.speaking_length_m,
-            duplex_length_m: s.duplex_length_m,
-            tension_n: s.tension_n,
-            linear_density_kg_m: s.linear_density_kg_m,
-            core_diameter_m: s.core_diameter_m,
-            young_modulus_pa: s.young_modulus_pa,
-            density_kg_m3: s.density_kg_m3,
-            wound: s.wound,
-        };
+        let nominal = s.nominal_string();
         s.mistuning_cents
             .iter()
             .map(|&c| nominal.detuned(c))

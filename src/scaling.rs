@@ -239,16 +239,7 @@ impl LoadedScaling {
         }
         // Modes below the frequency limit (for the sharpest string of the unison), at most the
         // paper's counts.
-        let mut string = StringParams {
-            speaking_length_m: s.speaking_length_m,
-            duplex_length_m: s.duplex_length_m,
-            tension_n: s.tension_n,
-            linear_density_kg_m: s.linear_density_kg_m,
-            core_diameter_m: s.core_diameter_m,
-            young_modulus_pa: s.young_modulus_pa,
-            density_kg_m3: s.density_kg_m3,
-            wound: s.wound,
-        };
+        let mut string = s.nominal_string();
         let sharpest = s.mistuning_cents.iter().copied().fold(0.0, f64::max);
         let f_lim = 2.0 * PI * l.max_mode_freq_hz;
         let count_modes = |string: &StringParams| {

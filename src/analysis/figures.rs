@@ -320,122 +320,95 @@ fn draw_band(
 
 /// Figure 4: force of each string on the soundboard in T, L and P, una corda (a, b) and normal (c, d).
 fn figure4(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
-    let cases = [
-        ("(a) una corda, string 1 (struck)", uc, 0),
-        ("(b) una corda, string 2 (passive)", uc, 1),
-        ("(c) normal, string 1", normal, 0),
-        ("(d) normal, string 2", normal, 1),
-    ];
-    let bins: Vec<[MinMax; 3]> = cases
-        .iter()
-        .map(|(_, rec, s)| {
-            std::array::from_fn(|d| {
-                min_max_bins(rec, &rec.channel(|f| f.obs.bridge_force_n[*s][d]))
-            })
-        })
-        .collect();
-    let mut csv = String::from("time_s");
-    for tag in ["a_uc_str1", "b_uc_str2", "c_normal_str1", "d_normal_str2"] {
-        for d in DIRECTIONS {
-            let _ = write!(csv, ",{tag}_{d}_min_n,{tag}_{d}_max_n");
-        }
-    }
-    csv.push('\n');
-    for k in 0..bins[0][0].t.len() {
-        let _ = write!(csv, "{:.4}", bins[0][0].t[k]);
-        for b in &bins {
-            for dir_bins in b {
-                let _ = write!(csv, ",{:.6},{:.6}", dir_bins.lo[k], dir_bins.hi[k]);
-            }
-        }
-        csv.push('\n');
-    }
-    let png = dir.join("fig4_string_forces.png");
-    let draw = || -> Result2<()> {
-        let root = BitMapBackend::new(&png, (1400, 900)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (title, body) = root.split_vertically(40);
-        title.titled(
-            "Fig. 4 — force of each string on the soundboard (rows T, L, P)",
-            (FONT, 22),
-        )?;
-        let panels = body.split_evenly((3, 4));
-        for d in 0..3 {
-            // One scale per direction across the four cases, so that they compare.
-            let y = symmetric_range(
-                &bins
-                    .iter()
-                    .flat_map(|b| [&b[d].lo[..], &b[d].hi[..]])
-                    .collect::<Vec<_>>(),
-            );
-            for (c, (label, _, _)) in cases.iter().enumerate() {
-                draw_band(
-                    &panels[d * 4 + c],
-                    &format!("{label} — {}", DIRECTIONS[d]),
-                    &bins[c][d],
-                    y,
-                    COLORS[d],
-                    d == 2,
-                )?;
-            }
-        }
-        root.present()?;
-        Ok(())
+    let string = |rec: &Recording, s: usize| -> [MinMax; 3] {
+        std::array::from_fn(|d| min_max_bins(rec, &rec.channel(|f| f.obs.bridge_force_n[s][d])))
     };
-    draw().map_err(plot_err(&png))?;
-    Ok(vec![
-        png,
-        write_text(dir.join("fig4_string_forces.csv"), &csv)?,
-    ])
+    let columns = [
+        (
+            "(a) una corda, string 1 (struck)",
+            "a_uc_str1",
+            string(uc, 0),
+        ),
+        (
+            "(b) una corda, string 2 (passive)",
+            "b_uc_str2",
+            string(uc, 1),
+        ),
+        ("(c) normal, string 1", "c_normal_str1", string(normal, 0)),
+        ("(d) normal, string 2", "d_normal_str2", string(normal, 1)),
+    ];
+    band_grid(
+        dir,
+        "fig4_string_forces",
+        "Fig. 4 — force of each string on the soundboard (rows T, L, P)",
+        (1400, 900),
+        &columns,
+    )
 }
 
 /// Figure 5: total force transmitted to the soundboard, una corda (a) and normal (b).
 fn figure5(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
-    let cases = [("(a) una corda", uc), ("(b) normal", normal)];
-    let bins: Vec<[MinMax; 3]> = cases
-        .iter()
-        .map(|(_, rec)| {
-            std::array::from_fn(|d| min_max_bins(rec, &rec.channel(|f| f.obs.total_force_n[d])))
-        })
-        .collect();
+    let total = |rec: &Recording| -> [MinMax; 3] {
+        std::array::from_fn(|d| min_max_bins(rec, &rec.channel(|f| f.obs.total_force_n[d])))
+    };
+    let columns = [
+        ("(a) una corda", "a_uc", total(uc)),
+        ("(b) normal", "b_normal", total(normal)),
+    ];
+    band_grid(
+        dir,
+        "fig5_total_force",
+        "Fig. 5 — total force transmitted to the soundboard (rows T, L, P)",
+        (1100, 800),
+        &columns,
+    )
+}
+
+/// A grid of min/max force bands, one row per direction (T, L, P) and one column per case, each
+/// row on one scale so that the cases compare; written as `stem.png` and `stem.csv`.
+fn band_grid(
+    dir: &Path,
+    stem: &str,
+    title: &str,
+    size: (u32, u32),
+    columns: &[(&str, &str, [MinMax; 3])],
+) -> Result<Vec<PathBuf>, FigureError> {
     let mut csv = String::from("time_s");
-    for tag in ["a_uc", "b_normal"] {
+    for (_, tag, _) in columns {
         for d in DIRECTIONS {
             let _ = write!(csv, ",{tag}_{d}_min_n,{tag}_{d}_max_n");
         }
     }
     csv.push('\n');
-    for k in 0..bins[0][0].t.len() {
-        let _ = write!(csv, "{:.4}", bins[0][0].t[k]);
-        for b in &bins {
-            for dir_bins in b {
-                let _ = write!(csv, ",{:.6},{:.6}", dir_bins.lo[k], dir_bins.hi[k]);
+    for k in 0..columns[0].2[0].t.len() {
+        let _ = write!(csv, "{:.4}", columns[0].2[0].t[k]);
+        for (_, _, bins) in columns {
+            for b in bins {
+                let _ = write!(csv, ",{:.6},{:.6}", b.lo[k], b.hi[k]);
             }
         }
         csv.push('\n');
     }
-    let png = dir.join("fig5_total_force.png");
+    let png = dir.join(format!("{stem}.png"));
     let draw = || -> Result2<()> {
-        let root = BitMapBackend::new(&png, (1100, 800)).into_drawing_area();
+        let root = BitMapBackend::new(&png, size).into_drawing_area();
         root.fill(&WHITE)?;
-        let (title, body) = root.split_vertically(40);
-        title.titled(
-            "Fig. 5 — total force transmitted to the soundboard (rows T, L, P)",
-            (FONT, 22),
-        )?;
-        let panels = body.split_evenly((3, 2));
+        let (head, body) = root.split_vertically(40);
+        head.titled(title, (FONT, 22))?;
+        let panels = body.split_evenly((3, columns.len()));
         for d in 0..3 {
             let y = symmetric_range(
-                &bins
+                &columns
                     .iter()
-                    .flat_map(|b| [&b[d].lo[..], &b[d].hi[..]])
+                    .flat_map(|(_, _, b)| [&b[d].lo[..], &b[d].hi[..]])
                     .collect::<Vec<_>>(),
             );
-            for (c, (label, _)) in cases.iter().enumerate() {
+            for (c, (label, _, bins)) in columns.iter().enumerate() {
+                let caption = format!("{label} — {}", DIRECTIONS[d]);
                 draw_band(
-                    &panels[d * 2 + c],
-                    &format!("{label} — {}", DIRECTIONS[d]),
-                    &bins[c][d],
+                    &panels[d * columns.len() + c],
+                    &caption,
+                    &bins[d],
                     y,
                     COLORS[d],
                     d == 2,
@@ -448,7 +421,7 @@ fn figure5(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
     draw().map_err(plot_err(&png))?;
     Ok(vec![
         png,
-        write_text(dir.join("fig5_total_force.csv"), &csv)?,
+        write_text(dir.join(format!("{stem}.csv")), &csv)?,
     ])
 }
 
