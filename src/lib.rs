@@ -4,6 +4,7 @@
 //!
 //! - [`engine`]: the physics (pure, no I/O),
 //! - [`preset`]: parameter files,
+//! - [`play`]: MIDI events and pedals applied to keys sharing one soundboard,
 //! - [`render`]: strikes to frames at the output rate,
 //! - [`scaling`]: every key of the keyboard from a few anchor keys,
 //! - [`analysis`]: spectra, envelopes and the paper's figures,
@@ -18,6 +19,7 @@ pub mod analysis;
 pub mod audio;
 pub mod engine;
 pub mod midi;
+pub mod play;
 pub mod preset;
 pub mod render;
 pub mod scaling;

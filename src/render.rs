@@ -73,9 +73,15 @@ impl Renderer {
     pub fn new(preset: &LoadedPreset) -> Result<Renderer, BuildError> {
         let spec = preset.unison_spec();
         let unison = Unison::new(&spec)?;
-        let ratio = preset.oversampling(&spec);
+        Ok(Self::from_unison(unison, preset))
+    }
+
+    /// The output stage of `preset` (rates, radiation) around a built system; the analysis
+    /// channels follow its first voice.
+    pub fn from_unison(unison: Unison, preset: &LoadedPreset) -> Renderer {
+        let ratio = (preset.output_rate_hz() * unison.step_s()).recip().round() as usize;
         let r = &preset.preset.radiation;
-        Ok(Renderer {
+        Renderer {
             unison,
             decimator: Decimator::new(ratio, CHANNELS),
             monopole: r.air_density_kg_m3 / (4.0 * std::f64::consts::PI * r.distance_m),
@@ -83,7 +89,7 @@ impl Renderer {
             output_rate_hz: preset.output_rate_hz(),
             inputs: [0.0; CHANNELS],
             outputs: [0.0; CHANNELS],
-        })
+        }
     }
 
     pub fn unison(&self) -> &Unison {
@@ -183,4 +189,71 @@ pub fn simulate(
         delay_s: r.filter_delay_samples() / r.output_rate_hz(),
         frames,
     })
+}
+
+/// Why a MIDI performance cannot be rendered.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    #[error(transparent)]
+    Preset(#[from] crate::preset::PresetError),
+    #[error(transparent)]
+    Build(#[from] BuildError),
+    #[error("the MIDI file plays no key of the piano (notes 21–108)")]
+    NoKeys,
+}
+
+/// Render a MIDI performance on the keyboard `scaling`: one voice for every key the file plays,
+/// all on one soundboard, the events applied at their output sample through the [`Player`], and
+/// `tail_s` of sound after the last event. Returns the recording and the keys used.
+pub fn render_midi(
+    scaling: &crate::scaling::LoadedScaling,
+    events: &[crate::midi::file::TimedEvent],
+    tail_s: f64,
+    mut progress: impl FnMut(f64),
+) -> Result<(Recording, Vec<usize>), RenderError> {
+    use crate::midi::{piano_key, Event};
+    let mut keys: Vec<usize> = events
+        .iter()
+        .filter_map(|e| match e.event {
+            Event::NoteOn { note, .. } => piano_key(note),
+            _ => None,
+        })
+        .collect();
+    keys.sort_unstable();
+    keys.dedup();
+    if keys.is_empty() {
+        return Err(RenderError::NoKeys);
+    }
+    let specs = keys
+        .iter()
+        .map(|&k| Ok(scaling.key_preset(k)?.unison_spec()))
+        .collect::<Result<Vec<_>, RenderError>>()?;
+    let mut r = Renderer::from_unison(Unison::with_voices(&specs)?, &scaling.base);
+    let mut player = crate::play::Player::new(&keys);
+    let fs = r.output_rate_hz();
+    let end_s = events.last().map_or(0.0, |e| e.time_s) + tail_s;
+    let n = (end_s * fs).round() as usize;
+    let mut frames = Vec::with_capacity(n);
+    let mut next = 0;
+    let every = (fs as usize / 20).max(1);
+    for k in 0..n {
+        while next < events.len() && (events[next].time_s * fs).round() as usize <= k {
+            player.apply(events[next].event, r.unison_mut());
+            next += 1;
+        }
+        frames.push(r.next_frame());
+        if k % every == 0 {
+            progress(k as f64 / n as f64);
+        }
+    }
+    progress(1.0);
+    let delay_s = r.filter_delay_samples() / fs;
+    Ok((
+        Recording {
+            rate_hz: fs,
+            delay_s,
+            frames,
+        },
+        keys,
+    ))
 }

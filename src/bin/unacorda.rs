@@ -36,8 +36,20 @@ enum Command {
         /// or a number 1 (A0) – 88 (C8).
         #[arg(long)]
         key: Option<String>,
-        /// Keyboard scaling for --key: built-in name (grand) or path to a .toml file.
-        #[arg(long, default_value = "grand", requires = "key")]
+        /// Play a standard MIDI file on the keyboard (all tracks, tempo map, pedals) instead of
+        /// striking one note.
+        #[arg(long, value_name = "FILE.mid", conflicts_with_all = ["key", "una_corda", "velocity", "midi_velocity", "release_at"])]
+        midi: Option<PathBuf>,
+        /// With --midi: seconds of sound after the last event, 0–60.
+        #[arg(
+            long,
+            default_value_t = 2.0,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
+        tail: f64,
+        /// Keyboard scaling for --key and --midi: built-in name (grand) or path to a .toml file.
+        #[arg(long, default_value = "grand")]
         keyboard: String,
         /// Soft pedal: the hammer strikes one string of two (two of three).
         #[arg(long)]
@@ -123,6 +135,8 @@ fn run(cli: Cli) -> Result<()> {
             offline,
             preset,
             key,
+            midi,
+            tail,
             keyboard,
             una_corda,
             velocity,
@@ -133,6 +147,38 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             if !offline {
                 bail!("live playback is not available yet: use `render --offline`");
+            }
+            if let Some(path) = midi {
+                if !(0.0..=60.0).contains(&tail) {
+                    bail!("--tail {tail}: expected a duration in [0, 60] s");
+                }
+                let events = unacorda::midi::file::read_file(&path)?;
+                let scaling = Scaling::resolve(&keyboard)?;
+                let length_s = events.last().map_or(0.0, |e| e.time_s) + tail;
+                let pb = progress_bar(length_s, "rendering");
+                let (rec, keys) = unacorda::render::render_midi(&scaling, &events, tail, |f| {
+                    pb.set_position((f * 1000.0) as u64)
+                })
+                .with_context(|| format!("{}", path.display()))?;
+                pb.finish_and_clear();
+                let full_scale = scaling.base.preset.radiation.full_scale_pa;
+                let samples: Vec<f32> = rec
+                    .frames
+                    .iter()
+                    .map(|f| (f.pressure_pa / full_scale) as f32)
+                    .collect();
+                let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
+                unacorda::audio::wav::write_f32(&out, rec.rate_hz as u32, &samples)
+                    .with_context(|| format!("writing {}", out.display()))?;
+                eprintln!(
+                    "wrote {} ({} events on {} keys sharing one soundboard, {:.2} s, peak {:.1} dBFS)",
+                    out.display(),
+                    events.len(),
+                    keys.len(),
+                    length_s,
+                    20.0 * peak.max(1e-12).log10()
+                );
+                return Ok(());
             }
             if !(0.001..=600.0).contains(&seconds) {
                 bail!("--seconds {seconds}: expected a duration in [0.001, 600] s");

@@ -92,21 +92,14 @@ impl Energy {
     }
 }
 
-/// Fixed coefficients, computed once when the unison is built.
+/// Coefficients of one voice: the strings of one key, its hammer, damper and bridge point.
 #[derive(Debug, Clone)]
-struct Model {
+struct VoiceModel {
     n_strings: usize,
     /// `ranges[s][d]`: modes of string `s` in direction `d` (T, L, P) within the flat arrays.
     ranges: [[Range<usize>; 3]; MAX_STRINGS],
-    board: Range<usize>,
-    omega2: Vec<f64>,
-    /// `2 zeta omega` per mode (1/s).
-    damp: Vec<f64>,
-    /// String modes: `psi_n(L_s)` in the mode's own direction; zero over the board block.
-    bridge_shape: Vec<f64>,
-    /// Board modes: `phi_T`, `phi_L`, `phi_P` at the bridge point (Eq. 5).
+    /// Board modes: `phi_T`, `phi_L`, `phi_P` at this voice's bridge point (Eq. 5).
     board_shape: [Vec<f64>; 3],
-    board_volume: Vec<f64>,
     /// `psi_n(L_e)` of the T modes (identical for every string: same length).
     hammer_shape: Vec<f64>,
     /// `psi_n(x_d)` of the transverse modes, and the felt's coefficient (N s/m); empty without damper.
@@ -117,26 +110,54 @@ struct Model {
     duplex_n: usize,
     hammer: HammerParams,
     contact: Contact,
+}
+
+/// Fixed coefficients, computed once when the system is built.
+#[derive(Debug, Clone)]
+struct Model {
+    voices: Vec<VoiceModel>,
+    board: Range<usize>,
+    omega2: Vec<f64>,
+    /// `2 zeta omega` per mode (1/s).
+    damp: Vec<f64>,
+    /// String modes: `psi_n(L_s)` in the mode's own direction; zero over the board block.
+    bridge_shape: Vec<f64>,
+    board_volume: Vec<f64>,
     h: f64,
 }
 
-/// One unison of 1–3 strings on the shared bridge point, with its hammer (paper Eq. 10).
+/// What each voice is doing, apart from its modes; read by every evaluation.
+#[derive(Debug, Clone)]
+struct VoiceFlags {
+    /// Simulated at all: a voice of a multi-key system joins when first struck.
+    active: Vec<bool>,
+    hammer_on: Vec<bool>,
+    struck: Vec<[bool; MAX_STRINGS]>,
+    damper_down: Vec<bool>,
+}
+
+/// The strings of one or several keys, each at its own bridge point of one shared soundboard, with
+/// their hammers (paper Eq. 10, the board coupling every string of every key). Built for one key
+/// with [`Unison::new`] (the paper's case) or for several with [`Unison::with_voices`].
 #[derive(Debug, Clone)]
 pub struct Unison {
     model: Model,
     q: Vec<f64>,
     v: Vec<f64>,
-    hammer_y: f64,
-    hammer_v: f64,
-    hammer_on: bool,
-    struck: [bool; MAX_STRINGS],
-    damper_down: bool,
+    hammer_y: Vec<f64>,
+    hammer_v: Vec<f64>,
+    flags: VoiceFlags,
     // RK4 scratch, sized once.
     qs: Vec<f64>,
     vs: Vec<f64>,
     acc: Vec<f64>,
     sum_q: Vec<f64>,
     sum_v: Vec<f64>,
+    hy_s: Vec<f64>,
+    hv_s: Vec<f64>,
+    sum_hy: Vec<f64>,
+    sum_hv: Vec<f64>,
+    ah: Vec<f64>,
     fast_path: bool,
     time_s: f64,
 }
@@ -148,6 +169,10 @@ pub enum BuildError {
     StringCount(usize),
     #[error("bridge point index {0} is not in the soundboard model")]
     BridgePoint(usize),
+    #[error("voices of one system must share one soundboard and one internal rate")]
+    SharedBoard,
+    #[error("a system needs at least one voice")]
+    NoVoice,
     #[error(
         "RK4 would be unstable: the stiffest coupled mode (≈{freq_hz:.0} Hz) gives omega h = {omega_h:.2} \
          above the limit 2.78 at {rate_hz:.0} Hz; raise the internal rate or soften the contact"
@@ -159,166 +184,195 @@ pub enum BuildError {
     },
 }
 
-impl Unison {
-    /// Precompute every coefficient and allocate all state and scratch.
-    pub fn new(spec: &UnisonSpec) -> Result<Unison, BuildError> {
-        let ns = spec.strings.len();
-        if ns == 0 || ns > MAX_STRINGS {
-            return Err(BuildError::StringCount(ns));
-        }
-        let point = spec
-            .board
-            .points
-            .get(spec.bridge_point)
-            .ok_or(BuildError::BridgePoint(spec.bridge_point))?;
-        let ModeSet {
-            modes_t: nt,
-            modes_p: np,
-            modes_l: nl,
-            ..
-        } = spec.modes;
-        let per_string = nt + np + nl;
-        let nb = spec.board.len();
-        let n = ns * per_string + nb;
-        let mut ranges: [[Range<usize>; 3]; MAX_STRINGS] = Default::default();
-        let mut omega2 = vec![0.0; n];
-        let mut damp = vec![0.0; n];
-        let mut bridge_shape = vec![0.0; n];
-        for (s, string) in spec.strings.iter().enumerate() {
-            let base = s * per_string;
-            // Flat layout [T | P | L]; direction index d is T = 0, L = 1, P = 2.
-            ranges[s] = [
-                base..base + nt,
-                base + nt + np..base + per_string,
-                base + nt..base + nt + np,
-            ];
-            let ls = string.speaking_length_m;
-            let fill = |range: &Range<usize>,
-                        zeta: f64,
-                        omega: &dyn Fn(usize) -> f64,
-                        omega2: &mut [f64],
-                        damp: &mut [f64],
-                        shape: &mut [f64]| {
-                for (k, i) in range.clone().enumerate() {
-                    let w = omega(k + 1);
-                    omega2[i] = w * w;
-                    damp[i] = 2.0 * zeta * w;
-                    shape[i] = string.mode_shape(k + 1, ls);
-                }
-            };
-            let t = |k| string.transverse_omega(k);
-            let l = |k| string.longitudinal_omega(k);
-            fill(
-                &ranges[s][0],
-                spec.modes.damping_ratio_t,
-                &t,
-                &mut omega2,
-                &mut damp,
-                &mut bridge_shape,
-            );
-            fill(
-                &ranges[s][2],
-                spec.modes.damping_ratio_p,
-                &t,
-                &mut omega2,
-                &mut damp,
-                &mut bridge_shape,
-            );
-            fill(
-                &ranges[s][1],
-                spec.modes.damping_ratio_l,
-                &l,
-                &mut omega2,
-                &mut damp,
-                &mut bridge_shape,
-            );
-        }
-        let board = ns * per_string..n;
-        for (k, i) in board.clone().enumerate() {
-            let w = 2.0 * PI * spec.board.freq_hz[k];
-            omega2[i] = w * w;
-            damp[i] = 2.0 * spec.board.damping_ratio[k] * w;
-        }
-        let s0 = &spec.strings[0];
-        let strike_x = spec.hammer.strike_ratio * s0.speaking_length_m;
-        let hammer_shape = (1..=nt).map(|k| s0.mode_shape(k, strike_x)).collect();
-        let (damper_shape, damper_n_s_m) = match spec.damper {
-            Some(d) => {
-                let x = d.position_ratio * s0.speaking_length_m;
-                (
-                    (1..=nt.max(np)).map(|k| s0.mode_shape(k, x)).collect(),
-                    d.damping_n_s_m,
-                )
+/// Modes of one voice in the flat layout from `base`; fills their coefficients.
+fn build_voice(
+    spec: &UnisonSpec,
+    base: usize,
+    omega2: &mut Vec<f64>,
+    damp: &mut Vec<f64>,
+    bridge_shape: &mut Vec<f64>,
+) -> Result<VoiceModel, BuildError> {
+    let ns = spec.strings.len();
+    if ns == 0 || ns > MAX_STRINGS {
+        return Err(BuildError::StringCount(ns));
+    }
+    let point = spec
+        .board
+        .points
+        .get(spec.bridge_point)
+        .ok_or(BuildError::BridgePoint(spec.bridge_point))?;
+    let ModeSet {
+        modes_t: nt,
+        modes_p: np,
+        modes_l: nl,
+        ..
+    } = spec.modes;
+    let per_string = nt + np + nl;
+    let end = base + ns * per_string;
+    omega2.resize(end, 0.0);
+    damp.resize(end, 0.0);
+    bridge_shape.resize(end, 0.0);
+    let mut ranges: [[Range<usize>; 3]; MAX_STRINGS] = Default::default();
+    for (s, string) in spec.strings.iter().enumerate() {
+        let b = base + s * per_string;
+        // Flat layout [T | P | L]; direction index d is T = 0, L = 1, P = 2.
+        ranges[s] = [b..b + nt, b + nt + np..b + per_string, b + nt..b + nt + np];
+        let ls = string.speaking_length_m;
+        let blocks: [(usize, f64, bool); 3] = [
+            (0, spec.modes.damping_ratio_t, true),
+            (2, spec.modes.damping_ratio_p, true),
+            (1, spec.modes.damping_ratio_l, false),
+        ];
+        for (d, zeta, transverse) in blocks {
+            for (k, i) in ranges[s][d].clone().enumerate() {
+                let w = if transverse {
+                    string.transverse_omega(k + 1)
+                } else {
+                    string.longitudinal_omega(k + 1)
+                };
+                omega2[i] = w * w;
+                damp[i] = 2.0 * zeta * w;
+                bridge_shape[i] = string.mode_shape(k + 1, ls);
             }
-            None => (Vec::new(), 0.0),
-        };
-        let duplex_n = nt.max(np);
-        let duplex = duplex_damping_matrix(
+        }
+    }
+    let s0 = &spec.strings[0];
+    let strike_x = spec.hammer.strike_ratio * s0.speaking_length_m;
+    let (damper_shape, damper_n_s_m) = match spec.damper {
+        Some(d) => {
+            let x = d.position_ratio * s0.speaking_length_m;
+            (
+                (1..=nt.max(np)).map(|k| s0.mode_shape(k, x)).collect(),
+                d.damping_n_s_m,
+            )
+        }
+        None => (Vec::new(), 0.0),
+    };
+    let duplex_n = nt.max(np);
+    // The stiffest coupled mode: a string's bridge point on its contact spring, with the
+    // effective point mass of the retained modes, 1 / sum psi_n(L_s)^2 (DESIGN.md §5).
+    let h = 1.0 / spec.sample_rate_hz;
+    let inv_mass: f64 = ranges[0][0].clone().map(|i| bridge_shape[i].powi(2)).sum();
+    let k_max = spec
+        .contact
+        .stiffness_n_m
+        .iter()
+        .copied()
+        .fold(0.0, f64::max);
+    let w_top = omega2[base..end].iter().copied().fold(0.0, f64::max);
+    let w_contact = (k_max * inv_mass + w_top).sqrt();
+    if w_contact * h > 2.78 {
+        return Err(BuildError::Unstable {
+            freq_hz: w_contact / (2.0 * PI),
+            omega_h: w_contact * h,
+            rate_hz: spec.sample_rate_hz,
+        });
+    }
+    Ok(VoiceModel {
+        n_strings: ns,
+        ranges,
+        board_shape: point.shape.clone(),
+        hammer_shape: (1..=nt).map(|k| s0.mode_shape(k, strike_x)).collect(),
+        damper_shape,
+        damper_n_s_m,
+        duplex: duplex_damping_matrix(
             duplex_n,
             s0.length_m(),
             s0.speaking_length_m,
             spec.duplex_damping_n_s_m2,
             s0.linear_density_kg_m,
-        );
-        let h = 1.0 / spec.sample_rate_hz;
-        // The stiffest coupled mode: a string's bridge point on its contact spring, with the
-        // effective point mass of the retained modes, 1 / sum psi_n(L_s)^2 (DESIGN.md §5).
-        let inv_mass: f64 = ranges[0][0].clone().map(|i| bridge_shape[i].powi(2)).sum();
-        let k_max = spec
-            .contact
-            .stiffness_n_m
+        ),
+        duplex_n,
+        hammer: spec.hammer,
+        contact: spec.contact,
+    })
+}
+
+impl Unison {
+    /// One unison on its bridge point (the paper's system); precomputes every coefficient and
+    /// allocates all state and scratch.
+    pub fn new(spec: &UnisonSpec) -> Result<Unison, BuildError> {
+        let mut u = Self::with_voices(std::slice::from_ref(spec))?;
+        u.flags.active[0] = true;
+        Ok(u)
+    }
+
+    /// Several keys on one shared soundboard: voice `k` is `specs[k]` at its own bridge point; all
+    /// specs must carry the same board and internal rate. A voice is simulated from its first
+    /// strike on.
+    pub fn with_voices(specs: &[UnisonSpec]) -> Result<Unison, BuildError> {
+        let first = specs.first().ok_or(BuildError::NoVoice)?;
+        if specs
             .iter()
-            .copied()
-            .fold(0.0, f64::max);
-        let w_contact = (k_max * inv_mass + omega2.iter().copied().fold(0.0, f64::max)).sqrt();
-        let omega_h = w_contact * h;
-        if omega_h > 2.78 {
-            return Err(BuildError::Unstable {
-                freq_hz: w_contact / (2.0 * PI),
-                omega_h,
-                rate_hz: spec.sample_rate_hz,
-            });
+            .any(|s| s.board != first.board || s.sample_rate_hz != first.sample_rate_hz)
+        {
+            return Err(BuildError::SharedBoard);
         }
+        let (mut omega2, mut damp, mut bridge_shape) = (Vec::new(), Vec::new(), Vec::new());
+        let mut voices = Vec::with_capacity(specs.len());
+        for spec in specs {
+            let base = omega2.len();
+            voices.push(build_voice(
+                spec,
+                base,
+                &mut omega2,
+                &mut damp,
+                &mut bridge_shape,
+            )?);
+        }
+        let board = omega2.len()..omega2.len() + first.board.len();
+        for k in 0..first.board.len() {
+            let w = 2.0 * PI * first.board.freq_hz[k];
+            omega2.push(w * w);
+            damp.push(2.0 * first.board.damping_ratio[k] * w);
+            bridge_shape.push(0.0);
+        }
+        let n = omega2.len();
+        let nv = voices.len();
         let model = Model {
-            n_strings: ns,
-            ranges,
+            voices,
             board,
             omega2,
             damp,
             bridge_shape,
-            board_shape: point.shape.clone(),
-            board_volume: spec.board.volume_m2_per_sqrt_kg.clone(),
-            hammer_shape,
-            damper_shape,
-            damper_n_s_m,
-            duplex,
-            duplex_n,
-            hammer: spec.hammer,
-            contact: spec.contact,
-            h,
+            board_volume: first.board.volume_m2_per_sqrt_kg.clone(),
+            h: 1.0 / first.sample_rate_hz,
         };
         Ok(Unison {
             model,
             q: vec![0.0; n],
             v: vec![0.0; n],
-            hammer_y: 0.0,
-            hammer_v: 0.0,
-            hammer_on: false,
-            struck: [false; MAX_STRINGS],
-            damper_down: false,
+            hammer_y: vec![0.0; nv],
+            hammer_v: vec![0.0; nv],
+            flags: VoiceFlags {
+                active: vec![false; nv],
+                hammer_on: vec![false; nv],
+                struck: vec![[false; MAX_STRINGS]; nv],
+                damper_down: vec![false; nv],
+            },
             qs: vec![0.0; n],
             vs: vec![0.0; n],
             acc: vec![0.0; n],
             sum_q: vec![0.0; n],
             sum_v: vec![0.0; n],
+            hy_s: vec![0.0; nv],
+            hv_s: vec![0.0; nv],
+            sum_hy: vec![0.0; nv],
+            sum_hv: vec![0.0; nv],
+            ah: vec![0.0; nv],
             fast_path: has_avx2_fma(),
             time_s: 0.0,
         })
     }
 
-    /// Number of strings.
+    /// Number of voices (keys).
+    pub fn n_voices(&self) -> usize {
+        self.model.voices.len()
+    }
+
+    /// Number of strings of voice 0.
     pub fn n_strings(&self) -> usize {
-        self.model.n_strings
+        self.model.voices[0].n_strings
     }
 
     /// Total number of modes (strings and board).
@@ -331,14 +385,14 @@ impl Unison {
         self.model.h
     }
 
-    /// Simulated time since the unison was built (s).
+    /// Simulated time since the system was built (s).
     pub fn time_s(&self) -> f64 {
         self.time_s
     }
 
-    /// Flat-array range of string `s`'s modes in direction `d` (0 = T, 1 = L, 2 = P).
+    /// Flat-array range of voice 0's string `s` in direction `d` (0 = T, 1 = L, 2 = P).
     pub fn string_range(&self, s: usize, d: usize) -> Range<usize> {
-        self.model.ranges[s][d].clone()
+        self.model.voices[0].ranges[s][d].clone()
     }
 
     /// Flat-array range of the board's modes.
@@ -356,41 +410,67 @@ impl Unison {
         (&self.q, &self.v)
     }
 
-    /// Whether the hammer is still part of the system.
+    /// Whether voice 0's hammer is still part of the system.
     pub fn hammer_engaged(&self) -> bool {
-        self.hammer_on
+        self.flags.hammer_on[0]
     }
 
-    /// Launch the hammer at the strings (Eq. 14–15): it starts touching the struck strings at
-    /// their current displacement and moves towards them at `velocity_m_s`.
+    /// Strike voice 0 (see [`Unison::strike_voice`]).
     pub fn strike(&mut self, strike: Strike) {
-        let ns = self.model.n_strings;
+        self.strike_voice(0, strike);
+    }
+
+    /// Launch voice `k`'s hammer at its strings (Eq. 14–15): it starts touching the struck strings
+    /// at their current displacement (a sounding key is re-struck in its motion) and moves towards
+    /// them at `velocity_m_s`.
+    pub fn strike_voice(&mut self, k: usize, strike: Strike) {
+        let voice = &self.model.voices[k];
+        let ns = voice.n_strings;
         let n_struck = if strike.una_corda && ns > 1 {
             ns - 1
         } else {
             ns
         };
-        self.struck = [false; MAX_STRINGS];
+        let mut struck = [false; MAX_STRINGS];
         let mut contact_y = f64::NEG_INFINITY;
         for s in 0..n_struck {
-            self.struck[s] = true;
-            let r = self.model.ranges[s][0].clone();
-            contact_y = contact_y.max(dot(&self.model.hammer_shape, &self.q[r]));
+            struck[s] = true;
+            let r = voice.ranges[s][0].clone();
+            contact_y = contact_y.max(dot(&voice.hammer_shape, &self.q[r]));
         }
-        self.hammer_y = contact_y;
-        self.hammer_v = strike.velocity_m_s;
-        self.hammer_on = true;
+        self.flags.struck[k] = struck;
+        self.hammer_y[k] = contact_y;
+        self.hammer_v[k] = strike.velocity_m_s;
+        self.flags.hammer_on[k] = true;
+        self.flags.active[k] = true;
     }
 
-    /// Lower (key released) or lift (key down, or a pedal holding it) the damper. Keys without a
-    /// damper ignore it.
+    /// Include voice `k` in the simulation without striking it (a key held silently, or every key
+    /// under the sustain pedal, whose strings then ring in sympathy through the board), or leave it
+    /// out. A left-out voice keeps its state frozen.
+    pub fn set_active(&mut self, k: usize, active: bool) {
+        self.flags.active[k] = active || self.flags.hammer_on[k];
+    }
+
+    /// Whether voice `k` is simulated.
+    pub fn is_active(&self, k: usize) -> bool {
+        self.flags.active[k]
+    }
+
+    /// Lower or lift voice 0's damper (see [`Unison::set_damper_voice`]).
     pub fn set_damper(&mut self, down: bool) {
-        self.damper_down = down && !self.model.damper_shape.is_empty();
+        self.set_damper_voice(0, down);
     }
 
-    /// Whether the damper rests on the strings.
+    /// Lower (key released) or lift (key down, or a pedal holding it) voice `k`'s damper. Keys
+    /// without a damper ignore it.
+    pub fn set_damper_voice(&mut self, k: usize, down: bool) {
+        self.flags.damper_down[k] = down && !self.model.voices[k].damper_shape.is_empty();
+    }
+
+    /// Whether voice 0's damper rests on the strings.
     pub fn damper_down(&self) -> bool {
-        self.damper_down
+        self.flags.damper_down[0]
     }
 
     /// Advance one RK4 step; never allocates.
@@ -415,41 +495,34 @@ impl Unison {
     #[inline(always)]
     fn step_impl<const SIMD: bool>(&mut self) {
         let h = self.model.h;
-        let (hammer_on, damper_down) = (self.hammer_on, self.damper_down);
-        let (q0, v0, yh0, vh0) = (&self.q, &self.v, self.hammer_y, self.hammer_v);
+        let (m, flags) = (&self.model, &self.flags);
+        let (q0, v0, hy0, hv0) = (&self.q, &self.v, &self.hammer_y, &self.hammer_v);
         let (qs, vs, acc) = (&mut self.qs, &mut self.vs, &mut self.acc);
         let (sum_q, sum_v) = (&mut self.sum_q, &mut self.sum_v);
-        // Stage 1 at the current state.
-        let ah1 = evaluate::<SIMD>(
-            &self.model,
-            &self.struck,
-            hammer_on,
-            damper_down,
-            q0,
-            v0,
-            yh0,
-            acc,
+        let (hy_s, hv_s, sum_hy, sum_hv, ah) = (
+            &mut self.hy_s,
+            &mut self.hv_s,
+            &mut self.sum_hy,
+            &mut self.sum_hv,
+            &mut self.ah,
         );
+        // Stage 1 at the current state.
+        evaluate::<SIMD>(m, flags, q0, v0, hy0, acc, ah);
         for i in 0..q0.len() {
             sum_q[i] = v0[i];
             sum_v[i] = acc[i];
             qs[i] = q0[i] + 0.5 * h * v0[i];
             vs[i] = v0[i] + 0.5 * h * acc[i];
         }
-        let (mut yh_s, mut vh_s) = (yh0 + 0.5 * h * vh0, vh0 + 0.5 * h * ah1);
-        let (mut sum_yh, mut sum_vh) = (vh0, ah1);
+        for k in 0..hy0.len() {
+            sum_hy[k] = hv0[k];
+            sum_hv[k] = ah[k];
+            hy_s[k] = hy0[k] + 0.5 * h * hv0[k];
+            hv_s[k] = hv0[k] + 0.5 * h * ah[k];
+        }
         // Stages 2 and 3: weights 2, next stage at h/2 then h.
         for c in [0.5, 1.0] {
-            let ah = evaluate::<SIMD>(
-                &self.model,
-                &self.struck,
-                hammer_on,
-                damper_down,
-                qs,
-                vs,
-                yh_s,
-                acc,
-            );
+            evaluate::<SIMD>(m, flags, qs, vs, hy_s, acc, ah);
             for i in 0..q0.len() {
                 let vsi = vs[i];
                 sum_q[i] += 2.0 * vsi;
@@ -457,97 +530,120 @@ impl Unison {
                 qs[i] = q0[i] + c * h * vsi;
                 vs[i] = v0[i] + c * h * acc[i];
             }
-            sum_yh += 2.0 * vh_s;
-            sum_vh += 2.0 * ah;
-            yh_s = yh0 + c * h * vh_s;
-            vh_s = vh0 + c * h * ah;
+            for k in 0..hy0.len() {
+                let hvk = hv_s[k];
+                sum_hy[k] += 2.0 * hvk;
+                sum_hv[k] += 2.0 * ah[k];
+                hy_s[k] = hy0[k] + c * h * hvk;
+                hv_s[k] = hv0[k] + c * h * ah[k];
+            }
         }
         // Stage 4 and the combination.
-        let ah4 = evaluate::<SIMD>(
-            &self.model,
-            &self.struck,
-            hammer_on,
-            damper_down,
-            qs,
-            vs,
-            yh_s,
-            acc,
-        );
+        evaluate::<SIMD>(m, flags, qs, vs, hy_s, acc, ah);
         let w = h / 6.0;
         let (q, v) = (&mut self.q, &mut self.v);
         for i in 0..q.len() {
             q[i] += w * (sum_q[i] + vs[i]);
             v[i] += w * (sum_v[i] + acc[i]);
         }
-        if hammer_on {
-            self.hammer_y += w * (sum_yh + vh_s);
-            self.hammer_v += w * (sum_vh + ah4);
-            self.release_hammer_if_clear();
+        for k in 0..self.hammer_y.len() {
+            if self.flags.hammer_on[k] {
+                self.hammer_y[k] += w * (sum_hy[k] + hv_s[k]);
+                self.hammer_v[k] += w * (sum_hv[k] + ah[k]);
+            }
+        }
+        for k in 0..self.hammer_y.len() {
+            if self.flags.hammer_on[k] {
+                self.release_hammer_if_clear(k);
+            }
         }
         self.time_s += h;
     }
 
-    /// The hammer leaves the system once it recedes and is clear of every string by the release gap.
-    fn release_hammer_if_clear(&mut self) {
-        if self.hammer_v >= 0.0 {
+    /// A hammer leaves the system once it recedes and is clear of every string by the release gap.
+    fn release_hammer_if_clear(&mut self, k: usize) {
+        if self.hammer_v[k] >= 0.0 {
             return;
         }
-        for s in 0..self.model.n_strings {
-            if self.struck[s] {
-                let ye = dot(
-                    &self.model.hammer_shape,
-                    &self.q[self.model.ranges[s][0].clone()],
-                );
-                if ye - self.hammer_y < self.model.hammer.release_gap_m {
+        let voice = &self.model.voices[k];
+        for s in 0..voice.n_strings {
+            if self.flags.struck[k][s] {
+                let ye = dot(&voice.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
+                if ye - self.hammer_y[k] < voice.hammer.release_gap_m {
                     return;
                 }
             }
         }
-        self.hammer_on = false;
+        self.flags.hammer_on[k] = false;
     }
 
-    /// Forces, bridge velocity and volume velocity at the current state (Eq. 19).
+    /// Voice 0's outputs (see [`Unison::observe_voice`]).
     pub fn observe(&self) -> Observation {
+        self.observe_voice(0)
+    }
+
+    /// Forces of voice `k`, the board's velocity at its bridge point and the board's volume
+    /// velocity, at the current state (Eq. 19).
+    pub fn observe_voice(&self, k: usize) -> Observation {
         let mut obs = Observation::default();
-        evaluate_outputs(
-            &self.model,
-            &self.struck,
-            self.hammer_on,
-            &self.q,
-            &self.v,
-            self.hammer_y,
-            &mut obs,
-        );
+        let (m, voice) = (&self.model, &self.model.voices[k]);
+        let (q, v) = (&self.q, &self.v);
+        let qb = &q[m.board.clone()];
+        let vb = &v[m.board.clone()];
+        let mut rb = [0.0; 3];
+        for d in 0..3 {
+            (rb[d], obs.bridge_velocity_m_s[d]) = dot2(&voice.board_shape[d], qb, vb);
+        }
+        for s in 0..voice.n_strings {
+            for d in 0..3 {
+                let r = voice.ranges[s][d].clone();
+                let (rs, rs_dot) = dot2(&m.bridge_shape[r.clone()], &q[r.clone()], &v[r]);
+                let f = voice.contact.stiffness_n_m[d] * (rs - rb[d])
+                    + voice.contact.damping_n_s_m[d] * (rs_dot - obs.bridge_velocity_m_s[d]);
+                obs.bridge_force_n[s][d] = f;
+                obs.total_force_n[d] += f;
+            }
+            if self.flags.hammer_on[k] && self.flags.struck[k][s] {
+                let ye = dot(&voice.hammer_shape, &q[voice.ranges[s][0].clone()]);
+                obs.hammer_force_n[s] = voice.hammer.felt_force_n(self.hammer_y[k] - ye);
+            }
+        }
+        obs.volume_velocity_m3_s = self.volume_velocity_m3_s();
         obs
     }
 
-    /// Mechanical energy of strings, board, contact springs and hammer (J).
+    /// Net volume velocity of the board (m^3/s), the source of the radiated sound.
+    pub fn volume_velocity_m3_s(&self) -> f64 {
+        dot(&self.model.board_volume, &self.v[self.model.board.clone()])
+    }
+
+    /// Mechanical energy of strings, board, contact springs and hammers (J).
     pub fn energy(&self) -> Energy {
         let m = &self.model;
         let modal = |r: Range<usize>| -> f64 {
             r.map(|i| 0.5 * (self.v[i] * self.v[i] + m.omega2[i] * self.q[i] * self.q[i]))
                 .sum()
         };
-        let ns = m.n_strings;
         let strings_j = modal(0..m.board.start);
         let board_j = modal(m.board.clone());
         let qb = &self.q[m.board.clone()];
-        let mut contact_j = 0.0;
-        for s in 0..ns {
-            for d in 0..3 {
-                let r = m.ranges[s][d].clone();
-                let rs = dot(&m.bridge_shape[r.clone()], &self.q[r]);
-                let rb = dot(&m.board_shape[d], qb);
-                contact_j += 0.5 * m.contact.stiffness_n_m[d] * (rs - rb).powi(2);
+        let (mut contact_j, mut hammer_j) = (0.0, 0.0);
+        for (k, voice) in m.voices.iter().enumerate() {
+            for s in 0..voice.n_strings {
+                for d in 0..3 {
+                    let r = voice.ranges[s][d].clone();
+                    let rs = dot(&m.bridge_shape[r.clone()], &self.q[r]);
+                    let rb = dot(&voice.board_shape[d], qb);
+                    contact_j += 0.5 * voice.contact.stiffness_n_m[d] * (rs - rb).powi(2);
+                }
             }
-        }
-        let mut hammer_j = 0.0;
-        if self.hammer_on {
-            hammer_j = 0.5 * m.hammer.mass_kg * self.hammer_v.powi(2);
-            for s in 0..ns {
-                if self.struck[s] {
-                    let ye = dot(&m.hammer_shape, &self.q[m.ranges[s][0].clone()]);
-                    hammer_j += m.hammer.felt_energy_j(self.hammer_y - ye);
+            if self.flags.hammer_on[k] {
+                hammer_j += 0.5 * voice.hammer.mass_kg * self.hammer_v[k].powi(2);
+                for s in 0..voice.n_strings {
+                    if self.flags.struck[k][s] {
+                        let ye = dot(&voice.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
+                        hammer_j += voice.hammer.felt_energy_j(self.hammer_y[k] - ye);
+                    }
                 }
             }
         }
@@ -560,110 +656,80 @@ impl Unison {
     }
 }
 
-/// Right-hand side of Eq. 10: writes the modal accelerations into `acc` and returns the hammer's.
-#[allow(clippy::too_many_arguments)]
+/// Right-hand side of Eq. 10: writes the modal accelerations into `acc` and each hammer's into `ah`.
 #[inline(always)]
 fn evaluate<const SIMD: bool>(
     m: &Model,
-    struck: &[bool; MAX_STRINGS],
-    hammer_on: bool,
-    damper_down: bool,
+    flags: &VoiceFlags,
     q: &[f64],
     v: &[f64],
-    hammer_y: f64,
+    hammer_y: &[f64],
     acc: &mut [f64],
-) -> f64 {
+    ah: &mut [f64],
+) {
     // Uncoupled modal oscillators: -Omega^2 q - C qdot (diagonal blocks of Eq. 11).
     for i in 0..q.len() {
         acc[i] = -m.omega2[i] * q[i] - m.damp[i] * v[i];
     }
-    // Bridge point of the board in T, L, P (Eq. 5).
     let qb = &q[m.board.clone()];
     let vb = &v[m.board.clone()];
-    let mut rb = [0.0; 3];
-    let mut rb_dot = [0.0; 3];
-    for d in 0..3 {
-        (rb[d], rb_dot[d]) = dot2(&m.board_shape[d], qb, vb);
-    }
-    // Contact forces (Eq. 6) and their modal projections on each string (Eq. 17).
-    let mut total = [0.0; 3];
-    for s in 0..m.n_strings {
-        for d in 0..3 {
-            let r = m.ranges[s][d].clone();
-            let shape = &m.bridge_shape[r.clone()];
-            let (rs, rs_dot) = dot2(shape, &q[r.clone()], &v[r.clone()]);
-            let f = m.contact.stiffness_n_m[d] * (rs - rb[d])
-                + m.contact.damping_n_s_m[d] * (rs_dot - rb_dot[d]);
-            total[d] += f;
-            axpy(&mut acc[r], shape, -f);
+    for (k, voice) in m.voices.iter().enumerate() {
+        ah[k] = 0.0;
+        if !flags.active[k] {
+            continue;
         }
-    }
-    // Duplex damping on both transverse polarisations of every string (Eq. 13).
-    duplex_damping::<SIMD>(m, v, acc);
-    // The damper felt, while it is down: a point damper on T and P of every string.
-    if damper_down {
-        for s in 0..m.n_strings {
-            for d in [0, 2] {
-                let r = m.ranges[s][d].clone();
-                let shape = &m.damper_shape[..r.len()];
-                let f = m.damper_n_s_m * dot(shape, &v[r.clone()]);
+        // This voice's bridge point of the board in T, L, P (Eq. 5).
+        let mut rb = [0.0; 3];
+        let mut rb_dot = [0.0; 3];
+        for d in 0..3 {
+            (rb[d], rb_dot[d]) = dot2(&voice.board_shape[d], qb, vb);
+        }
+        // Contact forces (Eq. 6) and their modal projections on each string (Eq. 17).
+        let mut total = [0.0; 3];
+        for s in 0..voice.n_strings {
+            for d in 0..3 {
+                let r = voice.ranges[s][d].clone();
+                let shape = &m.bridge_shape[r.clone()];
+                let (rs, rs_dot) = dot2(shape, &q[r.clone()], &v[r.clone()]);
+                let f = voice.contact.stiffness_n_m[d] * (rs - rb[d])
+                    + voice.contact.damping_n_s_m[d] * (rs_dot - rb_dot[d]);
+                total[d] += f;
                 axpy(&mut acc[r], shape, -f);
             }
         }
-    }
-    // The board receives the sum of the strings' forces (Eq. 17).
-    let ab = &mut acc[m.board.clone()];
-    for d in 0..3 {
-        axpy(ab, &m.board_shape[d], total[d]);
-    }
-    // Hammer (Eq. 8, 14): felt force on each struck string, reaction on the hammer mass.
-    if !hammer_on {
-        return 0.0;
-    }
-    let mut felt_total = 0.0;
-    for s in 0..m.n_strings {
-        if struck[s] {
-            let r = m.ranges[s][0].clone();
-            let ye = dot(&m.hammer_shape, &q[r.clone()]);
-            let f = m.hammer.felt_force_n(hammer_y - ye);
-            felt_total += f;
-            axpy(&mut acc[r], &m.hammer_shape, f);
+        // Duplex damping on both transverse polarisations of every string (Eq. 13).
+        duplex_damping::<SIMD>(voice, v, acc);
+        // The damper felt, while it is down: a point damper on T and P of every string.
+        if flags.damper_down[k] {
+            for s in 0..voice.n_strings {
+                for d in [0, 2] {
+                    let r = voice.ranges[s][d].clone();
+                    let shape = &voice.damper_shape[..r.len()];
+                    let f = voice.damper_n_s_m * dot(shape, &v[r.clone()]);
+                    axpy(&mut acc[r], shape, -f);
+                }
+            }
         }
-    }
-    -felt_total / m.hammer.mass_kg
-}
-
-/// The output equation (Eq. 19): physical forces and velocities from the state.
-fn evaluate_outputs(
-    m: &Model,
-    struck: &[bool; MAX_STRINGS],
-    hammer_on: bool,
-    q: &[f64],
-    v: &[f64],
-    hammer_y: f64,
-    obs: &mut Observation,
-) {
-    let qb = &q[m.board.clone()];
-    let vb = &v[m.board.clone()];
-    let mut rb = [0.0; 3];
-    for d in 0..3 {
-        (rb[d], obs.bridge_velocity_m_s[d]) = dot2(&m.board_shape[d], qb, vb);
-    }
-    for s in 0..m.n_strings {
+        // The board receives the sum of the strings' forces at this voice's point (Eq. 17).
+        let ab = &mut acc[m.board.clone()];
         for d in 0..3 {
-            let r = m.ranges[s][d].clone();
-            let (rs, rs_dot) = dot2(&m.bridge_shape[r.clone()], &q[r.clone()], &v[r]);
-            let f = m.contact.stiffness_n_m[d] * (rs - rb[d])
-                + m.contact.damping_n_s_m[d] * (rs_dot - obs.bridge_velocity_m_s[d]);
-            obs.bridge_force_n[s][d] = f;
-            obs.total_force_n[d] += f;
+            axpy(ab, &voice.board_shape[d], total[d]);
         }
-        if hammer_on && struck[s] {
-            let ye = dot(&m.hammer_shape, &q[m.ranges[s][0].clone()]);
-            obs.hammer_force_n[s] = m.hammer.felt_force_n(hammer_y - ye);
+        // Hammer (Eq. 8, 14): felt force on each struck string, reaction on the hammer mass.
+        if flags.hammer_on[k] {
+            let mut felt_total = 0.0;
+            for s in 0..voice.n_strings {
+                if flags.struck[k][s] {
+                    let r = voice.ranges[s][0].clone();
+                    let ye = dot(&voice.hammer_shape, &q[r.clone()]);
+                    let f = voice.hammer.felt_force_n(hammer_y[k] - ye);
+                    felt_total += f;
+                    axpy(&mut acc[r], &voice.hammer_shape, f);
+                }
+            }
+            ah[k] = -felt_total / voice.hammer.mass_kg;
         }
     }
-    obs.volume_velocity_m3_s = dot(&m.board_volume, vb);
 }
 
 /// Whether this CPU can run the AVX2 + FMA build of the step.
@@ -719,7 +785,7 @@ fn axpy(y: &mut [f64], x: &[f64], alpha: f64) {
 /// `acc -= C_d v` on the T and P blocks of every string (Eq. 13). All blocks share the matrix, so
 /// when they have the same length each row of `C_d` is loaded once for all of them.
 #[inline(always)]
-fn duplex_damping<const SIMD: bool>(m: &Model, v: &[f64], acc: &mut [f64]) {
+fn duplex_damping<const SIMD: bool>(m: &VoiceModel, v: &[f64], acc: &mut [f64]) {
     let starts = |d: usize| (0..m.n_strings).map(move |s| m.ranges[s][d].start);
     let (nt, np) = (m.ranges[0][0].len(), m.ranges[0][2].len());
     if nt == np {

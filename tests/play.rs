@@ -1,0 +1,276 @@
+//! Keys sharing one soundboard, played through MIDI events with the pedals.
+
+use midly::num::{u15, u28, u4, u7};
+use midly::{Format, Header, MetaMessage, MidiMessage, Smf, Timing, TrackEvent, TrackEventKind};
+use std::process::Command;
+use unacorda::engine::system::UnisonSpec;
+use unacorda::engine::{Strike, Unison};
+use unacorda::midi::{Event, Pedal};
+use unacorda::play::Player;
+use unacorda::preset::Preset;
+use unacorda::scaling::{parse_key, Scaling};
+
+fn key_spec(name: &str) -> (usize, UnisonSpec) {
+    let keyboard = Scaling::resolve("grand").unwrap();
+    let k = parse_key(name).unwrap();
+    (k, keyboard.key_preset(k).unwrap().unison_spec())
+}
+
+fn rms(x: &[f64]) -> f64 {
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
+}
+
+#[test]
+fn an_idle_second_key_changes_nothing() {
+    let c2 = Preset::resolve("c2").unwrap().unison_spec();
+    let (_, c3) = key_spec("C3");
+    let mut one = Unison::new(&c2).unwrap();
+    let mut two = Unison::with_voices(&[c2, c3]).unwrap();
+    let strike = Strike {
+        velocity_m_s: 2.5,
+        una_corda: false,
+    };
+    one.strike(strike);
+    two.strike_voice(0, strike);
+    let mut worst: f64 = 0.0;
+    for _ in 0..4800 {
+        one.step();
+        two.step();
+        let (a, b) = (
+            one.observe().total_force_n[0],
+            two.observe_voice(0).total_force_n[0],
+        );
+        worst = worst.max((a - b).abs() / a.abs().max(1e-3));
+    }
+    println!("C2 alone vs C2 with an idle C3 on the same board, 50 ms: worst relative difference {worst:.1e}");
+    assert!(worst < 1e-12);
+}
+
+#[test]
+fn undamped_strings_ring_in_sympathy_through_the_board() {
+    let (_, c2) = key_spec("C2");
+    let (_, c3) = key_spec("C3");
+    let run = |c3_damper_up: bool| -> f64 {
+        let mut u = Unison::with_voices(&[c2.clone(), c3.clone()]).unwrap();
+        u.set_active(1, true);
+        u.set_damper_voice(1, !c3_damper_up);
+        u.strike_voice(
+            0,
+            Strike {
+                velocity_m_s: 2.5,
+                una_corda: false,
+            },
+        );
+        let steps = (0.6 / u.step_s()) as usize;
+        let mut late = Vec::new();
+        for k in 0..steps {
+            u.step();
+            if k * 10 >= steps * 8 {
+                late.push(u.observe_voice(1).total_force_n[0]);
+            }
+        }
+        rms(&late)
+    };
+    let (up, down) = (run(true), run(false));
+    let gain_db = 20.0 * (up / down).log10();
+    println!("C2 struck; unstruck C3's T force on the bridge, RMS 0.48–0.6 s: damper up {up:.2e} N, down {down:.2e} N ({gain_db:.1} dB)");
+    assert!(up > 0.0 && gain_db > 10.0);
+}
+
+/// Step `u` for `seconds`, applying `events` (time s, event) at their step; record voice forces.
+fn perform(
+    u: &mut Unison,
+    keys: &[usize],
+    events: &[(f64, Event)],
+    seconds: f64,
+) -> Vec<Vec<unacorda::engine::Observation>> {
+    let mut player = Player::new(keys);
+    let h = u.step_s();
+    let steps = (seconds / h) as usize;
+    let mut next = 0;
+    let mut obs = vec![Vec::with_capacity(steps); keys.len()];
+    for k in 0..steps {
+        while next < events.len() && (events[next].0 / h).round() as usize <= k {
+            player.apply(events[next].1, u);
+            next += 1;
+        }
+        u.step();
+        for (v, o) in obs.iter_mut().enumerate() {
+            o.push(u.observe_voice(v));
+        }
+    }
+    obs
+}
+
+#[test]
+fn soft_pedal_marks_only_the_notes_played_under_it() {
+    let (k2, c2) = key_spec("C2");
+    let (k3, c3) = key_spec("C3");
+    let mut u = Unison::with_voices(&[c2, c3]).unwrap();
+    let events = [
+        (
+            0.0,
+            Event::Pedal {
+                pedal: Pedal::Soft,
+                down: true,
+            },
+        ),
+        (
+            0.0,
+            Event::NoteOn {
+                note: 36,
+                velocity: 90,
+            },
+        ),
+        (
+            0.05,
+            Event::Pedal {
+                pedal: Pedal::Soft,
+                down: false,
+            },
+        ),
+        (
+            0.05,
+            Event::NoteOn {
+                note: 48,
+                velocity: 90,
+            },
+        ),
+    ];
+    let obs = perform(&mut u, &[k2, k3], &events, 0.2);
+    let peak = |v: usize, s: usize| obs[v].iter().fold(0f64, |m, o| m.max(o.hammer_force_n[s]));
+    println!("hammer force peaks (N): C2 (soft pedal) strings {:.1} {:.1}; C3 (no pedal) strings {:.1} {:.1} {:.1}",
+        peak(0, 0), peak(0, 1), peak(1, 0), peak(1, 1), peak(1, 2));
+    assert!(
+        peak(0, 0) > 1.0 && peak(0, 1) == 0.0,
+        "una corda on C2: one string of two"
+    );
+    assert!(
+        (0..3).all(|s| peak(1, s) > 1.0),
+        "C3 after the pedal rose: all three strings"
+    );
+    // The passive C2 string's bridge force grows, the una-corda signature of issue 2.
+    let steps_per_ms = (1e-3 / u.step_s()) as usize;
+    let f2: Vec<f64> = obs[0].iter().map(|o| o.bridge_force_n[1][0]).collect();
+    let (early, later) = (
+        rms(&f2[..15 * steps_per_ms]),
+        rms(&f2[135 * steps_per_ms..150 * steps_per_ms]),
+    );
+    println!(
+        "passive C2 string, T bridge force RMS: 0–15 ms {early:.3} N, 135–150 ms {later:.3} N"
+    );
+    assert!(later > 3.0 * early);
+}
+
+#[test]
+fn sustain_keeps_a_released_key_ringing() {
+    let (k2, c2) = key_spec("C2");
+    let level = |sustain: bool| -> f64 {
+        let mut u = Unison::with_voices(std::slice::from_ref(&c2)).unwrap();
+        let mut events = vec![
+            (
+                0.0,
+                Event::NoteOn {
+                    note: 36,
+                    velocity: 90,
+                },
+            ),
+            (0.1, Event::NoteOff { note: 36 }),
+        ];
+        if sustain {
+            events.insert(
+                1,
+                (
+                    0.05,
+                    Event::Pedal {
+                        pedal: Pedal::Sustain,
+                        down: true,
+                    },
+                ),
+            );
+        }
+        let obs = perform(&mut u, &[k2], &events, 0.6);
+        let tail: Vec<f64> = obs[0][obs[0].len() * 5 / 6..]
+            .iter()
+            .map(|o| o.total_force_n[0])
+            .collect();
+        20.0 * rms(&tail).log10()
+    };
+    let (held, damped) = (level(true), level(false));
+    println!("C2 released at 0.1 s, T force level 0.5–0.6 s: sustain down {held:.1} dB, no pedal {damped:.1} dB");
+    assert!(held - damped > 20.0);
+}
+
+#[test]
+fn cli_renders_a_midi_file() {
+    let ev = |delta: u32, kind| TrackEvent {
+        delta: u28::new(delta),
+        kind,
+    };
+    let midi = |message| TrackEventKind::Midi {
+        channel: u4::new(0),
+        message,
+    };
+    let mut smf = Smf::new(Header::new(
+        Format::SingleTrack,
+        Timing::Metrical(u15::new(480)),
+    ));
+    smf.tracks.push(vec![
+        ev(
+            0,
+            midi(MidiMessage::Controller {
+                controller: u7::new(67),
+                value: u7::new(127),
+            }),
+        ),
+        ev(
+            0,
+            midi(MidiMessage::NoteOn {
+                key: u7::new(36),
+                vel: u7::new(80),
+            }),
+        ),
+        ev(
+            96,
+            midi(MidiMessage::NoteOn {
+                key: u7::new(60),
+                vel: u7::new(70),
+            }),
+        ),
+        ev(
+            96,
+            midi(MidiMessage::NoteOff {
+                key: u7::new(36),
+                vel: u7::new(0),
+            }),
+        ),
+        ev(0, TrackEventKind::Meta(MetaMessage::EndOfTrack)),
+    ]);
+    let dir = tempfile::tempdir().unwrap();
+    let (mid, wav) = (dir.path().join("two.mid"), dir.path().join("two.wav"));
+    smf.save(&mid).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_unacorda"))
+        .args([
+            "render",
+            "--offline",
+            "--midi",
+            mid.to_str().unwrap(),
+            "--tail",
+            "0.1",
+            "--out",
+            wav.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    println!("{}", stderr.trim());
+    assert!(out.status.success() && stderr.contains("on 2 keys"));
+    let samples: Vec<f32> = hound::WavReader::open(&wav)
+        .unwrap()
+        .into_samples::<f32>()
+        .map(Result::unwrap)
+        .collect();
+    // Last event at 192 ticks = 0.2 s (120 bpm), plus the 0.1 s tail.
+    assert_eq!(samples.len(), (0.3 * 48_000.0) as usize);
+    assert!(samples.iter().all(|s| s.is_finite()) && samples.iter().any(|s| s.abs() > 1e-3));
+}
