@@ -231,21 +231,8 @@ impl Preset {
                 (p.display().to_string(), SoundboardModes::load_file(&p)?)
             }
         };
-        let bridge_point = board
-            .points
-            .iter()
-            .position(|p| p.name == preset.soundboard.bridge_point)
-            .ok_or_else(|| PresetError::BridgePoint {
-                path: path.to_owned(),
-                point: preset.soundboard.bridge_point.clone(),
-                asset: asset_name,
-                available: board
-                    .points
-                    .iter()
-                    .map(|p| p.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", "),
-            })?;
+        let bridge_point =
+            bridge_point_index(&board, &preset.soundboard.bridge_point, path, &asset_name)?;
         Ok(LoadedPreset {
             preset,
             source: path.to_owned(),
@@ -362,6 +349,31 @@ impl Preset {
         range("radiation.full_scale_pa", r.full_scale_pa, 1e-6, 1e4)?;
         Ok(())
     }
+}
+
+/// Index of the bridge point `name` in `board`, or an error naming the file, the asset and the
+/// points it has.
+pub(crate) fn bridge_point_index(
+    board: &SoundboardModes,
+    name: &str,
+    path: &Path,
+    asset: &str,
+) -> Result<usize, PresetError> {
+    board
+        .points
+        .iter()
+        .position(|p| p.name == name)
+        .ok_or_else(|| PresetError::BridgePoint {
+            path: path.to_owned(),
+            point: name.to_owned(),
+            asset: asset.to_owned(),
+            available: board
+                .points
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
 }
 
 impl LoadedPreset {

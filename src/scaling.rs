@@ -9,7 +9,7 @@
 
 use crate::engine::string::StringParams;
 use crate::engine::tuning::bridged_first_partial_hz;
-use crate::preset::{LoadedPreset, Preset, PresetError};
+use crate::preset::{bridge_point_index, LoadedPreset, Preset, PresetError};
 use serde::Deserialize;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
@@ -280,18 +280,12 @@ impl LoadedScaling {
         h.strike_ratio = self.interpolate(key, |a| a.strike_ratio);
         preset.soundboard.bridge_point = crate::engine::plate::key_name(key);
         preset.validate(&self.source)?;
-        let bridge_point = self
-            .base
-            .board
-            .points
-            .iter()
-            .position(|p| p.name == preset.soundboard.bridge_point)
-            .ok_or_else(|| PresetError::BridgePoint {
-                path: self.source.clone(),
-                point: preset.soundboard.bridge_point.clone(),
-                asset: preset.soundboard.asset.clone(),
-                available: self.base.board.points.len().to_string() + " other points",
-            })?;
+        let bridge_point = bridge_point_index(
+            &self.base.board,
+            &preset.soundboard.bridge_point,
+            &self.source,
+            &preset.soundboard.asset,
+        )?;
         Ok(LoadedPreset {
             preset,
             source: self.source.clone(),

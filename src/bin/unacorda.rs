@@ -8,7 +8,7 @@ use unacorda::engine::plate::generate_asset;
 use unacorda::engine::Strike;
 use unacorda::preset::Preset;
 use unacorda::preset::GRAND_BOARD_TOML;
-use unacorda::render::simulate;
+use unacorda::render::{simulate, Recording};
 use unacorda::scaling::Scaling;
 
 #[derive(Parser)]
@@ -119,6 +119,19 @@ fn progress_bar(seconds: f64, label: &str) -> ProgressBar {
     pb
 }
 
+/// Write the recording's sound pressure as a WAV (0 dBFS = `full_scale_pa`); returns its peak (dBFS).
+fn write_wav(out: &Path, rec: &Recording, full_scale_pa: f64) -> Result<f64> {
+    let samples: Vec<f32> = rec
+        .frames
+        .iter()
+        .map(|f| (f.pressure_pa / full_scale_pa) as f32)
+        .collect();
+    let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
+    unacorda::audio::wav::write_f32(out, rec.rate_hz as u32, &samples)
+        .with_context(|| format!("writing {}", out.display()))?;
+    Ok(20.0 * f64::from(peak).max(1e-12).log10())
+}
+
 fn main() -> std::process::ExitCode {
     match run(Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -161,22 +174,14 @@ fn run(cli: Cli) -> Result<()> {
                 })
                 .with_context(|| format!("{}", path.display()))?;
                 pb.finish_and_clear();
-                let full_scale = scaling.base.preset.radiation.full_scale_pa;
-                let samples: Vec<f32> = rec
-                    .frames
-                    .iter()
-                    .map(|f| (f.pressure_pa / full_scale) as f32)
-                    .collect();
-                let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
-                unacorda::audio::wav::write_f32(&out, rec.rate_hz as u32, &samples)
-                    .with_context(|| format!("writing {}", out.display()))?;
+                let peak_dbfs = write_wav(&out, &rec, scaling.base.preset.radiation.full_scale_pa)?;
                 eprintln!(
                     "wrote {} ({} events on {} keys sharing one soundboard, {:.2} s, peak {:.1} dBFS)",
                     out.display(),
                     events.len(),
                     keys.len(),
                     length_s,
-                    20.0 * peak.max(1e-12).log10()
+                    peak_dbfs
                 );
                 return Ok(());
             }
@@ -220,22 +225,14 @@ fn run(cli: Cli) -> Result<()> {
                 |f| pb.set_position((f * 1000.0) as u64),
             )?;
             pb.finish_and_clear();
-            let full_scale = loaded.preset.radiation.full_scale_pa;
-            let samples: Vec<f32> = rec
-                .frames
-                .iter()
-                .map(|f| (f.pressure_pa / full_scale) as f32)
-                .collect();
-            let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
-            unacorda::audio::wav::write_f32(&out, rec.rate_hz as u32, &samples)
-                .with_context(|| format!("writing {}", out.display()))?;
+            let peak_dbfs = write_wav(&out, &rec, loaded.preset.radiation.full_scale_pa)?;
             eprintln!(
                 "wrote {} ({}, {:.2} s at {} Hz, peak {:.1} dBFS, {})",
                 out.display(),
                 loaded.preset.name,
                 seconds,
                 rec.rate_hz,
-                20.0 * peak.max(1e-12).log10(),
+                peak_dbfs,
                 if una_corda { "una corda" } else { "normal" }
             );
         }
