@@ -4,7 +4,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
-use unacorda::engine::{Strike, Unison};
+use unacorda::engine::{Instrument, Strike};
 use unacorda::preset::Preset;
 use unacorda::render::Renderer;
 
@@ -34,7 +34,7 @@ fn c2_voice(c: &mut Criterion) {
     // The integrator alone: RK4 steps of the state-space system.
     let spec = preset.unison_spec();
     let steps = FRAMES * preset.oversampling(&spec);
-    let mut unison = Unison::new(&spec).expect("c2 builds");
+    let mut unison = Instrument::new(&spec).expect("c2 builds");
     unison.strike(strike);
     group.bench_function("rk4_steps_10ms", |b| {
         b.iter(|| {

@@ -1,15 +1,17 @@
 //! Playing the instrument: piano events (from live MIDI or a MIDI file) applied to keys that share
-//! one soundboard, with the pedals' logic. Keys are voices of one [`Unison`] system, each at its
-//! own bridge point; a key struck again is struck in its current motion.
+//! one soundboard, with the pedals' logic and the voice pool's allocation. A key struck again is
+//! struck in its current motion; a key without a voice takes a free one, or steals the quietest.
 
-use crate::engine::{Strike, Unison};
+use crate::engine::{Instrument, Strike};
 use crate::midi::{hammer_speed_m_s, piano_key, Event, Pedal};
 
 /// The performer's state: which keys are down and what the pedals do.
 #[derive(Debug, Clone)]
 pub struct Player {
-    /// Voice of each key (1–88), if the instrument has that key.
-    voice_of_key: [Option<usize>; 89],
+    /// Bank index (the instrument's key) of each piano key 1–88, if the instrument has it.
+    bank_of_key: [Option<usize>; 89],
+    /// Piano key (1–88) of each bank index.
+    key_of_bank: Vec<usize>,
     key_down: [bool; 89],
     /// Keys whose dampers the sostenuto pedal holds up.
     sostenuto_held: [bool; 89],
@@ -19,16 +21,17 @@ pub struct Player {
 }
 
 impl Player {
-    /// A player for an instrument whose voice `k` is key `keys[k]` (1–88).
+    /// A player for an instrument whose bank key `k` is piano key `keys[k]` (1–88).
     pub fn new(keys: &[usize]) -> Player {
-        let mut voice_of_key = [None; 89];
-        for (voice, &key) in keys.iter().enumerate() {
+        let mut bank_of_key = [None; 89];
+        for (bank, &key) in keys.iter().enumerate() {
             if (1..=88).contains(&key) {
-                voice_of_key[key] = Some(voice);
+                bank_of_key[key] = Some(bank);
             }
         }
         Player {
-            voice_of_key,
+            bank_of_key,
+            key_of_bank: keys.to_vec(),
             key_down: [false; 89],
             sostenuto_held: [false; 89],
             sustain: false,
@@ -43,22 +46,32 @@ impl Player {
     }
 
     /// Apply one event to the instrument. Events for keys the instrument lacks are ignored.
-    pub fn apply(&mut self, event: Event, instrument: &mut Unison) {
+    /// Never allocates.
+    pub fn apply(&mut self, event: Event, instrument: &mut Instrument) {
         match event {
             Event::NoteOn { note, velocity } => {
                 let (Some(key), Some(speed)) = (piano_key(note), hammer_speed_m_s(velocity)) else {
                     return;
                 };
-                if let Some(v) = self.voice_of_key[key] {
-                    self.key_down[key] = true;
-                    instrument.set_damper_voice(v, false);
-                    instrument.strike_voice(
-                        v,
-                        Strike {
-                            velocity_m_s: speed,
-                            una_corda: self.soft,
-                        },
-                    );
+                let Some(bank) = self.bank_of_key[key] else {
+                    return;
+                };
+                self.key_down[key] = true;
+                let strike = Strike {
+                    velocity_m_s: speed,
+                    una_corda: self.soft,
+                };
+                match instrument.voice_of_key(bank) {
+                    // Sounding (or waiting for its stolen voice): struck in its current motion.
+                    Some(v) if !instrument.is_fading(v) => {
+                        instrument.set_damper_voice(v, false);
+                        instrument.strike_voice(v, strike);
+                    }
+                    Some(v) => instrument.steal(v, bank, strike),
+                    None => {
+                        let v = self.voice_for_new_key(instrument);
+                        instrument.steal(v, bank, strike);
+                    }
                 }
             }
             Event::NoteOff { note } => {
@@ -92,8 +105,8 @@ impl Player {
             }
             Event::AllSoundOff => {
                 self.key_down = [false; 89];
-                for v in self.voice_of_key.iter().flatten() {
-                    instrument.set_damper_voice(*v, true);
+                for v in 0..instrument.n_voices() {
+                    instrument.set_damper_voice(v, true);
                 }
             }
             Event::ResetControllers => {
@@ -106,21 +119,107 @@ impl Player {
         }
     }
 
+    /// Whether the damper of piano key `key` is lifted by the key or a pedal.
+    fn lifted(&self, key: usize) -> bool {
+        self.key_down[key] || self.sustain || self.sostenuto_held[key]
+    }
+
+    /// The voice a newly sounding key takes: a silent one if there is any (one that never played
+    /// first), else the quietest by string energy, preferring keys whose dampers are down over
+    /// keys held by a finger or a pedal, and never one already fading.
+    fn voice_for_new_key(&self, instrument: &Instrument) -> usize {
+        let n = instrument.n_voices();
+        let free = |v: &usize| !instrument.is_active(*v) && !instrument.is_fading(*v);
+        if let Some(v) = (0..n)
+            .filter(free)
+            .find(|&v| instrument.key_of_voice(v).is_none())
+            .or_else(|| (0..n).find(free))
+        {
+            return v;
+        }
+        let rank = |v: usize| {
+            let held = instrument
+                .key_of_voice(v)
+                .is_some_and(|bank| self.lifted(self.key_of_bank[bank]));
+            (instrument.is_fading(v), held, instrument.voice_energy_j(v))
+        };
+        (0..n)
+            .min_by(|&a, &b| {
+                rank(a)
+                    .partial_cmp(&rank(b))
+                    .unwrap_or(std::cmp::Ordering::Equal)
+            })
+            .unwrap_or(0)
+    }
+
     /// Lift or drop one key's damper from the key and the pedals.
-    fn settle_damper(&self, key: usize, instrument: &mut Unison) {
-        if let Some(v) = self.voice_of_key[key] {
-            let lifted = self.key_down[key] || self.sustain || self.sostenuto_held[key];
-            instrument.set_damper_voice(v, !lifted);
-            // Strings whose damper is up ring in sympathy with the rest through the board.
-            if lifted {
-                instrument.set_active(v, true);
-            }
+    fn settle_damper(&self, key: usize, instrument: &mut Instrument) {
+        let Some(v) = self.bank_of_key[key].and_then(|b| instrument.voice_of_key(b)) else {
+            return;
+        };
+        let lifted = self.lifted(key);
+        instrument.set_damper_voice(v, !lifted);
+        // Strings whose damper is up ring in sympathy with the rest through the board.
+        if lifted {
+            instrument.set_active(v, true);
         }
     }
 
-    fn settle_all(&self, instrument: &mut Unison) {
+    fn settle_all(&self, instrument: &mut Instrument) {
         for key in 1..=88 {
             self.settle_damper(key, instrument);
         }
+    }
+}
+
+/// An instrument with its player: what the audio thread owns.
+#[derive(Debug, Clone)]
+pub struct Piano {
+    pub instrument: Instrument,
+    pub player: Player,
+    /// Piano key (1–88) of each bank index.
+    pub keys: Vec<usize>,
+}
+
+/// Default size of the voice pool.
+pub const DEFAULT_VOICES: usize = 32;
+
+impl Piano {
+    /// The `keys` (1–88) of `scaling` on one soundboard with a pool of `voices` voices. Keys are
+    /// built (and tuned) on all cores.
+    pub fn build(
+        scaling: &crate::scaling::LoadedScaling,
+        keys: &[usize],
+        voices: usize,
+    ) -> Result<Piano, crate::render::RenderError> {
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let chunk = keys.len().div_ceil(threads).max(1);
+        let specs = std::thread::scope(|scope| {
+            let handles: Vec<_> = keys
+                .chunks(chunk)
+                .map(|part| {
+                    scope.spawn(move || {
+                        part.iter()
+                            .map(|&k| Ok(scaling.key_preset(k)?.unison_spec()))
+                            .collect::<Result<Vec<_>, crate::preset::PresetError>>()
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().expect("key builder thread panicked"))
+                .collect::<Result<Vec<_>, _>>()
+        })?;
+        let specs: Vec<_> = specs.into_iter().flatten().collect();
+        Ok(Piano {
+            instrument: Instrument::with_pool(&specs, voices)?,
+            player: Player::new(keys),
+            keys: keys.to_vec(),
+        })
+    }
+
+    /// Apply one event.
+    pub fn apply(&mut self, event: Event) {
+        self.player.apply(event, &mut self.instrument);
     }
 }

@@ -445,6 +445,19 @@ impl LoadedPreset {
         self.preset.simulation.output_rate_hz as f64
     }
 
+    /// The output stage the preset describes: rate, radiation, full scale, and the default
+    /// threshold below which a voice stops being simulated.
+    pub fn output_settings(&self) -> crate::audio::synth::OutputSettings {
+        let r = &self.preset.radiation;
+        crate::audio::synth::OutputSettings {
+            rate_hz: self.output_rate_hz(),
+            air_density_kg_m3: r.air_density_kg_m3,
+            distance_m: r.distance_m,
+            full_scale_pa: r.full_scale_pa,
+            silence_j: crate::audio::synth::SILENCE_J,
+        }
+    }
+
     /// Internal steps per output sample.
     pub fn oversampling(&self, spec: &UnisonSpec) -> usize {
         let needed = self.preset.simulation.min_rate_over_fmax * spec.max_mode_freq_hz();

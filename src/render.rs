@@ -1,12 +1,12 @@
 //! From a preset and a strike to frames at the output rate: forces (Eq. 19) and radiated sound.
 //!
-//! The [`Renderer`] advances the [`Unison`] at the internal rate, reads the outputs after each step,
+//! The [`Renderer`] advances the [`Instrument`] at the internal rate, reads the outputs after each step,
 //! turns the board's net volume velocity into pressure at the listener (a monopole,
 //! `p = rho0 / (4 pi r) dQ/dt`, DESIGN.md §1.7) and decimates every channel through the same
 //! anti-alias filter to the output rate.
 
 use crate::audio::Decimator;
-use crate::engine::system::{BuildError, Observation, Strike, Unison};
+use crate::engine::system::{BuildError, Instrument, Observation, Strike};
 use crate::engine::MAX_STRINGS;
 use crate::preset::LoadedPreset;
 
@@ -57,9 +57,9 @@ impl Frame {
     }
 }
 
-/// A unison and its output stage.
+/// An instrument and its output stage, with analysis channels (forces of voice 0).
 pub struct Renderer {
-    unison: Unison,
+    instrument: Instrument,
     decimator: Decimator,
     /// `rho0 / (4 pi r)` (kg/m^4).
     monopole: f64,
@@ -72,17 +72,19 @@ pub struct Renderer {
 impl Renderer {
     pub fn new(preset: &LoadedPreset) -> Result<Renderer, BuildError> {
         let spec = preset.unison_spec();
-        let unison = Unison::new(&spec)?;
-        Ok(Self::from_unison(unison, preset))
+        let instrument = Instrument::new(&spec)?;
+        Ok(Self::from_instrument(instrument, preset))
     }
 
     /// The output stage of `preset` (rates, radiation) around a built system; the analysis
     /// channels follow its first voice.
-    pub fn from_unison(unison: Unison, preset: &LoadedPreset) -> Renderer {
-        let ratio = (preset.output_rate_hz() * unison.step_s()).recip().round() as usize;
+    pub fn from_instrument(instrument: Instrument, preset: &LoadedPreset) -> Renderer {
+        let ratio = (preset.output_rate_hz() * instrument.step_s())
+            .recip()
+            .round() as usize;
         let r = &preset.preset.radiation;
         Renderer {
-            unison,
+            instrument,
             decimator: Decimator::new(ratio, CHANNELS),
             monopole: r.air_density_kg_m3 / (4.0 * std::f64::consts::PI * r.distance_m),
             last_volume_velocity: 0.0,
@@ -92,12 +94,12 @@ impl Renderer {
         }
     }
 
-    pub fn unison(&self) -> &Unison {
-        &self.unison
+    pub fn instrument(&self) -> &Instrument {
+        &self.instrument
     }
 
-    pub fn unison_mut(&mut self) -> &mut Unison {
-        &mut self.unison
+    pub fn instrument_mut(&mut self) -> &mut Instrument {
+        &mut self.instrument
     }
 
     pub fn output_rate_hz(&self) -> f64 {
@@ -115,15 +117,15 @@ impl Renderer {
     }
 
     pub fn strike(&mut self, strike: Strike) {
-        self.unison.strike(strike);
+        self.instrument.strike(strike);
     }
 
     /// Advance by one output frame.
     pub fn next_frame(&mut self) -> Frame {
-        let fs_int = 1.0 / self.unison.step_s();
+        let fs_int = 1.0 / self.instrument.step_s();
         loop {
-            self.unison.step();
-            let obs = self.unison.observe();
+            self.instrument.step();
+            let obs = self.instrument.observe();
             let dq = (obs.volume_velocity_m3_s - self.last_volume_velocity) * fs_int;
             self.last_volume_velocity = obs.volume_velocity_m3_s;
             Frame {
@@ -176,7 +178,7 @@ pub fn simulate(
     let every = (r.output_rate_hz() as usize / 20).max(1);
     for k in 0..n {
         if Some(k) == release_frame {
-            r.unison_mut().set_damper(true);
+            r.instrument_mut().set_damper(true);
         }
         frames.push(r.next_frame());
         if k % every == 0 {
@@ -198,20 +200,58 @@ pub enum RenderError {
     Preset(#[from] crate::preset::PresetError),
     #[error(transparent)]
     Build(#[from] BuildError),
+    #[error(transparent)]
+    Synth(#[from] crate::audio::synth::SynthError),
     #[error("the MIDI file plays no key of the piano (notes 21–108)")]
     NoKeys,
+    #[error("the voice pool needs 1 to 256 voices, got {0}")]
+    Voices(usize),
 }
 
-/// Render a MIDI performance on the keyboard `scaling`: one voice for every key the file plays,
-/// all on one soundboard, the events applied at their output sample through the [`Player`], and
-/// `tail_s` of sound after the last event. Returns the recording and the keys used.
+/// A MIDI performance rendered offline.
+#[derive(Debug, Clone)]
+pub struct Performance {
+    pub rate_hz: f64,
+    /// Sound pressure normalised to full scale, one channel.
+    pub samples: Vec<f32>,
+    /// The piano keys (1–88) the file plays.
+    pub keys: Vec<usize>,
+    /// Size of the voice pool used.
+    pub voices: usize,
+}
+
+/// Output frames per block of the offline render (the live block sizes give the same samples:
+/// events are applied at their own frame whatever the block).
+pub const OFFLINE_BLOCK: usize = 256;
+
+/// Render a MIDI performance on the keyboard `scaling` through the live engine's path: every key
+/// the file plays in the bank, a pool of at most `voices` voices on one soundboard, events queued
+/// with their output frame and applied by the [`crate::audio::Synth`] block by block, and `tail_s`
+/// of sound after the last event.
 pub fn render_midi(
     scaling: &crate::scaling::LoadedScaling,
     events: &[crate::midi::file::TimedEvent],
     tail_s: f64,
+    voices: usize,
+    progress: impl FnMut(f64),
+) -> Result<Performance, RenderError> {
+    render_midi_with(scaling, events, tail_s, voices, progress, |_, _| {})
+}
+
+/// [`render_midi`], with `tap(instrument, frame)` called after every output frame.
+pub fn render_midi_with(
+    scaling: &crate::scaling::LoadedScaling,
+    events: &[crate::midi::file::TimedEvent],
+    tail_s: f64,
+    voices: usize,
     mut progress: impl FnMut(f64),
-) -> Result<(Recording, Vec<usize>), RenderError> {
+    mut tap: impl FnMut(&Instrument, u64),
+) -> Result<Performance, RenderError> {
+    use crate::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
     use crate::midi::{piano_key, Event};
+    if !(1..=256).contains(&voices) {
+        return Err(RenderError::Voices(voices));
+    }
     let mut keys: Vec<usize> = events
         .iter()
         .filter_map(|e| match e.event {
@@ -224,36 +264,36 @@ pub fn render_midi(
     if keys.is_empty() {
         return Err(RenderError::NoKeys);
     }
-    let specs = keys
-        .iter()
-        .map(|&k| Ok(scaling.key_preset(k)?.unison_spec()))
-        .collect::<Result<Vec<_>, RenderError>>()?;
-    let mut r = Renderer::from_unison(Unison::with_voices(&specs)?, &scaling.base);
-    let mut player = crate::play::Player::new(&keys);
-    let fs = r.output_rate_hz();
+    let voices = voices.min(keys.len());
+    let piano = crate::play::Piano::build(scaling, &keys, voices)?;
+    let settings = scaling.base.output_settings();
+    let fs = settings.rate_hz;
+    let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
     let end_s = events.last().map_or(0.0, |e| e.time_s) + tail_s;
-    let n = (end_s * fs).round() as usize;
-    let mut frames = Vec::with_capacity(n);
+    let mut samples = vec![0f32; (end_s * fs).round() as usize];
+    let n_blocks = samples.len().div_ceil(OFFLINE_BLOCK).max(1);
     let mut next = 0;
-    let every = (fs as usize / 20).max(1);
-    for k in 0..n {
-        while next < events.len() && (events[next].time_s * fs).round() as usize <= k {
-            player.apply(events[next].event, r.unison_mut());
+    for (b, block) in samples.chunks_mut(OFFLINE_BLOCK).enumerate() {
+        while next < events.len() && handle.queue_room() > 0 {
+            let e = &events[next];
+            let frame = (e.time_s * fs).round() as u64;
+            // Room was checked: the push cannot fail.
+            let _ = handle.schedule(Scheduled {
+                frame,
+                event: e.event,
+            });
             next += 1;
         }
-        frames.push(r.next_frame());
-        if k % every == 0 {
-            progress(k as f64 / n as f64);
+        synth.process_with(block, 1, &mut tap);
+        if b % 64 == 0 {
+            progress(b as f64 / n_blocks as f64);
         }
     }
     progress(1.0);
-    let delay_s = r.filter_delay_samples() / fs;
-    Ok((
-        Recording {
-            rate_hz: fs,
-            delay_s,
-            frames,
-        },
+    Ok(Performance {
+        rate_hz: fs,
+        samples,
         keys,
-    ))
+        voices,
+    })
 }

@@ -2,7 +2,7 @@
 //! point, string layout and mode counts follow the documented rules, and the keys sound near pitch.
 
 use unacorda::analysis::spectral::peak_frequency;
-use unacorda::engine::system::Unison;
+use unacorda::engine::system::Instrument;
 use unacorda::engine::Strike;
 use unacorda::preset::Preset;
 use unacorda::render::simulate;
@@ -33,7 +33,7 @@ fn every_key_builds_with_the_documented_layout() {
         let lp = keyboard.key_preset(k).unwrap();
         let s = &lp.preset.strings;
         let spec = lp.unison_spec();
-        let unison = Unison::new(&spec).unwrap_or_else(|e| panic!("key {k}: {e}"));
+        let unison = Instrument::new(&spec).unwrap_or_else(|e| panic!("key {k}: {e}"));
         let string = &spec.strings[0];
         let f_speaking = (s.tension_n / s.linear_density_kg_m).sqrt() / (2.0 * s.speaking_length_m);
         let cents = 1200.0 * (f_speaking / equal_tempered_hz(k)).log2();

@@ -3,7 +3,7 @@
 
 use std::f64::consts::PI;
 use unacorda::analysis::spectral::{dtft_magnitude, peak_frequency};
-use unacorda::engine::system::{Unison, UnisonSpec};
+use unacorda::engine::system::{Instrument, UnisonSpec};
 use unacorda::engine::Strike;
 use unacorda::preset::{LoadedPreset, Preset};
 
@@ -25,7 +25,7 @@ fn uncoupled(zeta: f64) -> UnisonSpec {
 /// Free vibration of string 1 from a smooth initial shape, sampled at every other step:
 /// transverse displacement at 0.37 L.
 fn free_vibration(spec: &UnisonSpec, seconds: f64) -> (f64, Vec<f64>) {
-    let mut u = Unison::new(spec).unwrap();
+    let mut u = Instrument::new(spec).unwrap();
     let t = u.string_range(0, 0);
     let s = &spec.strings[0];
     let x_obs = 0.37 * s.length_m();
@@ -132,7 +132,7 @@ fn linear_subproblem(rate_hz: f64, damped: bool) -> UnisonSpec {
 }
 
 /// Start with the string moving in a smooth shape whose bridge point is at rest.
-fn set_initial_velocity(u: &mut Unison) {
+fn set_initial_velocity(u: &mut Instrument) {
     let t = u.string_range(0, 0);
     let p = u.string_range(0, 2);
     let (_, v) = u.state_mut();
@@ -148,7 +148,7 @@ fn set_initial_velocity(u: &mut Unison) {
 fn rk4_converges_with_order_four() {
     let t_end = 0.01;
     let run = |rate: f64| -> Vec<f64> {
-        let mut u = Unison::new(&linear_subproblem(rate, true)).unwrap();
+        let mut u = Instrument::new(&linear_subproblem(rate, true)).unwrap();
         set_initial_velocity(&mut u);
         for _ in 0..(t_end * rate).round() as usize {
             u.step();
@@ -191,7 +191,7 @@ fn rk4_converges_with_order_four() {
 
 /// Worst relative drift of the total energy over 1 s, and the largest energy held by board + springs.
 fn undamped_drift(rate_hz: f64) -> (f64, f64, f64) {
-    let mut u = Unison::new(&linear_subproblem(rate_hz, false)).unwrap();
+    let mut u = Instrument::new(&linear_subproblem(rate_hz, false)).unwrap();
     set_initial_velocity(&mut u);
     let e0 = u.energy().total_j();
     let steps = (1.0 / u.step_s()).round() as usize;
@@ -230,7 +230,7 @@ fn energy_is_conserved_without_damping() {
 #[test]
 fn energy_never_increases_with_damping_and_hammer() {
     let preset = c2();
-    let mut u = Unison::new(&preset.unison_spec()).unwrap();
+    let mut u = Instrument::new(&preset.unison_spec()).unwrap();
     u.strike(Strike {
         velocity_m_s: 2.5,
         una_corda: false,

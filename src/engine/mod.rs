@@ -1,4 +1,4 @@
-//! Pure physics: no I/O, no threads, no allocation after a [`Unison`] is built.
+//! Pure physics: no I/O, no threads, no allocation after a [`Instrument`] is built.
 //!
 //! One module per physical part of the paper's model, one for their assembly:
 //! - [`string`]: stiff-string modes in T, P and L (Eq. 1–3),
@@ -21,7 +21,7 @@ pub mod string;
 pub mod system;
 pub mod tuning;
 
-pub use system::{Observation, Strike, Unison};
+pub use system::{Instrument, Observation, Strike};
 
 /// Directions at the bridge, in the paper's order (Eq. 5–6): transverse to the
 /// board (T), longitudinal along the string (L), parallel to the board (P).

@@ -21,7 +21,7 @@ use super::MAX_STRINGS;
 use std::f64::consts::PI;
 use std::ops::Range;
 
-/// Everything needed to build a [`Unison`]; plain data, every field public.
+/// Everything needed to build a [`Instrument`]; plain data, every field public.
 #[derive(Debug, Clone)]
 pub struct UnisonSpec {
     /// The strings of the unison (1 to 3), which differ only in tension.
@@ -92,13 +92,18 @@ impl Energy {
     }
 }
 
-/// Coefficients of one voice: the strings of one key, its hammer, damper and bridge point.
+/// Coefficients of one key: its strings' modes (laid out from 0), hammer, damper and bridge point.
+/// Built once; a voice playing the key copies the per-mode arrays into its own slot.
 #[derive(Debug, Clone)]
-struct VoiceModel {
+struct KeyModel {
     n_strings: usize,
-    /// `ranges[s][d]`: modes of string `s` in direction `d` (T, L, P) within the flat arrays.
+    /// `ranges[s][d]`: modes of string `s` in direction `d` (T, L, P), from the key's first mode.
     ranges: [[Range<usize>; 3]; MAX_STRINGS],
-    /// Board modes: `phi_T`, `phi_L`, `phi_P` at this voice's bridge point (Eq. 5).
+    n_modes: usize,
+    omega2: Vec<f64>,
+    damp: Vec<f64>,
+    bridge_shape: Vec<f64>,
+    /// Board modes: `phi_T`, `phi_L`, `phi_P` at this key's bridge point (Eq. 5).
     board_shape: [Vec<f64>; 3],
     /// `psi_n(L_e)` of the T modes (identical for every string: same length).
     hammer_shape: Vec<f64>,
@@ -112,10 +117,22 @@ struct VoiceModel {
     contact: Contact,
 }
 
-/// Fixed coefficients, computed once when the system is built.
+/// One voice of the pool: a fixed slot of `capacity` modes in the flat arrays, playing one key.
+#[derive(Debug, Clone)]
+struct Voice {
+    base: usize,
+    key: Option<usize>,
+    /// The key's `ranges` moved to this slot.
+    ranges: [[Range<usize>; 3]; MAX_STRINGS],
+    n_strings: usize,
+    n_modes: usize,
+}
+
+/// Coefficients of the system: the key bank, where each voice sits and what it plays, the board.
 #[derive(Debug, Clone)]
 struct Model {
-    voices: Vec<VoiceModel>,
+    keys: Vec<KeyModel>,
+    voices: Vec<Voice>,
     board: Range<usize>,
     omega2: Vec<f64>,
     /// `2 zeta omega` per mode (1/s).
@@ -129,24 +146,40 @@ struct Model {
 /// What each voice is doing, apart from its modes; read by every evaluation.
 #[derive(Debug, Clone)]
 struct VoiceFlags {
-    /// Simulated at all: a voice of a multi-key system joins when first struck.
+    /// Simulated at all: a voice joins when struck or its damper is lifted, and leaves when it
+    /// falls silent ([`Instrument::retire_silent`]).
     active: Vec<bool>,
     hammer_on: Vec<bool>,
     struck: Vec<[bool; MAX_STRINGS]>,
     damper_down: Vec<bool>,
+    /// Scale of the voice's contact forces (1, or falling to 0 while the voice is stolen).
+    coupling: Vec<f64>,
+    /// Steps left in the fade of a stolen voice, and the key and strike that follow it.
+    fade_left: Vec<u32>,
+    pending: Vec<Option<(usize, Strike)>>,
 }
 
-/// The strings of one or several keys, each at its own bridge point of one shared soundboard, with
-/// their hammers (paper Eq. 10, the board coupling every string of every key). Built for one key
-/// with [`Unison::new`] (the paper's case) or for several with [`Unison::with_voices`].
+/// Strings of up to 88 keys on one shared soundboard (paper Eq. 10, the board coupling every
+/// string of every sounding key), with their hammers and dampers.
+///
+/// The instrument holds a bank of keys and a fixed pool of voices. A voice is a slot in the flat
+/// state arrays that plays one key at a time at that key's bridge point; [`Instrument::assign`]
+/// gives a free voice a key (copying coefficients, no allocation) and [`Instrument::steal`] fades a
+/// sounding voice off the board before handing it to another key. Built for one key with
+/// [`Instrument::new`] (the paper's system), one voice per key with [`Instrument::with_keys`], or
+/// with a pool of any size with [`Instrument::with_pool`]. Only active voices are simulated.
 #[derive(Debug, Clone)]
-pub struct Unison {
+pub struct Instrument {
     model: Model,
     q: Vec<f64>,
     v: Vec<f64>,
     hammer_y: Vec<f64>,
     hammer_v: Vec<f64>,
     flags: VoiceFlags,
+    voice_of_key: Vec<Option<usize>>,
+    /// Mode ranges simulated in this step: the active voices' and the board's.
+    live: Vec<Range<usize>>,
+    fade_steps: u32,
     // RK4 scratch, sized once.
     qs: Vec<f64>,
     vs: Vec<f64>,
@@ -162,16 +195,16 @@ pub struct Unison {
     time_s: f64,
 }
 
-/// Why a [`UnisonSpec`] cannot be built.
+/// Why an [`Instrument`] cannot be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum BuildError {
     #[error("a unison holds 1 to {MAX_STRINGS} strings, got {0}")]
     StringCount(usize),
     #[error("bridge point index {0} is not in the soundboard model")]
     BridgePoint(usize),
-    #[error("voices of one system must share one soundboard and one internal rate")]
+    #[error("keys of one instrument must share one soundboard and one internal rate")]
     SharedBoard,
-    #[error("a system needs at least one voice")]
+    #[error("an instrument needs at least one key and one voice")]
     NoVoice,
     #[error(
         "RK4 would be unstable: the stiffest coupled mode (≈{freq_hz:.0} Hz) gives omega h = {omega_h:.2} \
@@ -184,14 +217,13 @@ pub enum BuildError {
     },
 }
 
-/// Modes of one voice in the flat layout from `base`; fills their coefficients.
-fn build_voice(
-    spec: &UnisonSpec,
-    base: usize,
-    omega2: &mut Vec<f64>,
-    damp: &mut Vec<f64>,
-    bridge_shape: &mut Vec<f64>,
-) -> Result<VoiceModel, BuildError> {
+/// Length of the fade that takes a stolen voice off the board (s): long enough not to click
+/// (a raised cosine over 5 ms has no energy above ~200 Hz beyond the sound itself), short enough
+/// that the new note's delay stays below what a pianist feels.
+pub const STEAL_FADE_S: f64 = 0.005;
+
+/// One key's coefficients, its modes laid out from 0.
+fn build_key(spec: &UnisonSpec) -> Result<KeyModel, BuildError> {
     let ns = spec.strings.len();
     if ns == 0 || ns > MAX_STRINGS {
         return Err(BuildError::StringCount(ns));
@@ -208,13 +240,12 @@ fn build_voice(
         ..
     } = spec.modes;
     let per_string = nt + np + nl;
-    let end = base + ns * per_string;
-    omega2.resize(end, 0.0);
-    damp.resize(end, 0.0);
-    bridge_shape.resize(end, 0.0);
+    let n_modes = ns * per_string;
+    let (mut omega2, mut damp, mut bridge_shape) =
+        (vec![0.0; n_modes], vec![0.0; n_modes], vec![0.0; n_modes]);
     let mut ranges: [[Range<usize>; 3]; MAX_STRINGS] = Default::default();
     for (s, string) in spec.strings.iter().enumerate() {
-        let b = base + s * per_string;
+        let b = s * per_string;
         // Flat layout [T | P | L]; direction index d is T = 0, L = 1, P = 2.
         ranges[s] = [b..b + nt, b + nt + np..b + per_string, b + nt..b + nt + np];
         let ls = string.speaking_length_m;
@@ -259,7 +290,7 @@ fn build_voice(
         .iter()
         .copied()
         .fold(0.0, f64::max);
-    let w_top = omega2[base..end].iter().copied().fold(0.0, f64::max);
+    let w_top = omega2.iter().copied().fold(0.0, f64::max);
     let w_contact = (k_max * inv_mass + w_top).sqrt();
     if w_contact * h > 2.78 {
         return Err(BuildError::Unstable {
@@ -268,9 +299,13 @@ fn build_voice(
             rate_hz: spec.sample_rate_hz,
         });
     }
-    Ok(VoiceModel {
+    Ok(KeyModel {
         n_strings: ns,
         ranges,
+        n_modes,
+        omega2,
+        damp,
+        bridge_shape,
         board_shape: point.shape.clone(),
         hammer_shape: (1..=nt).map(|k| s0.mode_shape(k, strike_x)).collect(),
         damper_shape,
@@ -288,39 +323,56 @@ fn build_voice(
     })
 }
 
-impl Unison {
-    /// One unison on its bridge point (the paper's system); precomputes every coefficient and
-    /// allocates all state and scratch.
-    pub fn new(spec: &UnisonSpec) -> Result<Unison, BuildError> {
-        let mut u = Self::with_voices(std::slice::from_ref(spec))?;
+impl Instrument {
+    /// One unison on its bridge point (the paper's system), active from the start; precomputes
+    /// every coefficient and allocates all state and scratch.
+    pub fn new(spec: &UnisonSpec) -> Result<Instrument, BuildError> {
+        let mut u = Self::with_keys(std::slice::from_ref(spec))?;
         u.flags.active[0] = true;
         Ok(u)
     }
 
-    /// Several keys on one shared soundboard: voice `k` is `specs[k]` at its own bridge point; all
-    /// specs must carry the same board and internal rate. A voice is simulated from its first
-    /// strike on.
-    pub fn with_voices(specs: &[UnisonSpec]) -> Result<Unison, BuildError> {
+    /// Several keys on one shared soundboard, one voice each: voice `k` plays `specs[k]` at its
+    /// own bridge point. A voice is simulated once struck or its damper lifted.
+    pub fn with_keys(specs: &[UnisonSpec]) -> Result<Instrument, BuildError> {
+        let mut u = Self::with_pool(specs, specs.len())?;
+        for k in 0..specs.len() {
+            u.assign(k, k);
+        }
+        Ok(u)
+    }
+
+    /// A bank of keys (`specs`, all on the same board and internal rate) and a pool of `voices`
+    /// voices, each large enough for any key; no voice plays a key yet.
+    pub fn with_pool(specs: &[UnisonSpec], voices: usize) -> Result<Instrument, BuildError> {
         let first = specs.first().ok_or(BuildError::NoVoice)?;
+        if voices == 0 {
+            return Err(BuildError::NoVoice);
+        }
         if specs
             .iter()
             .any(|s| s.board != first.board || s.sample_rate_hz != first.sample_rate_hz)
         {
             return Err(BuildError::SharedBoard);
         }
-        let (mut omega2, mut damp, mut bridge_shape) = (Vec::new(), Vec::new(), Vec::new());
-        let mut voices = Vec::with_capacity(specs.len());
-        for spec in specs {
-            let base = omega2.len();
-            voices.push(build_voice(
-                spec,
-                base,
-                &mut omega2,
-                &mut damp,
-                &mut bridge_shape,
-            )?);
-        }
-        let board = omega2.len()..omega2.len() + first.board.len();
+        let keys = specs.iter().map(build_key).collect::<Result<Vec<_>, _>>()?;
+        let capacity = keys.iter().map(|k| k.n_modes).max().unwrap_or(0);
+        let voice_slots: Vec<Voice> = (0..voices)
+            .map(|i| Voice {
+                base: i * capacity,
+                key: None,
+                ranges: Default::default(),
+                n_strings: 0,
+                n_modes: 0,
+            })
+            .collect();
+        let strings_end = voices * capacity;
+        let (mut omega2, mut damp, mut bridge_shape) = (
+            vec![0.0; strings_end],
+            vec![0.0; strings_end],
+            vec![0.0; strings_end],
+        );
+        let board = strings_end..strings_end + first.board.len();
         for k in 0..first.board.len() {
             let w = 2.0 * PI * first.board.freq_hz[k];
             omega2.push(w * w);
@@ -328,46 +380,58 @@ impl Unison {
             bridge_shape.push(0.0);
         }
         let n = omega2.len();
-        let nv = voices.len();
+        let h = 1.0 / first.sample_rate_hz;
         let model = Model {
-            voices,
+            keys,
+            voices: voice_slots,
             board,
             omega2,
             damp,
             bridge_shape,
             board_volume: first.board.volume_m2_per_sqrt_kg.clone(),
-            h: 1.0 / first.sample_rate_hz,
+            h,
         };
-        Ok(Unison {
+        Ok(Instrument {
+            voice_of_key: vec![None; specs.len()],
+            live: Vec::with_capacity(voices + 1),
+            fade_steps: (STEAL_FADE_S / h).round().max(1.0) as u32,
             model,
             q: vec![0.0; n],
             v: vec![0.0; n],
-            hammer_y: vec![0.0; nv],
-            hammer_v: vec![0.0; nv],
+            hammer_y: vec![0.0; voices],
+            hammer_v: vec![0.0; voices],
             flags: VoiceFlags {
-                active: vec![false; nv],
-                hammer_on: vec![false; nv],
-                struck: vec![[false; MAX_STRINGS]; nv],
-                damper_down: vec![false; nv],
+                active: vec![false; voices],
+                hammer_on: vec![false; voices],
+                struck: vec![[false; MAX_STRINGS]; voices],
+                damper_down: vec![false; voices],
+                coupling: vec![1.0; voices],
+                fade_left: vec![0; voices],
+                pending: vec![None; voices],
             },
             qs: vec![0.0; n],
             vs: vec![0.0; n],
             acc: vec![0.0; n],
             sum_q: vec![0.0; n],
             sum_v: vec![0.0; n],
-            hy_s: vec![0.0; nv],
-            hv_s: vec![0.0; nv],
-            sum_hy: vec![0.0; nv],
-            sum_hv: vec![0.0; nv],
-            ah: vec![0.0; nv],
+            hy_s: vec![0.0; voices],
+            hv_s: vec![0.0; voices],
+            sum_hy: vec![0.0; voices],
+            sum_hv: vec![0.0; voices],
+            ah: vec![0.0; voices],
             fast_path: has_avx2_fma(),
             time_s: 0.0,
         })
     }
 
-    /// Number of voices (keys).
+    /// Number of voices in the pool.
     pub fn n_voices(&self) -> usize {
         self.model.voices.len()
+    }
+
+    /// Number of keys in the bank.
+    pub fn n_keys(&self) -> usize {
+        self.model.keys.len()
     }
 
     /// Number of strings of voice 0.
@@ -375,7 +439,7 @@ impl Unison {
         self.model.voices[0].n_strings
     }
 
-    /// Total number of modes (strings and board).
+    /// Total number of modes (every voice's slot and the board).
     pub fn n_modes(&self) -> usize {
         self.q.len()
     }
@@ -415,16 +479,136 @@ impl Unison {
         self.flags.hammer_on[0]
     }
 
-    /// Strike voice 0 (see [`Unison::strike_voice`]).
+    /// The key voice `k` plays (an index into the bank), if any.
+    pub fn key_of_voice(&self, k: usize) -> Option<usize> {
+        self.model.voices[k].key
+    }
+
+    /// The voice that plays `key`, or will once its fade ends.
+    pub fn voice_of_key(&self, key: usize) -> Option<usize> {
+        self.voice_of_key[key]
+    }
+
+    /// Give voice `k` to `key`: the previous key loses it, the slot takes the key's coefficients
+    /// and starts at rest, damper lifted, inactive until struck. Copies, never allocates.
+    pub fn assign(&mut self, k: usize, key: usize) {
+        if let Some(old) = self.model.voices[k].key {
+            self.voice_of_key[old] = None;
+        }
+        let km = &self.model.keys[key];
+        let voice = &mut self.model.voices[k];
+        let (base, capacity_end) = (voice.base, voice.base + km.n_modes);
+        let slot_end = self
+            .model
+            .voices
+            .get(k + 1)
+            .map_or(self.model.board.start, |v| v.base);
+        debug_assert!(capacity_end <= slot_end);
+        let voice = &mut self.model.voices[k];
+        voice.key = Some(key);
+        voice.n_strings = km.n_strings;
+        voice.n_modes = km.n_modes;
+        for (s, r) in voice.ranges.iter_mut().enumerate() {
+            for d in 0..3 {
+                let local = &km.ranges[s][d];
+                r[d] = base + local.start..base + local.end;
+            }
+        }
+        self.model.omega2[base..capacity_end].copy_from_slice(&km.omega2);
+        self.model.damp[base..capacity_end].copy_from_slice(&km.damp);
+        self.model.bridge_shape[base..capacity_end].copy_from_slice(&km.bridge_shape);
+        self.q[base..slot_end].fill(0.0);
+        self.v[base..slot_end].fill(0.0);
+        self.voice_of_key[key] = Some(k);
+        let f = &mut self.flags;
+        (f.active[k], f.hammer_on[k], f.damper_down[k]) = (false, false, false);
+        (f.coupling[k], f.fade_left[k], f.pending[k]) = (1.0, 0, None);
+    }
+
+    /// Hand sounding voice `k` to `key`: over [`STEAL_FADE_S`] its contact forces fall to zero
+    /// with a raised cosine (the board is released smoothly, no click), then the voice takes `key`
+    /// at rest and `strike` hits it. Stealing a voice already fading only replaces what follows.
+    /// A voice that is not active is assigned and struck at once.
+    pub fn steal(&mut self, k: usize, key: usize, strike: Strike) {
+        if !self.flags.active[k] {
+            self.assign(k, key);
+            self.strike_voice(k, strike);
+            return;
+        }
+        if let Some(old) = self.model.voices[k].key {
+            if self.voice_of_key[old] == Some(k) {
+                self.voice_of_key[old] = None;
+            }
+        }
+        if let Some((old_pending, _)) = self.flags.pending[k] {
+            if old_pending != key {
+                self.voice_of_key[old_pending] = None;
+            }
+        }
+        self.voice_of_key[key] = Some(k);
+        if self.flags.fade_left[k] == 0 {
+            self.flags.fade_left[k] = self.fade_steps;
+        }
+        self.flags.pending[k] = Some((key, strike));
+        self.flags.damper_down[k] = false;
+    }
+
+    /// Whether voice `k` is fading out before it changes key.
+    pub fn is_fading(&self, k: usize) -> bool {
+        self.flags.fade_left[k] > 0
+    }
+
+    /// Mechanical energy in voice `k`'s strings (J): the measure of how loud it still is.
+    pub fn voice_energy_j(&self, k: usize) -> f64 {
+        let voice = &self.model.voices[k];
+        let r = voice.base..voice.base + voice.n_modes;
+        r.map(|i| 0.5 * (self.v[i] * self.v[i] + self.model.omega2[i] * self.q[i] * self.q[i]))
+            .sum()
+    }
+
+    /// Stop simulating the voices that have fallen silent: strings below `threshold_j`, no hammer,
+    /// no fade, and either the damper down or no damper at all (strings whose damper a key or
+    /// pedal lifts keep ringing in sympathy). Their strings are set to rest; they keep their key
+    /// until another key needs the voice. Returns how many were retired.
+    pub fn retire_silent(&mut self, threshold_j: f64) -> usize {
+        let mut retired = 0;
+        for k in 0..self.n_voices() {
+            let f = &self.flags;
+            let Some(key) = self.model.voices[k].key else {
+                continue;
+            };
+            let undamped = self.model.keys[key].damper_shape.is_empty();
+            if f.active[k]
+                && !f.hammer_on[k]
+                && f.fade_left[k] == 0
+                && (f.damper_down[k] || undamped)
+                && self.voice_energy_j(k) < threshold_j
+            {
+                let voice = &self.model.voices[k];
+                let r = voice.base..voice.base + voice.n_modes;
+                self.q[r.clone()].fill(0.0);
+                self.v[r].fill(0.0);
+                self.flags.active[k] = false;
+                retired += 1;
+            }
+        }
+        retired
+    }
+
+    /// Strike voice 0 (see [`Instrument::strike_voice`]).
     pub fn strike(&mut self, strike: Strike) {
         self.strike_voice(0, strike);
     }
 
     /// Launch voice `k`'s hammer at its strings (Eq. 14–15): it starts touching the struck strings
     /// at their current displacement (a sounding key is re-struck in its motion) and moves towards
-    /// them at `velocity_m_s`.
+    /// them at `velocity_m_s`. A voice without a key ignores it.
     pub fn strike_voice(&mut self, k: usize, strike: Strike) {
         let voice = &self.model.voices[k];
+        let Some(key) = voice.key else {
+            return;
+        };
+        let km = &self.model.keys[key];
         let ns = voice.n_strings;
         let n_struck = if strike.una_corda && ns > 1 {
             ns - 1
@@ -436,7 +620,7 @@ impl Unison {
         for s in 0..n_struck {
             struck[s] = true;
             let r = voice.ranges[s][0].clone();
-            contact_y = contact_y.max(dot(&voice.hammer_shape, &self.q[r]));
+            contact_y = contact_y.max(dot(&km.hammer_shape, &self.q[r]));
         }
         self.flags.struck[k] = struck;
         self.hammer_y[k] = contact_y;
@@ -447,9 +631,11 @@ impl Unison {
 
     /// Include voice `k` in the simulation without striking it (a key held silently, or every key
     /// under the sustain pedal, whose strings then ring in sympathy through the board), or leave it
-    /// out. A left-out voice keeps its state frozen.
+    /// out. A left-out voice keeps its state frozen; a voice without a key stays out.
     pub fn set_active(&mut self, k: usize, active: bool) {
-        self.flags.active[k] = active || self.flags.hammer_on[k];
+        let f = &mut self.flags;
+        f.active[k] =
+            self.model.voices[k].key.is_some() && (active || f.hammer_on[k] || f.fade_left[k] > 0);
     }
 
     /// Whether voice `k` is simulated.
@@ -457,15 +643,20 @@ impl Unison {
         self.flags.active[k]
     }
 
-    /// Lower or lift voice 0's damper (see [`Unison::set_damper_voice`]).
+    /// Lower or lift voice 0's damper (see [`Instrument::set_damper_voice`]).
     pub fn set_damper(&mut self, down: bool) {
         self.set_damper_voice(0, down);
     }
 
     /// Lower (key released) or lift (key down, or a pedal holding it) voice `k`'s damper. Keys
-    /// without a damper ignore it.
+    /// without a damper ignore it. For a fading voice it applies to the key that follows.
     pub fn set_damper_voice(&mut self, k: usize, down: bool) {
-        self.flags.damper_down[k] = down && !self.model.voices[k].damper_shape.is_empty();
+        let key = match self.flags.pending[k] {
+            Some((key, _)) => Some(key),
+            None => self.model.voices[k].key,
+        };
+        let has_damper = key.is_some_and(|key| !self.model.keys[key].damper_shape.is_empty());
+        self.flags.damper_down[k] = down && has_damper;
     }
 
     /// Whether voice 0's damper rests on the strings.
@@ -475,13 +666,22 @@ impl Unison {
 
     /// Advance one RK4 step; never allocates.
     pub fn step(&mut self) {
+        self.live.clear();
+        for (k, voice) in self.model.voices.iter().enumerate() {
+            if self.flags.active[k] {
+                self.live.push(voice.base..voice.base + voice.n_modes);
+            }
+        }
+        self.live.push(self.model.board.clone());
         #[cfg(target_arch = "x86_64")]
         if self.fast_path {
             // SAFETY: `fast_path` is set only when the CPU reports AVX2 and FMA.
             unsafe { self.step_avx2() };
+            self.advance_fades();
             return;
         }
         self.step_impl::<false>();
+        self.advance_fades();
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -490,12 +690,13 @@ impl Unison {
         self.step_impl::<true>();
     }
 
-    /// Classical RK4 over `(q, v, y_H, ydot_H)`, stage sums accumulated in place. `SIMD` selects
-    /// the explicit AVX2 + FMA kernels; it is true only on the path entered after detecting them.
+    /// Classical RK4 over `(q, v, y_H, ydot_H)` of the active voices and the board, stage sums
+    /// accumulated in place. `SIMD` selects the explicit AVX2 + FMA kernels; it is true only on
+    /// the path entered after detecting them.
     #[inline(always)]
     fn step_impl<const SIMD: bool>(&mut self) {
         let h = self.model.h;
-        let (m, flags) = (&self.model, &self.flags);
+        let (m, flags, live) = (&self.model, &self.flags, &self.live);
         let (q0, v0, hy0, hv0) = (&self.q, &self.v, &self.hammer_y, &self.hammer_v);
         let (qs, vs, acc) = (&mut self.qs, &mut self.vs, &mut self.acc);
         let (sum_q, sum_v) = (&mut self.sum_q, &mut self.sum_v);
@@ -507,12 +708,14 @@ impl Unison {
             &mut self.ah,
         );
         // Stage 1 at the current state.
-        evaluate::<SIMD>(m, flags, q0, v0, hy0, acc, ah);
-        for i in 0..q0.len() {
-            sum_q[i] = v0[i];
-            sum_v[i] = acc[i];
-            qs[i] = q0[i] + 0.5 * h * v0[i];
-            vs[i] = v0[i] + 0.5 * h * acc[i];
+        evaluate::<SIMD>(m, flags, live, q0, v0, hy0, acc, ah);
+        for r in live {
+            for i in r.clone() {
+                sum_q[i] = v0[i];
+                sum_v[i] = acc[i];
+                qs[i] = q0[i] + 0.5 * h * v0[i];
+                vs[i] = v0[i] + 0.5 * h * acc[i];
+            }
         }
         for k in 0..hy0.len() {
             sum_hy[k] = hv0[k];
@@ -522,13 +725,15 @@ impl Unison {
         }
         // Stages 2 and 3: weights 2, next stage at h/2 then h.
         for c in [0.5, 1.0] {
-            evaluate::<SIMD>(m, flags, qs, vs, hy_s, acc, ah);
-            for i in 0..q0.len() {
-                let vsi = vs[i];
-                sum_q[i] += 2.0 * vsi;
-                sum_v[i] += 2.0 * acc[i];
-                qs[i] = q0[i] + c * h * vsi;
-                vs[i] = v0[i] + c * h * acc[i];
+            evaluate::<SIMD>(m, flags, live, qs, vs, hy_s, acc, ah);
+            for r in live {
+                for i in r.clone() {
+                    let vsi = vs[i];
+                    sum_q[i] += 2.0 * vsi;
+                    sum_v[i] += 2.0 * acc[i];
+                    qs[i] = q0[i] + c * h * vsi;
+                    vs[i] = v0[i] + c * h * acc[i];
+                }
             }
             for k in 0..hy0.len() {
                 let hvk = hv_s[k];
@@ -539,12 +744,14 @@ impl Unison {
             }
         }
         // Stage 4 and the combination.
-        evaluate::<SIMD>(m, flags, qs, vs, hy_s, acc, ah);
+        evaluate::<SIMD>(m, flags, live, qs, vs, hy_s, acc, ah);
         let w = h / 6.0;
         let (q, v) = (&mut self.q, &mut self.v);
-        for i in 0..q.len() {
-            q[i] += w * (sum_q[i] + vs[i]);
-            v[i] += w * (sum_v[i] + acc[i]);
+        for r in live {
+            for i in r.clone() {
+                q[i] += w * (sum_q[i] + vs[i]);
+                v[i] += w * (sum_v[i] + acc[i]);
+            }
         }
         for k in 0..self.hammer_y.len() {
             if self.flags.hammer_on[k] {
@@ -560,16 +767,42 @@ impl Unison {
         self.time_s += h;
     }
 
+    /// Move every stolen voice one step along its fade; at the end, give it its next key.
+    fn advance_fades(&mut self) {
+        for k in 0..self.n_voices() {
+            let left = self.flags.fade_left[k];
+            if left == 0 {
+                continue;
+            }
+            let left = left - 1;
+            self.flags.fade_left[k] = left;
+            let x = f64::from(left) / f64::from(self.fade_steps);
+            self.flags.coupling[k] = 0.5 - 0.5 * (PI * x).cos();
+            if left == 0 {
+                if let Some((key, strike)) = self.flags.pending[k] {
+                    let damper_down = self.flags.damper_down[k];
+                    self.assign(k, key);
+                    self.strike_voice(k, strike);
+                    self.set_damper_voice(k, damper_down);
+                }
+            }
+        }
+    }
+
     /// A hammer leaves the system once it recedes and is clear of every string by the release gap.
     fn release_hammer_if_clear(&mut self, k: usize) {
         if self.hammer_v[k] >= 0.0 {
             return;
         }
         let voice = &self.model.voices[k];
+        let Some(key) = voice.key else {
+            return;
+        };
+        let km = &self.model.keys[key];
         for s in 0..voice.n_strings {
             if self.flags.struck[k][s] {
-                let ye = dot(&voice.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
-                if ye - self.hammer_y[k] < voice.hammer.release_gap_m {
+                let ye = dot(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
+                if ye - self.hammer_y[k] < km.hammer.release_gap_m {
                     return;
                 }
             }
@@ -577,38 +810,46 @@ impl Unison {
         self.flags.hammer_on[k] = false;
     }
 
-    /// Voice 0's outputs (see [`Unison::observe_voice`]).
+    /// Voice 0's outputs (see [`Instrument::observe_voice`]).
     pub fn observe(&self) -> Observation {
         self.observe_voice(0)
     }
 
     /// Forces of voice `k`, the board's velocity at its bridge point and the board's volume
-    /// velocity, at the current state (Eq. 19).
+    /// velocity, at the current state (Eq. 19). A voice without a key observes nothing but the board.
     pub fn observe_voice(&self, k: usize) -> Observation {
-        let mut obs = Observation::default();
+        let mut obs = Observation {
+            volume_velocity_m3_s: self.volume_velocity_m3_s(),
+            ..Observation::default()
+        };
         let (m, voice) = (&self.model, &self.model.voices[k]);
+        let Some(key) = voice.key else {
+            return obs;
+        };
+        let km = &m.keys[key];
+        let gain = self.flags.coupling[k];
         let (q, v) = (&self.q, &self.v);
         let qb = &q[m.board.clone()];
         let vb = &v[m.board.clone()];
         let mut rb = [0.0; 3];
         for d in 0..3 {
-            (rb[d], obs.bridge_velocity_m_s[d]) = dot2(&voice.board_shape[d], qb, vb);
+            (rb[d], obs.bridge_velocity_m_s[d]) = dot2(&km.board_shape[d], qb, vb);
         }
         for s in 0..voice.n_strings {
             for d in 0..3 {
                 let r = voice.ranges[s][d].clone();
                 let (rs, rs_dot) = dot2(&m.bridge_shape[r.clone()], &q[r.clone()], &v[r]);
-                let f = voice.contact.stiffness_n_m[d] * (rs - rb[d])
-                    + voice.contact.damping_n_s_m[d] * (rs_dot - obs.bridge_velocity_m_s[d]);
+                let f = gain
+                    * (km.contact.stiffness_n_m[d] * (rs - rb[d])
+                        + km.contact.damping_n_s_m[d] * (rs_dot - obs.bridge_velocity_m_s[d]));
                 obs.bridge_force_n[s][d] = f;
                 obs.total_force_n[d] += f;
             }
             if self.flags.hammer_on[k] && self.flags.struck[k][s] {
-                let ye = dot(&voice.hammer_shape, &q[voice.ranges[s][0].clone()]);
-                obs.hammer_force_n[s] = voice.hammer.felt_force_n(self.hammer_y[k] - ye);
+                let ye = dot(&km.hammer_shape, &q[voice.ranges[s][0].clone()]);
+                obs.hammer_force_n[s] = km.hammer.felt_force_n(self.hammer_y[k] - ye);
             }
         }
-        obs.volume_velocity_m3_s = self.volume_velocity_m3_s();
         obs
     }
 
@@ -629,20 +870,27 @@ impl Unison {
         let qb = &self.q[m.board.clone()];
         let (mut contact_j, mut hammer_j) = (0.0, 0.0);
         for (k, voice) in m.voices.iter().enumerate() {
+            let Some(key) = voice.key else {
+                continue;
+            };
+            let km = &m.keys[key];
             for s in 0..voice.n_strings {
                 for d in 0..3 {
                     let r = voice.ranges[s][d].clone();
                     let rs = dot(&m.bridge_shape[r.clone()], &self.q[r]);
-                    let rb = dot(&voice.board_shape[d], qb);
-                    contact_j += 0.5 * voice.contact.stiffness_n_m[d] * (rs - rb).powi(2);
+                    let rb = dot(&km.board_shape[d], qb);
+                    contact_j += 0.5
+                        * self.flags.coupling[k]
+                        * km.contact.stiffness_n_m[d]
+                        * (rs - rb).powi(2);
                 }
             }
             if self.flags.hammer_on[k] {
-                hammer_j += 0.5 * voice.hammer.mass_kg * self.hammer_v[k].powi(2);
+                hammer_j += 0.5 * km.hammer.mass_kg * self.hammer_v[k].powi(2);
                 for s in 0..voice.n_strings {
                     if self.flags.struck[k][s] {
-                        let ye = dot(&voice.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
-                        hammer_j += voice.hammer.felt_energy_j(self.hammer_y[k] - ye);
+                        let ye = dot(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
+                        hammer_j += km.hammer.felt_energy_j(self.hammer_y[k] - ye);
                     }
                 }
             }
@@ -656,11 +904,14 @@ impl Unison {
     }
 }
 
-/// Right-hand side of Eq. 10: writes the modal accelerations into `acc` and each hammer's into `ah`.
+/// Right-hand side of Eq. 10 over the `live` modes: writes their accelerations into `acc` and each
+/// hammer's into `ah`.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn evaluate<const SIMD: bool>(
     m: &Model,
     flags: &VoiceFlags,
+    live: &[Range<usize>],
     q: &[f64],
     v: &[f64],
     hammer_y: &[f64],
@@ -668,21 +919,25 @@ fn evaluate<const SIMD: bool>(
     ah: &mut [f64],
 ) {
     // Uncoupled modal oscillators: -Omega^2 q - C qdot (diagonal blocks of Eq. 11).
-    for i in 0..q.len() {
-        acc[i] = -m.omega2[i] * q[i] - m.damp[i] * v[i];
+    for r in live {
+        for i in r.clone() {
+            acc[i] = -m.omega2[i] * q[i] - m.damp[i] * v[i];
+        }
     }
     let qb = &q[m.board.clone()];
     let vb = &v[m.board.clone()];
     for (k, voice) in m.voices.iter().enumerate() {
         ah[k] = 0.0;
-        if !flags.active[k] {
+        let (true, Some(key)) = (flags.active[k], voice.key) else {
             continue;
-        }
+        };
+        let km = &m.keys[key];
+        let gain = flags.coupling[k];
         // This voice's bridge point of the board in T, L, P (Eq. 5).
         let mut rb = [0.0; 3];
         let mut rb_dot = [0.0; 3];
         for d in 0..3 {
-            (rb[d], rb_dot[d]) = dot2(&voice.board_shape[d], qb, vb);
+            (rb[d], rb_dot[d]) = dot2(&km.board_shape[d], qb, vb);
         }
         // Contact forces (Eq. 6) and their modal projections on each string (Eq. 17).
         let mut total = [0.0; 3];
@@ -691,21 +946,22 @@ fn evaluate<const SIMD: bool>(
                 let r = voice.ranges[s][d].clone();
                 let shape = &m.bridge_shape[r.clone()];
                 let (rs, rs_dot) = dot2(shape, &q[r.clone()], &v[r.clone()]);
-                let f = voice.contact.stiffness_n_m[d] * (rs - rb[d])
-                    + voice.contact.damping_n_s_m[d] * (rs_dot - rb_dot[d]);
+                let f = gain
+                    * (km.contact.stiffness_n_m[d] * (rs - rb[d])
+                        + km.contact.damping_n_s_m[d] * (rs_dot - rb_dot[d]));
                 total[d] += f;
                 axpy(&mut acc[r], shape, -f);
             }
         }
         // Duplex damping on both transverse polarisations of every string (Eq. 13).
-        duplex_damping::<SIMD>(voice, v, acc);
+        duplex_damping::<SIMD>(km, &voice.ranges, v, acc);
         // The damper felt, while it is down: a point damper on T and P of every string.
         if flags.damper_down[k] {
             for s in 0..voice.n_strings {
                 for d in [0, 2] {
                     let r = voice.ranges[s][d].clone();
-                    let shape = &voice.damper_shape[..r.len()];
-                    let f = voice.damper_n_s_m * dot(shape, &v[r.clone()]);
+                    let shape = &km.damper_shape[..r.len()];
+                    let f = km.damper_n_s_m * dot(shape, &v[r.clone()]);
                     axpy(&mut acc[r], shape, -f);
                 }
             }
@@ -713,7 +969,7 @@ fn evaluate<const SIMD: bool>(
         // The board receives the sum of the strings' forces at this voice's point (Eq. 17).
         let ab = &mut acc[m.board.clone()];
         for d in 0..3 {
-            axpy(ab, &voice.board_shape[d], total[d]);
+            axpy(ab, &km.board_shape[d], total[d]);
         }
         // Hammer (Eq. 8, 14): felt force on each struck string, reaction on the hammer mass.
         if flags.hammer_on[k] {
@@ -721,13 +977,13 @@ fn evaluate<const SIMD: bool>(
             for s in 0..voice.n_strings {
                 if flags.struck[k][s] {
                     let r = voice.ranges[s][0].clone();
-                    let ye = dot(&voice.hammer_shape, &q[r.clone()]);
-                    let f = voice.hammer.felt_force_n(hammer_y[k] - ye);
+                    let ye = dot(&km.hammer_shape, &q[r.clone()]);
+                    let f = km.hammer.felt_force_n(hammer_y[k] - ye);
                     felt_total += f;
-                    axpy(&mut acc[r], &voice.hammer_shape, f);
+                    axpy(&mut acc[r], &km.hammer_shape, f);
                 }
             }
-            ah[k] = -felt_total / voice.hammer.mass_kg;
+            ah[k] = -felt_total / km.hammer.mass_kg;
         }
     }
 }
@@ -785,9 +1041,14 @@ fn axpy(y: &mut [f64], x: &[f64], alpha: f64) {
 /// `acc -= C_d v` on the T and P blocks of every string (Eq. 13). All blocks share the matrix, so
 /// when they have the same length each row of `C_d` is loaded once for all of them.
 #[inline(always)]
-fn duplex_damping<const SIMD: bool>(m: &VoiceModel, v: &[f64], acc: &mut [f64]) {
-    let starts = |d: usize| (0..m.n_strings).map(move |s| m.ranges[s][d].start);
-    let (nt, np) = (m.ranges[0][0].len(), m.ranges[0][2].len());
+fn duplex_damping<const SIMD: bool>(
+    m: &KeyModel,
+    ranges: &[[Range<usize>; 3]; MAX_STRINGS],
+    v: &[f64],
+    acc: &mut [f64],
+) {
+    let starts = |d: usize| (0..m.n_strings).map(move |s| ranges[s][d].start);
+    let (nt, np) = (ranges[0][0].len(), ranges[0][2].len());
     if nt == np {
         let mut offsets = [0; 2 * MAX_STRINGS];
         for (o, start) in offsets.iter_mut().zip(starts(0).chain(starts(2))) {

@@ -1,4 +1,4 @@
-//! `unacorda`: command-line front end (render, figures, soundboard).
+//! `unacorda`: command-line front end (render, play, devices, figures, soundboard).
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
@@ -24,9 +24,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render one strike of a preset to a WAV file (32-bit float), without any audio device.
+    /// Render one strike of a preset, or a MIDI file, to a WAV file (32-bit float), without any
+    /// audio device.
     Render {
-        /// Render offline (the only mode of this command for now; no audio device is opened).
+        /// Render offline (required: this command never opens an audio device; `play` is live).
         #[arg(long)]
         offline: bool,
         /// Built-in preset name (c2) or path to a preset .toml file.
@@ -40,6 +41,9 @@ enum Command {
         /// striking one note.
         #[arg(long, value_name = "FILE.mid", conflicts_with_all = ["key", "una_corda", "velocity", "midi_velocity", "release_at"])]
         midi: Option<PathBuf>,
+        /// With --midi: size of the voice pool, 1–256 (the quietest voice is stolen when it is full).
+        #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES, value_name = "N")]
+        voices: usize,
         /// With --midi: seconds of sound after the last event, 0–60.
         #[arg(
             long,
@@ -80,6 +84,35 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Play live: MIDI input (or a MIDI file in real time) on all 88 keys through an audio device.
+    Play {
+        /// MIDI input port: its number in `unacorda devices` or part of its name (default: the first).
+        #[arg(long, value_name = "PORT")]
+        midi_in: Option<String>,
+        /// Play this MIDI file in real time instead of live input.
+        #[arg(long, value_name = "FILE.mid")]
+        midi: Option<PathBuf>,
+        /// Audio output: its id in `unacorda devices` (e.g. alsa:null) or part of its name.
+        #[arg(long, value_name = "NAME")]
+        device: Option<String>,
+        /// Frames per audio callback, 16–8192 (default: the device's).
+        #[arg(long, value_name = "N")]
+        buffer: Option<u32>,
+        /// Size of the voice pool, 1–256.
+        #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES, value_name = "N")]
+        voices: usize,
+        /// Keyboard scaling: built-in name (grand) or path to a .toml file.
+        #[arg(long, default_value = "grand")]
+        keyboard: String,
+        /// Stop after this many seconds (default: at the end of --midi plus 2 s, else at Ctrl-C).
+        #[arg(long, value_name = "S", allow_negative_numbers = true)]
+        seconds: Option<f64>,
+        /// Stop after this many audio callbacks (for tests on devices that play faster than real time).
+        #[arg(long, value_name = "N")]
+        callbacks: Option<u64>,
+    },
+    /// List audio outputs and MIDI inputs.
+    Devices,
     /// Regenerate the paper's Figures 2–6 (PNG + CSV): the board's mobility, full vs reduced, and
     /// a preset struck una corda vs normal.
     Figures {
@@ -104,6 +137,8 @@ enum Command {
     },
 }
 
+mod live;
+
 fn progress_bar(seconds: f64, label: &str) -> ProgressBar {
     // Anything that simulates more than a second shows progress.
     if seconds <= 1.0 {
@@ -126,8 +161,13 @@ fn write_wav(out: &Path, rec: &Recording, full_scale_pa: f64) -> Result<f64> {
         .iter()
         .map(|f| (f.pressure_pa / full_scale_pa) as f32)
         .collect();
+    write_samples(out, rec.rate_hz, &samples)
+}
+
+/// Write full-scale samples as a WAV; returns their peak (dBFS).
+fn write_samples(out: &Path, rate_hz: f64, samples: &[f32]) -> Result<f64> {
     let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
-    unacorda::audio::wav::write_f32(out, rec.rate_hz as u32, &samples)
+    unacorda::audio::wav::write_f32(out, rate_hz as u32, samples)
         .with_context(|| format!("writing {}", out.display()))?;
     Ok(20.0 * f64::from(peak).max(1e-12).log10())
 }
@@ -149,6 +189,7 @@ fn run(cli: Cli) -> Result<()> {
             preset,
             key,
             midi,
+            voices,
             tail,
             keyboard,
             una_corda,
@@ -159,7 +200,9 @@ fn run(cli: Cli) -> Result<()> {
             out,
         } => {
             if !offline {
-                bail!("live playback is not available yet: use `render --offline`");
+                bail!(
+                    "render works offline only: add --offline (for live sound use `unacorda play`)"
+                );
             }
             if let Some(path) = midi {
                 if !(0.0..=60.0).contains(&tail) {
@@ -169,18 +212,21 @@ fn run(cli: Cli) -> Result<()> {
                 let scaling = Scaling::resolve(&keyboard)?;
                 let length_s = events.last().map_or(0.0, |e| e.time_s) + tail;
                 let pb = progress_bar(length_s, "rendering");
-                let (rec, keys) = unacorda::render::render_midi(&scaling, &events, tail, |f| {
+                let started = std::time::Instant::now();
+                let perf = unacorda::render::render_midi(&scaling, &events, tail, voices, |f| {
                     pb.set_position((f * 1000.0) as u64)
                 })
                 .with_context(|| format!("{}", path.display()))?;
                 pb.finish_and_clear();
-                let peak_dbfs = write_wav(&out, &rec, scaling.base.preset.radiation.full_scale_pa)?;
+                let peak_dbfs = write_samples(&out, perf.rate_hz, &perf.samples)?;
                 eprintln!(
-                    "wrote {} ({} events on {} keys sharing one soundboard, {:.2} s, peak {:.1} dBFS)",
+                    "wrote {} ({} events on {} keys sharing one soundboard, {} voices, {:.2} s in {:.1} s, peak {:.1} dBFS)",
                     out.display(),
                     events.len(),
-                    keys.len(),
+                    perf.keys.len(),
+                    perf.voices,
                     length_s,
+                    started.elapsed().as_secs_f64(),
                     peak_dbfs
                 );
                 return Ok(());
@@ -296,6 +342,26 @@ fn run(cli: Cli) -> Result<()> {
                 eprintln!("wrote {}", w.display());
             }
         }
+        Command::Play {
+            midi_in,
+            midi,
+            device,
+            buffer,
+            voices,
+            keyboard,
+            seconds,
+            callbacks,
+        } => live::play(live::PlayArgs {
+            midi_in,
+            midi,
+            device,
+            buffer,
+            voices,
+            keyboard,
+            seconds,
+            callbacks,
+        })?,
+        Command::Devices => live::devices()?,
         Command::Soundboard { input, out } => {
             let spec = unacorda::preset::load_board_spec(&input)?;
             let command = format!(

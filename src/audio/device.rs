@@ -1,0 +1,216 @@
+//! Audio output through cpal (ALSA on Linux, whose `null` device plays without a sound card) and
+//! the list of MIDI inputs through midir. The stream's callback runs [`Synth::process`] and
+//! measures itself against the block's deadline; nothing in it allocates, locks or prints.
+
+use super::synth::Synth;
+use cpal::traits::{DeviceTrait, HostTrait, StreamTrait};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// One audio output as `devices` lists it.
+#[derive(Debug, Clone)]
+pub struct OutputInfo {
+    /// cpal's id, `host:device` (e.g. `alsa:null`, `alsa:hw:0,0`): what `--device` matches.
+    pub id: String,
+    pub description: String,
+    /// Whether the device can run the engine's format: 32-bit float at the output rate.
+    pub supports_rate: bool,
+    pub is_default: bool,
+}
+
+/// Why audio output cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum DeviceError {
+    #[error("no audio output device{}: run `unacorda devices` to list them, or render offline with `unacorda render --offline`", .0.as_ref().map(|n| format!(" matches {n:?}")).unwrap_or_default())]
+    NotFound(Option<String>),
+    #[error("audio device {device}: no 32-bit float output at {rate_hz} Hz (it offers: {offers})")]
+    Format {
+        device: String,
+        rate_hz: u32,
+        offers: String,
+    },
+    #[error("--buffer {0}: expected 16 to 8192 frames")]
+    Buffer(u32),
+    #[error("audio device {device}: {source}")]
+    Cpal {
+        device: String,
+        #[source]
+        source: cpal::Error,
+    },
+}
+
+/// Every output device of the default host, with whether it can play at `rate_hz`.
+pub fn output_devices(rate_hz: u32) -> Result<Vec<OutputInfo>, DeviceError> {
+    let host = cpal::default_host();
+    let default_id = host
+        .default_output_device()
+        .and_then(|d| d.id().ok())
+        .map(|id| id.to_string());
+    let devices = host.output_devices().map_err(|source| DeviceError::Cpal {
+        device: "host".into(),
+        source,
+    })?;
+    Ok(devices
+        .map(|d| {
+            let id = d.id().map_or_else(|_| "?".into(), |id| id.to_string());
+            OutputInfo {
+                description: d
+                    .description()
+                    .map_or_else(|_| String::new(), |x| x.to_string()),
+                supports_rate: f32_config(&d, rate_hz).is_ok(),
+                is_default: default_id.as_deref() == Some(id.as_str()),
+                id,
+            }
+        })
+        .collect())
+}
+
+/// The names of the MIDI inputs, or why live MIDI is unavailable (on Linux it needs the ALSA
+/// sequencer, `/dev/snd/seq`).
+pub fn midi_inputs() -> Result<Vec<String>, String> {
+    let input = midir::MidiInput::new("unacorda").map_err(|e| {
+        format!("live MIDI input is unavailable: {e} (on Linux it needs the ALSA sequencer, /dev/snd/seq)")
+    })?;
+    Ok(input
+        .ports()
+        .iter()
+        .map(|p| input.port_name(p).unwrap_or_else(|_| "?".into()))
+        .collect())
+}
+
+/// A channel count for 32-bit float output at `rate_hz`, or what the device offers instead.
+fn f32_config(device: &cpal::Device, rate_hz: u32) -> Result<u16, String> {
+    let configs: Vec<_> = device
+        .supported_output_configs()
+        .map_err(|e| format!("nothing: it cannot be opened ({e})"))?
+        .collect();
+    configs
+        .iter()
+        .filter(|c| c.sample_format() == cpal::SampleFormat::F32)
+        .filter(|c| (c.min_sample_rate()..=c.max_sample_rate()).contains(&rate_hz))
+        .map(|c| c.channels())
+        .min_by_key(|&ch| (ch != 2, ch))
+        .ok_or_else(|| {
+            configs
+                .iter()
+                .map(|c| {
+                    format!(
+                        "{} ch {:?} {}–{} Hz",
+                        c.channels(),
+                        c.sample_format(),
+                        c.min_sample_rate(),
+                        c.max_sample_rate()
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        })
+}
+
+/// What the callback measures about itself (relaxed atomics, read from any thread).
+#[derive(Debug, Default)]
+pub struct CallbackStats {
+    pub callbacks: AtomicU64,
+    /// Callbacks that took longer than their block lasts (the engine could not keep up).
+    pub overruns: AtomicU64,
+    pub busy_ns: AtomicU64,
+    pub max_ns: AtomicU64,
+    /// Frames of the largest block seen.
+    pub max_frames: AtomicU64,
+}
+
+/// A running output stream.
+pub struct Output {
+    /// Dropping the stream stops it.
+    _stream: cpal::Stream,
+    pub device: String,
+    pub channels: u16,
+    pub rate_hz: u32,
+    pub stats: Arc<CallbackStats>,
+    /// Errors the stream reported (device lost, xruns), as text.
+    pub errors: crossbeam_channel::Receiver<String>,
+}
+
+/// Open `device` (an id or part of an id or description; `None`: the default output) at
+/// `rate_hz` with `buffer` frames per callback (`None`: the device's default), and start `synth`
+/// in its callback.
+pub fn start(
+    mut synth: Synth,
+    device: Option<&str>,
+    rate_hz: u32,
+    buffer: Option<u32>,
+) -> Result<Output, DeviceError> {
+    if let Some(b) = buffer {
+        if !(16..=8192).contains(&b) {
+            return Err(DeviceError::Buffer(b));
+        }
+    }
+    let host = cpal::default_host();
+    let chosen = match device {
+        None => host.default_output_device(),
+        Some(name) => host.output_devices().ok().and_then(|mut all| {
+            all.find(|d| {
+                let id = d.id().map(|id| id.to_string()).unwrap_or_default();
+                let desc = d.description().map(|x| x.to_string()).unwrap_or_default();
+                id == name || id.ends_with(&format!(":{name}")) || desc.contains(name)
+            })
+        }),
+    }
+    .ok_or_else(|| DeviceError::NotFound(device.map(str::to_owned)))?;
+    let id = chosen.id().map_or_else(|_| "?".into(), |id| id.to_string());
+    let channels = f32_config(&chosen, rate_hz).map_err(|offers| DeviceError::Format {
+        device: id.clone(),
+        rate_hz,
+        offers,
+    })?;
+    let config = cpal::StreamConfig {
+        channels,
+        sample_rate: rate_hz,
+        buffer_size: buffer.map_or(cpal::BufferSize::Default, cpal::BufferSize::Fixed),
+    };
+    let stats = Arc::new(CallbackStats::default());
+    let (err_tx, err_rx) = crossbeam_channel::bounded(64);
+    let cb_stats = stats.clone();
+    let ch = usize::from(channels);
+    let fs = f64::from(rate_hz);
+    let stream = chosen
+        .build_output_stream(
+            config,
+            move |data: &mut [f32], _: &cpal::OutputCallbackInfo| {
+                let start = Instant::now();
+                synth.process(data, ch);
+                let ns = start.elapsed().as_nanos() as u64;
+                let frames = (data.len() / ch) as u64;
+                let deadline_ns = (frames as f64 / fs * 1e9) as u64;
+                let s = &cb_stats;
+                s.callbacks.fetch_add(1, Ordering::Relaxed);
+                s.busy_ns.fetch_add(ns, Ordering::Relaxed);
+                s.max_ns.fetch_max(ns, Ordering::Relaxed);
+                s.max_frames.fetch_max(frames, Ordering::Relaxed);
+                if ns > deadline_ns {
+                    s.overruns.fetch_add(1, Ordering::Relaxed);
+                }
+            },
+            move |e: cpal::Error| {
+                let _ = err_tx.try_send(e.to_string());
+            },
+            None,
+        )
+        .map_err(|source| DeviceError::Cpal {
+            device: id.clone(),
+            source,
+        })?;
+    stream.play().map_err(|source| DeviceError::Cpal {
+        device: id.clone(),
+        source,
+    })?;
+    Ok(Output {
+        _stream: stream,
+        device: id,
+        channels,
+        rate_hz,
+        stats,
+        errors: err_rx,
+    })
+}

@@ -1,0 +1,329 @@
+//! The audio thread's work, the same for live play and offline render: take the piano events due
+//! in this block from a bounded lock-free queue (each at its own output frame), take control
+//! commands from a channel, advance the shared-soundboard instrument at the internal rate, turn the
+//! board's volume velocity into sound pressure (a monopole, DESIGN.md §1.7) and decimate it to the
+//! output rate. [`Synth::process`] never allocates, locks, prints or blocks (a test runs it under
+//! `assert_no_alloc`), and runs with denormals flushed to zero.
+
+use super::Decimator;
+use crate::engine::Instrument;
+use crate::midi::Event;
+use crate::play::Piano;
+use crossbeam_channel::{Receiver, Sender, TrySendError};
+use ringbuf::traits::{Consumer, Observer, Producer, Split};
+use ringbuf::{HeapCons, HeapProd, HeapRb};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// A piano event due at an output frame of the engine's clock (frame 0 is the first sample the
+/// engine produced).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Scheduled {
+    pub frame: u64,
+    pub event: Event,
+}
+
+/// Commands from the controlling thread.
+#[derive(Debug)]
+pub enum Control {
+    /// Output silence from now on and stop simulating.
+    Shutdown,
+    /// Output gain (linear, applied to the normalised pressure).
+    Gain(f32),
+    /// Play another piano (a preset or keyboard change), built off the audio thread; the old
+    /// one is handed back through the handle so that it is never freed on the audio thread.
+    Replace(Box<Piano>),
+}
+
+/// Output stage settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OutputSettings {
+    /// Output sample rate (Hz); the instrument's internal rate must be an integer multiple.
+    pub rate_hz: f64,
+    /// Air density and listener distance give `rho0 / (4 pi r)` (kg/m^4).
+    pub air_density_kg_m3: f64,
+    pub distance_m: f64,
+    /// Sound pressure at digital full scale (Pa).
+    pub full_scale_pa: f64,
+    /// Voices whose strings hold less energy than this stop being simulated (J).
+    pub silence_j: f64,
+}
+
+/// Default retirement threshold: about 80 dB below the energy a mezzo-forte hammer brings (≈ 0.02 J).
+pub const SILENCE_J: f64 = 1e-10;
+
+/// Counters the audio thread publishes (relaxed atomics: readable from any thread at any time).
+#[derive(Debug, Default)]
+pub struct Stats {
+    pub blocks: AtomicU64,
+    pub frames: AtomicU64,
+    /// Events that arrived after their frame had passed (applied at the block's start).
+    pub late_events: AtomicU64,
+    /// Largest number of simultaneously simulated voices.
+    pub peak_voices: AtomicU64,
+}
+
+/// The engine's frame clock as last published by the audio thread, so that other threads can
+/// stamp events with the frame at which they should sound. A sequence lock: the audio thread
+/// never waits, readers retry.
+#[derive(Debug)]
+pub struct Clock {
+    seq: AtomicU64,
+    frame: AtomicU64,
+    at_ns: AtomicU64,
+    block: AtomicU64,
+    origin: Instant,
+    rate_hz: f64,
+}
+
+impl Clock {
+    pub fn new(rate_hz: f64) -> Clock {
+        Clock {
+            seq: AtomicU64::new(0),
+            frame: AtomicU64::new(0),
+            at_ns: AtomicU64::new(0),
+            block: AtomicU64::new(0),
+            origin: Instant::now(),
+            rate_hz,
+        }
+    }
+
+    /// Called by the audio thread at the start of each block of `block` frames.
+    fn publish(&self, frame: u64, now: Instant, block: u64) {
+        let ns = now.saturating_duration_since(self.origin).as_nanos() as u64;
+        self.seq.fetch_add(1, Ordering::AcqRel);
+        self.frame.store(frame, Ordering::Release);
+        self.at_ns.store(ns, Ordering::Release);
+        self.block.store(block, Ordering::Release);
+        self.seq.fetch_add(1, Ordering::AcqRel);
+    }
+
+    /// The frame at which an event arriving at `now` should sound: the frame being played,
+    /// extrapolated from the last block start, plus one block. Stamping live events this way
+    /// turns the callback's jitter into a constant delay of one block.
+    pub fn frame_at(&self, now: Instant) -> u64 {
+        loop {
+            let s0 = self.seq.load(Ordering::Acquire);
+            let frame = self.frame.load(Ordering::Acquire);
+            let ns = self.at_ns.load(Ordering::Acquire);
+            let block = self.block.load(Ordering::Acquire);
+            if s0 % 2 == 0 && self.seq.load(Ordering::Acquire) == s0 {
+                let now_ns = now.saturating_duration_since(self.origin).as_nanos() as u64;
+                let ahead = now_ns.saturating_sub(ns) as f64 * 1e-9 * self.rate_hz;
+                return frame + (ahead as u64).min(block) + block;
+            }
+            std::hint::spin_loop();
+        }
+    }
+}
+
+/// The audio thread's side: owns the piano, reads events and commands.
+pub struct Synth {
+    piano: Box<Piano>,
+    events: HeapCons<Scheduled>,
+    control: Receiver<Control>,
+    returned: Sender<Box<Piano>>,
+    clock: Arc<Clock>,
+    stats: Arc<Stats>,
+    decimator: Decimator,
+    monopole: f64,
+    internal_rate_hz: f64,
+    last_volume_velocity: f64,
+    scale: f64,
+    gain: f32,
+    silence_j: f64,
+    frame: u64,
+    running: bool,
+}
+
+/// The other threads' side: schedule events, send commands, read the clock and the counters.
+pub struct SynthHandle {
+    pub events: HeapProd<Scheduled>,
+    control: Sender<Control>,
+    returned: Receiver<Box<Piano>>,
+    pub clock: Arc<Clock>,
+    pub stats: Arc<Stats>,
+}
+
+/// Why the synth cannot be set up.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SynthError {
+    #[error(
+        "the internal rate {internal_hz} Hz is not an integer multiple of the output rate {output_hz} Hz"
+    )]
+    Rates { internal_hz: f64, output_hz: f64 },
+}
+
+/// Room in the event queue: a second of dense playing.
+pub const EVENT_QUEUE: usize = 4096;
+
+impl Synth {
+    /// A synth playing `piano` with its pair of handles; `queue` events fit in the queue.
+    pub fn new(
+        piano: Piano,
+        out: OutputSettings,
+        queue: usize,
+    ) -> Result<(Synth, SynthHandle), SynthError> {
+        let internal_rate_hz = 1.0 / piano.instrument.step_s();
+        let ratio = (internal_rate_hz / out.rate_hz).round();
+        if ratio < 1.0 || (ratio * out.rate_hz - internal_rate_hz).abs() > 1e-6 * internal_rate_hz {
+            return Err(SynthError::Rates {
+                internal_hz: internal_rate_hz,
+                output_hz: out.rate_hz,
+            });
+        }
+        let (prod, cons) = HeapRb::<Scheduled>::new(queue.max(1)).split();
+        let (control_tx, control_rx) = crossbeam_channel::bounded(8);
+        // One slot: `SynthHandle::replace` waits for the old piano before sending another.
+        let (returned_tx, returned_rx) = crossbeam_channel::bounded(1);
+        let clock = Arc::new(Clock::new(out.rate_hz));
+        let stats = Arc::new(Stats::default());
+        let synth = Synth {
+            piano: Box::new(piano),
+            events: cons,
+            control: control_rx,
+            returned: returned_tx,
+            clock: clock.clone(),
+            stats: stats.clone(),
+            decimator: Decimator::new(ratio as usize, 1),
+            monopole: out.air_density_kg_m3 / (4.0 * std::f64::consts::PI * out.distance_m),
+            internal_rate_hz,
+            last_volume_velocity: 0.0,
+            scale: 1.0 / out.full_scale_pa,
+            gain: 1.0,
+            silence_j: out.silence_j,
+            frame: 0,
+            running: true,
+        };
+        let handle = SynthHandle {
+            events: prod,
+            control: control_tx,
+            returned: returned_rx,
+            clock,
+            stats,
+        };
+        Ok((synth, handle))
+    }
+
+    /// The piano being played.
+    pub fn piano(&self) -> &Piano {
+        &self.piano
+    }
+
+    /// Output frames produced so far.
+    pub fn frame(&self) -> u64 {
+        self.frame
+    }
+
+    /// Fill an interleaved block of `channels` channels (every channel the same signal).
+    pub fn process(&mut self, out: &mut [f32], channels: usize) {
+        self.process_with(out, channels, |_, _| {});
+    }
+
+    /// [`Synth::process`], calling `tap(instrument, frame)` after each output frame (for tests and
+    /// analysis; the no-op tap of `process` compiles away).
+    pub fn process_with(
+        &mut self,
+        out: &mut [f32],
+        channels: usize,
+        mut tap: impl FnMut(&Instrument, u64),
+    ) {
+        // SAFETY: flush-to-zero and denormals-are-zero only change how subnormal results are
+        // rounded (to zero) for the duration of the block on this thread; the guard restores MXCSR.
+        unsafe { no_denormals::no_denormals(|| self.render(out, channels.max(1), &mut tap)) }
+    }
+
+    fn render(&mut self, out: &mut [f32], channels: usize, tap: &mut impl FnMut(&Instrument, u64)) {
+        self.clock
+            .publish(self.frame, Instant::now(), (out.len() / channels) as u64);
+        while let Ok(command) = self.control.try_recv() {
+            match command {
+                Control::Shutdown => self.running = false,
+                Control::Gain(g) => self.gain = if g.is_finite() { g.max(0.0) } else { 1.0 },
+                Control::Replace(new) => {
+                    let old = std::mem::replace(&mut self.piano, new);
+                    self.last_volume_velocity = 0.0;
+                    if let Err(TrySendError::Full(old) | TrySendError::Disconnected(old)) =
+                        self.returned.try_send(old)
+                    {
+                        // Only when the handle is gone (shutting down): nothing else can free it.
+                        std::mem::forget(old);
+                    }
+                }
+            }
+        }
+        let block_start = self.frame;
+        for frame_out in out.chunks_exact_mut(channels) {
+            while let Some(&Scheduled { frame, event }) = self.events.try_peek() {
+                if frame > self.frame {
+                    break;
+                }
+                self.events.try_pop();
+                if frame < block_start {
+                    self.stats.late_events.fetch_add(1, Ordering::Relaxed);
+                }
+                self.piano.apply(event);
+            }
+            let y = if self.running {
+                (self.next_pressure_pa() * self.scale) as f32 * self.gain
+            } else {
+                0.0
+            };
+            frame_out.fill(y);
+            tap(&self.piano.instrument, self.frame);
+            self.frame += 1;
+        }
+        let inst = &mut self.piano.instrument;
+        inst.retire_silent(self.silence_j);
+        let active = (0..inst.n_voices()).filter(|&v| inst.is_active(v)).count() as u64;
+        self.stats.peak_voices.fetch_max(active, Ordering::Relaxed);
+        self.stats
+            .frames
+            .fetch_add(self.frame - block_start, Ordering::Relaxed);
+        self.stats.blocks.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Advance to the next output frame; returns its sound pressure (Pa).
+    fn next_pressure_pa(&mut self) -> f64 {
+        let mut out = [0.0];
+        loop {
+            let inst = &mut self.piano.instrument;
+            inst.step();
+            let q = inst.volume_velocity_m3_s();
+            let p = self.monopole * (q - self.last_volume_velocity) * self.internal_rate_hz;
+            self.last_volume_velocity = q;
+            if self.decimator.push(&[p], &mut out) {
+                return out[0];
+            }
+        }
+    }
+}
+
+impl SynthHandle {
+    /// Queue an event; returns it back if the queue is full.
+    pub fn schedule(&mut self, event: Scheduled) -> Result<(), Scheduled> {
+        self.events.try_push(event)
+    }
+
+    /// Room left in the event queue.
+    pub fn queue_room(&self) -> usize {
+        self.events.vacant_len()
+    }
+
+    /// Ask the audio thread to go silent.
+    pub fn shutdown(&self) {
+        let _ = self.control.send(Control::Shutdown);
+    }
+
+    pub fn set_gain(&self, gain: f32) {
+        let _ = self.control.send(Control::Gain(gain));
+    }
+
+    /// Hand the audio thread a new piano and wait until it gives the old one back, which is then
+    /// freed here. `process` must be running (the wait ends when it picks the command up).
+    pub fn replace(&self, piano: Piano) -> Option<Box<Piano>> {
+        self.control.send(Control::Replace(Box::new(piano))).ok()?;
+        self.returned.recv().ok()
+    }
+}

@@ -1,0 +1,230 @@
+//! `play` and `devices`: the live shell around the library's audio engine.
+
+use anyhow::{bail, Context, Result};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use unacorda::audio::device::{self, midi_inputs, output_devices};
+use unacorda::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
+use unacorda::midi::live::LiveParser;
+use unacorda::play::Piano;
+use unacorda::scaling::{Scaling, KEYS};
+
+pub struct PlayArgs {
+    pub midi_in: Option<String>,
+    pub midi: Option<PathBuf>,
+    pub device: Option<String>,
+    pub buffer: Option<u32>,
+    pub voices: usize,
+    pub keyboard: String,
+    pub seconds: Option<f64>,
+    pub callbacks: Option<u64>,
+}
+
+/// Sound after the last event of a file played live (s).
+const FILE_TAIL_S: f64 = 2.0;
+
+pub fn play(args: PlayArgs) -> Result<()> {
+    if !(1..=256).contains(&args.voices) {
+        bail!("--voices {}: expected 1 to 256", args.voices);
+    }
+    if let Some(s) = args.seconds {
+        if !(s > 0.0 && s <= 86_400.0) {
+            bail!("--seconds {s}: expected a duration in (0, 86400] s");
+        }
+    }
+    // Read the file first: a bad file should fail before the keys are built.
+    let file_events = match &args.midi {
+        Some(path) => Some(unacorda::midi::file::read_file(path)?),
+        None => None,
+    };
+    let scaling = Scaling::resolve(&args.keyboard)?;
+    let keys: Vec<usize> = (1..=KEYS).collect();
+    eprintln!("building {} keys on one soundboard…", keys.len());
+    let piano = Piano::build(&scaling, &keys, args.voices)?;
+    let settings = scaling.base.output_settings();
+    let (synth, handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
+    let clock = handle.clock.clone();
+    let stats = handle.stats.clone();
+    let output = device::start(
+        synth,
+        args.device.as_deref(),
+        settings.rate_hz as u32,
+        args.buffer,
+    )?;
+    eprintln!(
+        "playing on {} ({} ch, {} Hz, {} voices)",
+        output.device, output.channels, output.rate_hz, args.voices
+    );
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        // Without a handler Ctrl-C would end the process before the summary; failing to install
+        // one (another handler exists) only loses the summary.
+        let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
+    }
+    let started = Instant::now();
+    let mut deadline = args.seconds.map(|s| started + Duration::from_secs_f64(s));
+    // The event source: a file fed in real time from this thread, or the MIDI input's callback.
+    let mut feed = None;
+    let mut _connection = None;
+    match file_events {
+        Some(events) => {
+            let start = clock.frame_at(Instant::now());
+            let length = events.last().map_or(0.0, |e| e.time_s) + FILE_TAIL_S;
+            deadline.get_or_insert(started + Duration::from_secs_f64(length));
+            eprintln!("playing {} events from the file ({length:.1} s)", events.len());
+            feed = Some(FileFeed {
+                events,
+                start,
+                next: 0,
+                handle,
+            });
+        }
+        None => match connect_midi(args.midi_in.as_deref(), handle) {
+            Ok((connection, name)) => {
+                eprintln!("MIDI input: {name} — play; Ctrl-C stops");
+                _connection = Some(connection);
+            }
+            Err(reason) => eprintln!(
+                "{reason}\nno MIDI input: the engine runs silent until Ctrl-C; use --midi FILE to play a file in real time"
+            ),
+        },
+    }
+    loop {
+        std::thread::sleep(Duration::from_millis(5));
+        if let Some(f) = &mut feed {
+            f.push(settings.rate_hz);
+        }
+        while let Ok(e) = output.errors.try_recv() {
+            eprintln!("audio: {e}");
+        }
+        let n = output.stats.callbacks.load(Ordering::Relaxed);
+        if stop.load(Ordering::Relaxed)
+            || args.callbacks.is_some_and(|c| n >= c)
+            || deadline.is_some_and(|d| Instant::now() >= d)
+        {
+            break;
+        }
+    }
+    let wall = started.elapsed().as_secs_f64();
+    let s = &output.stats;
+    let callbacks = s.callbacks.load(Ordering::Relaxed).max(1);
+    let block = s.max_frames.load(Ordering::Relaxed);
+    let deadline_ms = block as f64 / settings.rate_hz * 1e3;
+    eprintln!(
+        "{} callbacks of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {} late events; at most {} voices sounding",
+        s.callbacks.load(Ordering::Relaxed),
+        s.busy_ns.load(Ordering::Relaxed) as f64 / callbacks as f64 * 1e-6,
+        s.max_ns.load(Ordering::Relaxed) as f64 * 1e-6,
+        s.overruns.load(Ordering::Relaxed),
+        stats.late_events.load(Ordering::Relaxed),
+        stats.peak_voices.load(Ordering::Relaxed),
+    );
+    Ok(())
+}
+
+/// A MIDI file played in real time: events are queued with their frame, as far ahead as the
+/// queue allows.
+struct FileFeed {
+    events: Vec<unacorda::midi::file::TimedEvent>,
+    start: u64,
+    next: usize,
+    handle: SynthHandle,
+}
+
+impl FileFeed {
+    fn push(&mut self, rate_hz: f64) {
+        while self.next < self.events.len() && self.handle.queue_room() > 0 {
+            let e = &self.events[self.next];
+            let frame = self.start + (e.time_s * rate_hz).round() as u64;
+            let _ = self.handle.schedule(Scheduled {
+                frame,
+                event: e.event,
+            });
+            self.next += 1;
+        }
+    }
+}
+
+/// Open the MIDI input `port` (a number or part of a name; `None`: the first) and move the event
+/// queue's producer into its callback, which parses the bytes with the same [`LiveParser`] the
+/// tests feed and stamps each event one block ahead of the audio clock.
+fn connect_midi(
+    port: Option<&str>,
+    mut handle: SynthHandle,
+) -> Result<(midir::MidiInputConnection<()>, String), String> {
+    let input = midir::MidiInput::new("unacorda").map_err(|e| {
+        format!("live MIDI input is unavailable: {e} (on Linux it needs the ALSA sequencer, /dev/snd/seq)")
+    })?;
+    let ports = input.ports();
+    let names: Vec<String> = ports
+        .iter()
+        .map(|p| input.port_name(p).unwrap_or_else(|_| "?".into()))
+        .collect();
+    let index = match port {
+        None => (!ports.is_empty()).then_some(0),
+        Some(p) => p
+            .parse::<usize>()
+            .ok()
+            .filter(|&i| i < ports.len())
+            .or_else(|| names.iter().position(|n| n.contains(p))),
+    }
+    .ok_or_else(|| match port {
+        Some(p) => format!("no MIDI input matches {p:?} (inputs: {})", names.join(", ")),
+        None => "no MIDI input port is connected".into(),
+    })?;
+    let clock = handle.clock.clone();
+    let mut parser = LiveParser::new();
+    let connection = input
+        .connect(
+            &ports[index],
+            "unacorda-in",
+            move |_stamp_us, bytes, _| {
+                let now = Instant::now();
+                for &b in bytes {
+                    if let Some(event) = parser.push(b) {
+                        let frame = clock.frame_at(now);
+                        // A full queue (4096 events in flight) drops the event rather than block.
+                        let _ = handle.schedule(Scheduled { frame, event });
+                    }
+                }
+            },
+            (),
+        )
+        .map_err(|e| format!("cannot open MIDI input {}: {e}", names[index]))?;
+    Ok((connection, names[index].clone()))
+}
+
+/// `devices`: audio outputs (with whether they can play the engine's format) and MIDI inputs.
+pub fn devices() -> Result<()> {
+    let rate = unacorda::preset::Preset::resolve("c2")?
+        .output_settings()
+        .rate_hz as u32;
+    println!("audio outputs (--device):");
+    for d in output_devices(rate).context("listing audio outputs")? {
+        println!(
+            "  {}{}  {}{}",
+            d.id,
+            if d.is_default { " (default)" } else { "" },
+            d.description,
+            if d.supports_rate {
+                String::new()
+            } else {
+                format!("  [no 32-bit float output at {rate} Hz]")
+            }
+        );
+    }
+    println!("MIDI inputs (--midi-in):");
+    match midi_inputs() {
+        Ok(names) if names.is_empty() => println!("  none connected"),
+        Ok(names) => {
+            for (i, n) in names.iter().enumerate() {
+                println!("  {i}: {n}");
+            }
+        }
+        Err(reason) => println!("  {reason}"),
+    }
+    Ok(())
+}
