@@ -223,7 +223,76 @@ fn stealing_fades_the_voice_off_the_board_without_a_click() {
 }
 
 #[test]
+fn control_commands_reach_the_audio_thread() {
+    let (first, settings) = piano(&["C4"], 1);
+    let (second, _) = piano(&["C4", "G4"], 2);
+    let (mut synth, mut handle) = Synth::new(first, settings, EVENT_QUEUE).unwrap();
+    handle
+        .schedule(Scheduled {
+            frame: 0,
+            event: on(60, 100),
+        })
+        .unwrap();
+    // The audio thread (allocation counts are per thread): plays until it is shut down (or 10 000 blocks, so a lost command fails
+    // the test instead of hanging it), then plays one more block, which must be silent.
+    let audio = std::thread::spawn(move || {
+        let mut out = [0f32; 64];
+        let mut blocks = 0;
+        while synth.is_running() && blocks < 10_000 {
+            assert_no_alloc(|| synth.process(&mut out, 1));
+            blocks += 1;
+        }
+        synth.process(&mut out, 1);
+        let silent = out.iter().all(|&s| s == 0.0);
+        (
+            blocks,
+            silent,
+            synth.piano().keys.clone(),
+            violation_count(),
+        )
+    });
+    // A new piano is swapped in; the old one comes back here to be freed.
+    let old = handle.replace(second).expect("the audio thread answers");
+    handle.shutdown();
+    let (blocks, silent, keys_now, violations) = audio.join().unwrap();
+    println!(
+        "replace: got back the piano with keys {:?}, the audio thread now plays {keys_now:?}; shutdown after {blocks} blocks, then silent: {silent}; {violations} allocations on the audio thread",
+        old.keys
+    );
+    assert_eq!(old.keys, vec![40]);
+    assert_eq!(keys_now, vec![40, 47]);
+    assert!(blocks < 10_000 && silent);
+    assert_eq!(violations, 0);
+}
+
+#[test]
 fn play_runs_the_callback_on_the_alsa_null_device() {
+    // A one-note file, played "in real time" on a device that consumes as fast as it is fed.
+    let mut smf = midly::Smf::new(midly::Header::new(
+        midly::Format::SingleTrack,
+        midly::Timing::Metrical(480.into()),
+    ));
+    let note = |delta: u32, vel: u8| midly::TrackEvent {
+        delta: delta.into(),
+        kind: midly::TrackEventKind::Midi {
+            channel: 0.into(),
+            message: midly::MidiMessage::NoteOn {
+                key: 60.into(),
+                vel: vel.into(),
+            },
+        },
+    };
+    smf.tracks.push(vec![
+        note(0, 90),
+        note(480, 0),
+        midly::TrackEvent {
+            delta: 0.into(),
+            kind: midly::TrackEventKind::Meta(midly::MetaMessage::EndOfTrack),
+        },
+    ]);
+    let dir = tempfile::tempdir().unwrap();
+    let mid = dir.path().join("one.mid");
+    smf.save(&mid).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_unacorda"))
         .args([
             "play",
@@ -235,6 +304,8 @@ fn play_runs_the_callback_on_the_alsa_null_device() {
             "300",
             "--voices",
             "4",
+            "--midi",
+            mid.to_str().unwrap(),
         ])
         .output()
         .unwrap();
@@ -246,8 +317,9 @@ fn play_runs_the_callback_on_the_alsa_null_device() {
     println!("{}", ours.join("\n"));
     assert!(out.status.success());
     assert!(stderr.contains("playing on alsa:null"));
-    assert!(stderr.contains("no MIDI input") || stderr.contains("MIDI input:"));
+    assert!(stderr.contains("playing 2 events from the file"));
     let summary = ours.last().unwrap();
     let n: u64 = summary.split_whitespace().next().unwrap().parse().unwrap();
     assert!(n >= 300, "{summary}");
+    assert!(summary.ends_with("at most 1 voices sounding"), "{summary}");
 }

@@ -24,7 +24,7 @@ pub struct OutputInfo {
 pub enum DeviceError {
     #[error("no audio output device{}: run `unacorda devices` to list them, or render offline with `unacorda render --offline`", .0.as_ref().map(|n| format!(" matches {n:?}")).unwrap_or_default())]
     NotFound(Option<String>),
-    #[error("audio device {device}: no 32-bit float output at {rate_hz} Hz (it offers: {offers})")]
+    #[error("audio device {device}: no 32-bit float output at {rate_hz} Hz (it offers {offers}); `unacorda devices` lists the others (alsa:null plays without a sound card)")]
     Format {
         device: String,
         rate_hz: u32,
@@ -83,7 +83,7 @@ pub fn midi_inputs() -> Result<Vec<String>, String> {
 fn f32_config(device: &cpal::Device, rate_hz: u32) -> Result<u16, String> {
     let configs: Vec<_> = device
         .supported_output_configs()
-        .map_err(|e| format!("nothing: it cannot be opened ({e})"))?
+        .map_err(|e| format!("nothing: it cannot be opened: {e}"))?
         .collect();
     configs
         .iter()

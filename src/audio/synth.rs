@@ -29,8 +29,6 @@ pub struct Scheduled {
 pub enum Control {
     /// Output silence from now on and stop simulating.
     Shutdown,
-    /// Output gain (linear, applied to the normalised pressure).
-    Gain(f32),
     /// Play another piano (a preset or keyboard change), built off the audio thread; the old
     /// one is handed back through the handle so that it is never freed on the audio thread.
     Replace(Box<Piano>),
@@ -131,7 +129,6 @@ pub struct Synth {
     internal_rate_hz: f64,
     last_volume_velocity: f64,
     scale: f64,
-    gain: f32,
     silence_j: f64,
     frame: u64,
     running: bool,
@@ -191,7 +188,6 @@ impl Synth {
             internal_rate_hz,
             last_volume_velocity: 0.0,
             scale: 1.0 / out.full_scale_pa,
-            gain: 1.0,
             silence_j: out.silence_j,
             frame: 0,
             running: true,
@@ -209,6 +205,11 @@ impl Synth {
     /// The piano being played.
     pub fn piano(&self) -> &Piano {
         &self.piano
+    }
+
+    /// Whether it still plays (no shutdown received).
+    pub fn is_running(&self) -> bool {
+        self.running
     }
 
     /// Output frames produced so far.
@@ -240,7 +241,6 @@ impl Synth {
         while let Ok(command) = self.control.try_recv() {
             match command {
                 Control::Shutdown => self.running = false,
-                Control::Gain(g) => self.gain = if g.is_finite() { g.max(0.0) } else { 1.0 },
                 Control::Replace(new) => {
                     let old = std::mem::replace(&mut self.piano, new);
                     self.last_volume_velocity = 0.0;
@@ -266,7 +266,7 @@ impl Synth {
                 self.piano.apply(event);
             }
             let y = if self.running {
-                (self.next_pressure_pa() * self.scale) as f32 * self.gain
+                (self.next_pressure_pa() * self.scale) as f32
             } else {
                 0.0
             };
@@ -314,10 +314,6 @@ impl SynthHandle {
     /// Ask the audio thread to go silent.
     pub fn shutdown(&self) {
         let _ = self.control.send(Control::Shutdown);
-    }
-
-    pub fn set_gain(&self, gain: f32) {
-        let _ = self.control.send(Control::Gain(gain));
     }
 
     /// Hand the audio thread a new piano and wait until it gives the old one back, which is then
