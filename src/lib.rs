@@ -9,7 +9,8 @@
 //! - [`scaling`]: every key of the keyboard from a few anchor keys,
 //! - [`analysis`]: spectra, envelopes and the paper's figures,
 //! - [`audio`]: decimation and WAV output,
-//! - [`midi`]: MIDI input — live byte parser, MIDI files, mapping to piano events.
+//! - [`midi`]: MIDI input — live byte parser, MIDI files, mapping to piano events,
+//! - [`measure`]: speed and memory figures for the benchmarks and `unacorda bench`.
 
 // Index loops mirror the equations' indices (modes k, directions d, strings s) across parallel
 // arrays; iterator chains over three or four of them read worse.
@@ -18,6 +19,7 @@
 pub mod analysis;
 pub mod audio;
 pub mod engine;
+pub mod measure;
 pub mod midi;
 pub mod play;
 pub mod preset;

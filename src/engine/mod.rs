@@ -9,6 +9,8 @@
 //! - [`hammer`]: the nonlinear felt hammer (Eq. 8–9),
 //! - [`damper`]: the felt that silences a released key,
 //! - [`system`]: the state-space assembly (Eq. 10–19) advanced with classical RK4,
+//! - [`statespace`]: the same system in the paper's literal dense form, the baseline it is checked
+//!   and measured against,
 //! - [`tuning`]: the coupled first partial, from the undamped linear system.
 
 pub mod contact;
@@ -17,11 +19,12 @@ pub mod duplex;
 pub mod hammer;
 pub mod plate;
 pub mod soundboard;
+pub mod statespace;
 pub mod string;
 pub mod system;
 pub mod tuning;
 
-pub use system::{Instrument, Observation, Strike};
+pub use system::{Instrument, Observation, Strike, UnisonSpec};
 
 /// Directions at the bridge, in the paper's order (Eq. 5–6): transverse to the
 /// board (T), longitudinal along the string (L), parallel to the board (P).

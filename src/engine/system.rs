@@ -858,6 +858,46 @@ impl Instrument {
         dot(&self.model.board_volume, &self.v[self.model.board.clone()])
     }
 
+    /// Floating-point operations of one RK4 step in the current state (active voices, hammers,
+    /// dampers), counted from the arithmetic of [`evaluate`] and the stage updates: a multiply-add
+    /// counts 2. What `unacorda bench` divides by time to report a FLOP rate.
+    pub fn flops_per_step(&self) -> f64 {
+        let (m, f) = (&self.model, &self.flags);
+        let nb = m.board.len();
+        let mut live = nb;
+        // Per evaluation: the uncoupled oscillators (3 per mode) of the board ...
+        let mut eval = 3 * nb;
+        for (k, voice) in m.voices.iter().enumerate() {
+            let (true, Some(key)) = (f.active[k], voice.key) else {
+                continue;
+            };
+            let km = &m.keys[key];
+            let n = voice.n_modes;
+            let (nt, np) = (voice.ranges[0][0].len(), voice.ranges[0][2].len());
+            live += n;
+            // ... and the strings; bridge dot products and projections (4 + 2 per mode), the
+            // board's side at this point (3 directions × (4 + 2) per board mode), the duplex
+            // product (2 per matrix entry, T and P of every string).
+            eval += 3 * n + 6 * n + 18 * nb + 2 * voice.n_strings * (nt * nt + np * np);
+            if f.damper_down[k] && !km.damper_shape.is_empty() {
+                eval += 4 * voice.n_strings * (nt + np);
+            }
+            if f.hammer_on[k] {
+                eval += 4 * nt * f.struck[k].iter().filter(|&&s| s).count();
+            }
+        }
+        // Four evaluations, and the stage updates: 4 + 8 + 8 + 6 per mode.
+        (4 * eval + 26 * live) as f64
+    }
+
+    /// Bytes of state and coefficients per voice slot (f64 arrays over its modes).
+    pub fn bytes_per_voice(&self) -> usize {
+        let capacity = self.model.board.start / self.n_voices().max(1);
+        // q and v, the RK4 stage state and acceleration (3), the stage sums (2), and the
+        // coefficients omega^2, damping, bridge shape (3).
+        capacity * 8 * 10
+    }
+
     /// Mechanical energy of strings, board, contact springs and hammers (J).
     pub fn energy(&self) -> Energy {
         let m = &self.model;

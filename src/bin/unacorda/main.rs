@@ -1,4 +1,4 @@
-//! `unacorda`: command-line front end (render, play, devices, figures, soundboard).
+//! `unacorda`: command-line front end (render, play, devices, bench, figures, soundboard).
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
@@ -113,6 +113,17 @@ enum Command {
     },
     /// List audio outputs and MIDI inputs.
     Devices,
+    /// Measure the engine on this machine: real-time factor of one voice and of the dense
+    /// state-space baseline, FLOP rate against the core's peak, callback times and voices within
+    /// the deadline, memory.
+    Bench {
+        /// Seconds spent on each measurement, 0.1–60.
+        #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
+        seconds: f64,
+        /// Largest voice count tried (also the pool size), 1–256.
+        #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES)]
+        voices: usize,
+    },
     /// Regenerate the paper's Figures 2–6 (PNG + CSV): the board's mobility, full vs reduced, and
     /// a preset struck una corda vs normal.
     Figures {
@@ -137,6 +148,7 @@ enum Command {
     },
 }
 
+mod bench;
 mod live;
 
 fn progress_bar(seconds: f64, label: &str) -> ProgressBar {
@@ -362,6 +374,7 @@ fn run(cli: Cli) -> Result<()> {
             callbacks,
         })?,
         Command::Devices => live::devices()?,
+        Command::Bench { seconds, voices } => bench::bench(seconds, voices)?,
         Command::Soundboard { input, out } => {
             let spec = unacorda::preset::load_board_spec(&input)?;
             let command = format!(

@@ -1,0 +1,100 @@
+//! `bench`: the engine's speed on this machine, in the user's terms (real-time factors, voices
+//! within the deadline, FLOP rate against the core's peak, memory).
+
+use anyhow::{bail, Result};
+use unacorda::measure::{
+    block_times_s, dense_real_time_factor, loaded_synth, nominal_f64_peak, percentile,
+    resident_bytes, voice_speed,
+};
+use unacorda::play::Piano;
+use unacorda::preset::Preset;
+use unacorda::scaling::{Scaling, KEYS};
+
+/// Block length of the live figures (frames at 48 kHz).
+const BLOCK: usize = 64;
+
+pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
+    if !(0.1..=60.0).contains(&seconds) {
+        bail!("--seconds {seconds}: expected 0.1 to 60 s per measurement");
+    }
+    if !(1..=256).contains(&max_voices) {
+        bail!("--voices {max_voices}: expected 1 to 256");
+    }
+    let c2 = Preset::resolve("c2")?;
+    let spec = c2.unison_spec();
+    let fast = voice_speed(&spec, seconds);
+    println!(
+        "c2 voice, paper-faithful ({} × {} string modes, {} board modes, dense duplex damping, RK4 in f64 at {:.0} kHz):",
+        spec.strings.len(),
+        spec.modes.modes_t + spec.modes.modes_p + spec.modes.modes_l,
+        spec.board.len(),
+        spec.sample_rate_hz / 1e3
+    );
+    println!(
+        "  real-time factor {:.2} (1 s of sound takes {:.2} s)",
+        fast.real_time_factor,
+        1.0 / fast.real_time_factor
+    );
+    match nominal_f64_peak() {
+        Some((peak, ghz)) => println!(
+            "  {:.1} GFLOP/s = {:.0} % of this core's nominal f64 peak ({:.1} GFLOP/s at {ghz:.2} GHz)",
+            fast.flops_per_s / 1e9,
+            100.0 * fast.flops_per_s / peak,
+            peak / 1e9
+        ),
+        None => println!("  {:.1} GFLOP/s", fast.flops_per_s / 1e9),
+    }
+    // The dense baseline is a few hundred times slower: time a slice of the same length in steps
+    // that takes about `seconds`.
+    let steps = ((seconds * spec.sample_rate_hz * fast.real_time_factor / 400.0) as usize).max(20);
+    let dense = dense_real_time_factor(&spec, steps);
+    println!(
+        "dense state-space baseline (Eq. 10–11 as written: A of order {}, faer mat-vec, RK4), same voice:\n  real-time factor {dense:.5}; unacorda is {:.0} × faster",
+        2 * (spec.strings.len() * (spec.modes.modes_t + spec.modes.modes_p + spec.modes.modes_l)
+            + spec.board.len())
+            + 2,
+        fast.real_time_factor / dense
+    );
+
+    let scaling = Scaling::resolve("grand")?;
+    let keys: Vec<usize> = (1..=KEYS).collect();
+    let piano = Piano::build(&scaling, &keys, max_voices)?;
+    let settings = scaling.base.output_settings();
+    let deadline = BLOCK as f64 / settings.rate_hz;
+    println!(
+        "live callback, {BLOCK}-frame blocks at {:.0} kHz (deadline {:.2} ms), keys spread from A0 under the sustain pedal:",
+        settings.rate_hz / 1e3,
+        deadline * 1e3
+    );
+    let mut within = 0;
+    let mut voices = 1;
+    loop {
+        let (mut synth, _handle) = loaded_synth(&piano, settings, voices, BLOCK);
+        let probe = block_times_s(&mut synth, BLOCK, 5);
+        let blocks = ((seconds / percentile(&probe, 0.5)) as usize).clamp(20, 5000);
+        let t = block_times_s(&mut synth, BLOCK, blocks);
+        let (median, p999) = (percentile(&t, 0.5), percentile(&t, 0.999));
+        println!(
+            "  {voices:>3} voices: median {:7.3} ms ({:6.2} × deadline), p99.9 {:7.3} ms ({:6.2} ×) over {blocks} blocks",
+            median * 1e3,
+            median / deadline,
+            p999 * 1e3,
+            p999 / deadline
+        );
+        if p999 < 0.5 * deadline {
+            within = voices;
+        }
+        if voices >= max_voices || median > 4.0 * deadline * voices as f64 {
+            break;
+        }
+        voices = (voices * 2).min(max_voices);
+    }
+    println!("  voices within the deadline (p99.9 below 50 % of it): {within}");
+    let (synth, _handle) = loaded_synth(&piano, settings, max_voices, BLOCK);
+    println!(
+        "memory: {:.1} kB of state and coefficients per voice; resident {:.0} MB with {max_voices} voices sounding",
+        synth.piano().instrument.bytes_per_voice() as f64 / 1e3,
+        resident_bytes().unwrap_or(0) as f64 / 1e6
+    );
+    Ok(())
+}

@@ -1,0 +1,321 @@
+//! The paper's formulation taken literally, as a MATLAB user runs it: Eq. 10,
+//! `xdot = A x + B u + B2 F_b`, with the dense state matrix `A` of Eq. 11 (duplex damping Eq. 13
+//! inside it), dense `B` (Eq. 14–15), `B2` (Eq. 17) and output matrix `C` (Eq. 19), advanced with
+//! classical RK4. Every evaluation is a dense matrix–vector product, O(n²) in the state size.
+//!
+//! It is assembled here from the physical parts (string, duplex, board, contact, hammer) without
+//! the optimised [`super::system`]'s layout or kernels, so that the two check each other, and it
+//! is the baseline the optimised engine's speed is reported against.
+
+use super::duplex::duplex_damping_matrix;
+use super::system::{Strike, UnisonSpec};
+use super::MAX_STRINGS;
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, Par};
+use std::f64::consts::PI;
+use std::ops::Range;
+
+/// One unison in the paper's dense state-space form.
+pub struct DenseUnison {
+    spec: UnisonSpec,
+    n_strings: usize,
+    /// Length of `q` (all string and board modes).
+    nq: usize,
+    a: Mat<f64>,
+    b: Mat<f64>,
+    b2: Mat<f64>,
+    c: Mat<f64>,
+    x: Mat<f64>,
+    // RK4 scratch.
+    xs: Mat<f64>,
+    k: Mat<f64>,
+    sum: Mat<f64>,
+    y: Mat<f64>,
+    u: Mat<f64>,
+    fb: Mat<f64>,
+    struck: [bool; MAX_STRINGS],
+    hammer_on: bool,
+    h: f64,
+}
+
+/// Rows of the output `y = C x`: bridge displacement and velocity of each string and direction,
+/// of the board at the bridge, and each string's displacement under the hammer.
+fn out_rs(s: usize, d: usize) -> usize {
+    3 * s + d
+}
+fn out_vs(s: usize, d: usize) -> usize {
+    3 * MAX_STRINGS + 3 * s + d
+}
+fn out_rb(d: usize) -> usize {
+    6 * MAX_STRINGS + d
+}
+fn out_vb(d: usize) -> usize {
+    6 * MAX_STRINGS + 3 + d
+}
+fn out_ye(s: usize) -> usize {
+    6 * MAX_STRINGS + 6 + s
+}
+const OUTPUTS: usize = 7 * MAX_STRINGS + 6;
+
+impl DenseUnison {
+    /// Assemble `A`, `B`, `B2` and `C` for `spec`.
+    pub fn new(spec: &UnisonSpec) -> DenseUnison {
+        let ns = spec.strings.len().min(MAX_STRINGS);
+        let (nt, np, nl) = (spec.modes.modes_t, spec.modes.modes_p, spec.modes.modes_l);
+        let per_string = nt + np + nl;
+        let nb = spec.board.len();
+        let nq = ns * per_string + nb;
+        let n = 2 * nq + 2;
+        let mut ranges: [[Range<usize>; 3]; MAX_STRINGS] = Default::default();
+        for (s, r) in ranges.iter_mut().enumerate().take(ns) {
+            let o = s * per_string;
+            *r = [o..o + nt, o + nt + np..o + per_string, o + nt..o + nt + np];
+        }
+        let board = ns * per_string..nq;
+        let point = &spec.board.points[spec.bridge_point];
+        let mut a = Mat::<f64>::zeros(n, n);
+        let mut b = Mat::<f64>::zeros(n, ns);
+        let mut b2 = Mat::<f64>::zeros(n, 3 * (ns + 1));
+        let mut c = Mat::<f64>::zeros(OUTPUTS, n);
+        // Kinematics: qdot rows of A are the identity; the hammer's [0 1; 0 0].
+        for i in 0..nq {
+            a[(i, nq + i)] = 1.0;
+        }
+        a[(2 * nq, 2 * nq + 1)] = 1.0;
+        for (s, string) in spec.strings.iter().enumerate().take(ns) {
+            let ls = string.speaking_length_m;
+            let zeta = [
+                spec.modes.damping_ratio_t,
+                spec.modes.damping_ratio_l,
+                spec.modes.damping_ratio_p,
+            ];
+            for d in 0..3 {
+                for (k, i) in ranges[s][d].clone().enumerate() {
+                    let w = if d == 1 {
+                        string.longitudinal_omega(k + 1)
+                    } else {
+                        string.transverse_omega(k + 1)
+                    };
+                    // -K and -C (Eq. 11, 12).
+                    a[(nq + i, i)] = -w * w;
+                    a[(nq + i, nq + i)] = -2.0 * zeta[d] * w;
+                    let phi = string.mode_shape(k + 1, ls);
+                    // B2 (Eq. 17): the string's bridge forces on its own modes.
+                    b2[(nq + i, 3 * s + d)] = phi;
+                    // C (Eq. 19): the string's bridge point, displacement and velocity.
+                    c[(out_rs(s, d), i)] = phi;
+                    c[(out_vs(s, d), nq + i)] = phi;
+                }
+            }
+            // -C_d on both transverse polarisations (Eq. 13), for this string's length.
+            let nd = nt.max(np);
+            let cd = duplex_damping_matrix(
+                nd,
+                string.length_m(),
+                ls,
+                spec.duplex_damping_n_s_m2,
+                string.linear_density_kg_m,
+            );
+            for d in [0, 2] {
+                let r = ranges[s][d].clone();
+                for (p, i) in r.clone().enumerate() {
+                    for (q, j) in r.clone().enumerate() {
+                        a[(nq + i, nq + j)] -= cd[p * nd + q];
+                    }
+                }
+            }
+            // B (Eq. 14–16): the hammer's force on the T modes at the striking point, and on the
+            // hammer mass.
+            let xe = spec.hammer.strike_ratio * spec.strings[0].speaking_length_m;
+            for (k, i) in ranges[s][0].clone().enumerate() {
+                let phi = string.mode_shape(k + 1, xe);
+                b[(nq + i, s)] = phi;
+                c[(out_ye(s), i)] = phi;
+            }
+            b[(2 * nq + 1, s)] = -1.0 / spec.hammer.mass_kg;
+        }
+        for (k, i) in board.clone().enumerate() {
+            let w = 2.0 * PI * spec.board.freq_hz[k];
+            a[(nq + i, i)] = -w * w;
+            a[(nq + i, nq + i)] = -2.0 * spec.board.damping_ratio[k] * w;
+            for d in 0..3 {
+                let phi = point.shape[d][k];
+                b2[(nq + i, 3 * ns + d)] = phi;
+                c[(out_rb(d), i)] = phi;
+                c[(out_vb(d), nq + i)] = phi;
+            }
+        }
+        let col = |len| Mat::<f64>::zeros(len, 1);
+        DenseUnison {
+            spec: spec.clone(),
+            n_strings: ns,
+            nq,
+            a,
+            b,
+            b2,
+            c,
+            x: col(n),
+            xs: col(n),
+            k: col(n),
+            sum: col(n),
+            y: col(OUTPUTS),
+            u: col(ns),
+            fb: col(3 * (ns + 1)),
+            struck: [false; MAX_STRINGS],
+            hammer_on: false,
+            h: 1.0 / spec.sample_rate_hz,
+        }
+    }
+
+    /// State size (the order of `A`).
+    pub fn state_len(&self) -> usize {
+        self.x.nrows()
+    }
+
+    /// Launch the hammer as [`super::Instrument::strike_voice`] does: in contact with the struck
+    /// strings' current displacement, moving at the strike's speed.
+    pub fn strike(&mut self, strike: Strike) {
+        let ns = self.n_strings;
+        let n_struck = if strike.una_corda && ns > 1 {
+            ns - 1
+        } else {
+            ns
+        };
+        self.outputs_of_x();
+        let mut contact = f64::NEG_INFINITY;
+        for s in 0..ns {
+            self.struck[s] = s < n_struck;
+            if self.struck[s] {
+                contact = contact.max(self.y[(out_ye(s), 0)]);
+            }
+        }
+        self.x[(2 * self.nq, 0)] = contact;
+        self.x[(2 * self.nq + 1, 0)] = strike.velocity_m_s;
+        self.hammer_on = true;
+    }
+
+    /// `y = C x` at the current state.
+    fn outputs_of_x(&mut self) {
+        matmul(
+            self.y.as_mut(),
+            Accum::Replace,
+            self.c.as_ref(),
+            self.x.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+    }
+
+    /// The right-hand side of Eq. 10 at `xs`, into `k`.
+    fn evaluate(&mut self) {
+        let (ns, nq) = (self.n_strings, self.nq);
+        matmul(
+            self.y.as_mut(),
+            Accum::Replace,
+            self.c.as_ref(),
+            self.xs.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+        // Contact forces (Eq. 6) into F_b = (-F_1, -F_2, F_1 + F_2) (Eq. 17).
+        let ct = &self.spec.contact;
+        for d in 0..3 {
+            let mut total = 0.0;
+            for s in 0..ns {
+                let f = ct.stiffness_n_m[d] * (self.y[(out_rs(s, d), 0)] - self.y[(out_rb(d), 0)])
+                    + ct.damping_n_s_m[d] * (self.y[(out_vs(s, d), 0)] - self.y[(out_vb(d), 0)]);
+                self.fb[(3 * s + d, 0)] = -f;
+                total += f;
+            }
+            self.fb[(3 * ns + d, 0)] = total;
+        }
+        // Hammer forces (Eq. 8) on the struck strings.
+        for s in 0..ns {
+            self.u[(s, 0)] = if self.hammer_on && self.struck[s] {
+                let yh = self.xs[(2 * nq, 0)];
+                self.spec.hammer.felt_force_n(yh - self.y[(out_ye(s), 0)])
+            } else {
+                0.0
+            };
+        }
+        matmul(
+            self.k.as_mut(),
+            Accum::Replace,
+            self.a.as_ref(),
+            self.xs.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+        matmul(
+            self.k.as_mut(),
+            Accum::Add,
+            self.b.as_ref(),
+            self.u.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+        matmul(
+            self.k.as_mut(),
+            Accum::Add,
+            self.b2.as_ref(),
+            self.fb.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+        if !self.hammer_on {
+            self.k[(2 * nq, 0)] = 0.0;
+            self.k[(2 * nq + 1, 0)] = 0.0;
+        }
+    }
+
+    /// One classical RK4 step; the hammer leaves the system, as in the optimised engine, once it
+    /// recedes and is clear of every struck string by the release gap.
+    pub fn step(&mut self) {
+        let (h, n) = (self.h, self.state_len());
+        self.xs.copy_from(&self.x);
+        // Stage weights 1, 2, 2, 1; the next stage at h/2, h/2, h.
+        for (stage, (w, c)) in [(1.0, 0.5), (2.0, 0.5), (2.0, 1.0), (1.0, 0.0)]
+            .into_iter()
+            .enumerate()
+        {
+            self.evaluate();
+            for i in 0..n {
+                let ki = self.k[(i, 0)];
+                self.sum[(i, 0)] = if stage == 0 {
+                    ki
+                } else {
+                    self.sum[(i, 0)] + w * ki
+                };
+                self.xs[(i, 0)] = self.x[(i, 0)] + c * h * ki;
+            }
+        }
+        for i in 0..n {
+            self.x[(i, 0)] += h / 6.0 * self.sum[(i, 0)];
+        }
+        if self.hammer_on && self.x[(2 * self.nq + 1, 0)] < 0.0 {
+            self.outputs_of_x();
+            let yh = self.x[(2 * self.nq, 0)];
+            let gap = self.spec.hammer.release_gap_m;
+            if (0..self.n_strings)
+                .filter(|&s| self.struck[s])
+                .all(|s| self.y[(out_ye(s), 0)] - yh >= gap)
+            {
+                self.hammer_on = false;
+            }
+        }
+    }
+
+    /// Force of each string on the bridge per direction T, L, P (N) (Eq. 6) at the current state.
+    pub fn bridge_forces_n(&mut self) -> [[f64; 3]; MAX_STRINGS] {
+        self.outputs_of_x();
+        let ct = &self.spec.contact;
+        let mut f = [[0.0; 3]; MAX_STRINGS];
+        for (s, fs) in f.iter_mut().enumerate().take(self.n_strings) {
+            for (d, fsd) in fs.iter_mut().enumerate() {
+                *fsd = ct.stiffness_n_m[d] * (self.y[(out_rs(s, d), 0)] - self.y[(out_rb(d), 0)])
+                    + ct.damping_n_s_m[d] * (self.y[(out_vs(s, d), 0)] - self.y[(out_vb(d), 0)]);
+            }
+        }
+        f
+    }
+}

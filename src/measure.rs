@@ -1,0 +1,139 @@
+//! Measurements shared by the benchmarks (`benches/`) and `unacorda bench`: a loaded audio
+//! engine, timings of its callback, real-time factors and FLOP rates. Timing is never a pass/fail
+//! test (CI machines are noisy); these report figures.
+
+use crate::audio::synth::{OutputSettings, Scheduled, Synth, SynthHandle, EVENT_QUEUE};
+use crate::engine::statespace::DenseUnison;
+use crate::engine::{Instrument, Strike, UnisonSpec};
+use crate::midi::{Event, Pedal};
+use crate::play::Piano;
+use std::time::Instant;
+
+/// A synth on `piano` with `voices` keys sounding under the sustain pedal — spread over the
+/// keyboard from A0 upwards, struck 1 ms apart at MIDI velocity 80 — run for 50 ms so that every
+/// hammer has left its strings. `piano` must hold all 88 keys and at least `voices` voices.
+pub fn loaded_synth(
+    piano: &Piano,
+    settings: OutputSettings,
+    voices: usize,
+    frames: usize,
+) -> (Synth, SynthHandle) {
+    let (mut synth, mut handle) =
+        Synth::new(piano.clone(), settings, EVENT_QUEUE).expect("the keyboard's rates match");
+    let sustain = Event::Pedal {
+        pedal: Pedal::Sustain,
+        down: true,
+    };
+    let mut events = vec![(0, sustain)];
+    for v in 0..voices {
+        let note = (21 + v * 88 / voices.max(1)) as u8;
+        events.push((v as u64 * 48, Event::NoteOn { note, velocity: 80 }));
+    }
+    for (frame, event) in events {
+        // The queue holds 4096 events; at most 257 are pushed.
+        let _ = handle.schedule(Scheduled { frame, event });
+    }
+    let mut out = vec![0f32; frames];
+    for _ in 0..(0.05 * settings.rate_hz) as usize / frames.max(1) {
+        synth.process(&mut out, 1);
+    }
+    (synth, handle)
+}
+
+/// Time each of `blocks` callbacks of `frames` frames (s), sorted.
+pub fn block_times_s(synth: &mut Synth, frames: usize, blocks: usize) -> Vec<f64> {
+    let mut out = vec![0f32; frames];
+    let mut times: Vec<f64> = (0..blocks)
+        .map(|_| {
+            let t = Instant::now();
+            synth.process(&mut out, 1);
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times
+}
+
+/// Percentile `p` (0–1) of sorted, non-empty `x`.
+pub fn percentile(x: &[f64], p: f64) -> f64 {
+    x[((x.len() - 1) as f64 * p).round() as usize]
+}
+
+/// Speed of one struck voice on its own.
+#[derive(Debug, Clone, Copy)]
+pub struct VoiceSpeed {
+    /// Seconds of sound per second of computing.
+    pub real_time_factor: f64,
+    pub flops_per_s: f64,
+}
+
+/// Run `spec` struck normally for `seconds` of sound (RK4 steps only) and time it.
+pub fn voice_speed(spec: &UnisonSpec, seconds: f64) -> VoiceSpeed {
+    let mut inst = Instrument::new(spec).expect("the preset builds");
+    inst.strike(Strike {
+        velocity_m_s: 2.5,
+        una_corda: false,
+    });
+    // Past the hammer's contact, so the FLOP count per step is steady.
+    for _ in 0..(0.01 / inst.step_s()) as usize {
+        inst.step();
+    }
+    let steps = (seconds / inst.step_s()).max(1.0) as usize;
+    let flops = inst.flops_per_step() * steps as f64;
+    let t = Instant::now();
+    for _ in 0..steps {
+        inst.step();
+    }
+    let dt = t.elapsed().as_secs_f64();
+    VoiceSpeed {
+        real_time_factor: steps as f64 * inst.step_s() / dt,
+        flops_per_s: flops / dt,
+    }
+}
+
+/// Real-time factor of the dense state-space baseline on `spec` over `steps` RK4 steps.
+pub fn dense_real_time_factor(spec: &UnisonSpec, steps: usize) -> f64 {
+    let mut dense = DenseUnison::new(spec);
+    dense.strike(Strike {
+        velocity_m_s: 2.5,
+        una_corda: false,
+    });
+    let t = Instant::now();
+    for _ in 0..steps {
+        dense.step();
+    }
+    steps as f64 / spec.sample_rate_hz / t.elapsed().as_secs_f64()
+}
+
+/// This core's nominal f64 peak (FLOP/s): FMA units × lanes × 2 × clock, from `/proc/cpuinfo`
+/// (2 × 4 × 2 = 16 FLOP per cycle with AVX2 + FMA, 8 with SSE2 only). `None` where the clock is
+/// not listed.
+pub fn nominal_f64_peak() -> Option<(f64, f64)> {
+    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let mhz: f64 = info
+        .lines()
+        .find(|l| l.starts_with("cpu MHz"))?
+        .split(':')
+        .nth(1)?
+        .trim()
+        .parse()
+        .ok()?;
+    let fma = info
+        .lines()
+        .any(|l| l.starts_with("flags") && l.contains(" avx2") && l.contains(" fma"));
+    let per_cycle = if fma { 16.0 } else { 8.0 };
+    Some((per_cycle * mhz * 1e6, mhz / 1e3))
+}
+
+/// Resident memory of this process (bytes), from `/proc/self/status`.
+pub fn resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kb: u64 = status
+        .lines()
+        .find(|l| l.starts_with("VmRSS:"))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()?;
+    Some(kb * 1024)
+}

@@ -1,0 +1,48 @@
+//! The optimised engine against the paper's literal dense formulation (Eq. 10–19 with the dense
+//! state matrix A): the same c2 strike, normal and una corda, must give the same bridge forces.
+
+use unacorda::engine::statespace::DenseUnison;
+use unacorda::engine::{Instrument, Strike};
+use unacorda::preset::Preset;
+
+#[test]
+fn optimised_engine_matches_the_dense_state_space_form() {
+    let preset = Preset::resolve("c2").unwrap();
+    let spec = preset.unison_spec();
+    let steps = (0.05 * spec.sample_rate_hz) as usize;
+    let compare = |una_corda: bool| {
+        let strike = Strike {
+            velocity_m_s: 2.5,
+            una_corda,
+        };
+        let mut fast = Instrument::new(&spec).unwrap();
+        let mut dense = DenseUnison::new(&spec);
+        fast.strike(strike);
+        dense.strike(strike);
+        let (mut worst, mut peak) = (0f64, 0f64);
+        for _ in 0..steps {
+            fast.step();
+            dense.step();
+            let (a, b) = (fast.observe().bridge_force_n, dense.bridge_forces_n());
+            for s in 0..spec.strings.len() {
+                for d in 0..3 {
+                    worst = worst.max((a[s][d] - b[s][d]).abs());
+                    peak = peak.max(b[s][d].abs());
+                }
+            }
+        }
+        (dense.state_len(), worst, peak)
+    };
+    let (normal, una) = std::thread::scope(|s| {
+        let n = s.spawn(|| compare(false));
+        let u = s.spawn(|| compare(true));
+        (n.join().unwrap(), u.join().unwrap())
+    });
+    for (name, (n, worst, peak)) in [("normal", normal), ("una corda", una)] {
+        println!(
+            "c2 {name}, first 50 ms ({steps} RK4 steps), dense A of order {n}: bridge forces differ by at most {worst:.2e} N of {peak:.2} N peak ({:.1e} relative)",
+            worst / peak
+        );
+        assert!(worst / peak < 1e-9, "{name}: {:.2e} relative", worst / peak);
+    }
+}
