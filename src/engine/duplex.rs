@@ -44,6 +44,32 @@ pub fn duplex_damping_matrix(
     c
 }
 
+/// `C_d` as `Wᵀ W` with `W` of rank `r` (row-major `r × n_modes`), from its eigen-decomposition,
+/// keeping the eigenvalues above 1e-14 of the largest: the rest lie at the rounding level of a dense
+/// product (the duplex segment is short, so a few modes span it: rank 16 of 100 for C2). The
+/// product `C_d v` then costs `4 r n` instead of `2 n²` and agrees with the dense one to rounding.
+/// Leading blocks factor the same way: `C_d[..k, ..k] = W[:, ..k]ᵀ W[:, ..k]`. `None` if the
+/// eigen-solver fails (only for non-finite entries).
+pub fn low_rank_factor(c: &[f64], n_modes: usize) -> Option<(Vec<f64>, usize)> {
+    let n = n_modes;
+    if n == 0 {
+        return Some((Vec::new(), 0));
+    }
+    let m = faer::Mat::<f64>::from_fn(n, n, |i, j| c[i * n + j]);
+    let eig = m.self_adjoint_eigen(faer::Side::Lower).ok()?;
+    let (values, vectors) = (eig.S(), eig.U());
+    let largest = (0..n).map(|k| values[k].abs()).fold(0.0, f64::max);
+    let kept: Vec<usize> = (0..n).filter(|&k| values[k] > 1e-14 * largest).collect();
+    let mut w = vec![0.0; kept.len() * n];
+    for (row, &k) in kept.iter().enumerate() {
+        let scale = values[k].sqrt();
+        for i in 0..n {
+            w[row * n + i] = scale * vectors[(i, k)];
+        }
+    }
+    Some((w, kept.len()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -69,5 +95,32 @@ mod tests {
                 "({m},{k}) {q} vs {exact}"
             );
         }
+    }
+
+    #[test]
+    fn low_rank_factor_reproduces_the_dense_product() {
+        // C2: 100 modes, duplex 0.2 m of 2.1 m.
+        let n = 100;
+        let c = duplex_damping_matrix(n, 2.1, 1.9, 20.0, 0.012141);
+        let (w, r) = low_rank_factor(&c, n).unwrap();
+        let v: Vec<f64> = (0..n)
+            .map(|i| ((i * 7919) % 101) as f64 / 50.0 - 1.0)
+            .collect();
+        let mut worst = 0f64;
+        let mut scale = 0f64;
+        for len in [n, 70, 13] {
+            for i in 0..len {
+                let dense: f64 = (0..len).map(|j| c[i * n + j] * v[j]).sum();
+                let z = (0..r).map(|k| (0..len).map(|j| w[k * n + j] * v[j]).sum::<f64>());
+                let low: f64 = z.enumerate().map(|(k, zk)| w[k * n + i] * zk).sum();
+                worst = worst.max((dense - low).abs());
+                scale = scale.max(dense.abs());
+            }
+        }
+        println!(
+            "duplex C_d (100 modes): rank {r}, low-rank vs dense product {:.1e} relative",
+            worst / scale
+        );
+        assert!(r < 30 && worst < 1e-12 * scale);
     }
 }

@@ -3,8 +3,9 @@
 //! The state `x = (q_1 .. q_n, q_b, qdot_1 .. qdot_n, qdot_b, y_H, ydot_H)` is held as two flat
 //! arrays `q`, `v` over all modes, laid out per string as `[T | P | L]` and then the board. Every
 //! block of the paper's `A` (Eq. 11) is diagonal except the duplex damping, and all coupling passes
-//! through rank-3 bridge projections and the rank-1 hammer projection (Eq. 14–18), so one
-//! evaluation of the right-hand side costs O(modes) plus the dense duplex product (Eq. 13):
+//! through rank-3 bridge projections and the rank-1 hammer projection (Eq. 14–18). The duplex
+//! matrix (Eq. 13) is applied as `Wᵀ W` of rank ~16 (exact to rounding: `duplex::low_rank_factor`),
+//! so one evaluation of the right-hand side costs O(modes):
 //! ```text
 //! qdd_i = -Omega_i^2 q_i - (C_i + C_d) qdot_i - Phi_s^T F_i + [struck] psi_e F_e,i
 //! qdd_b = -Omega_b^2 q_b - C_b qdot_b + Phi_b^T sum_i F_i
@@ -13,7 +14,7 @@
 
 use super::contact::Contact;
 use super::damper::DamperParams;
-use super::duplex::duplex_damping_matrix;
+use super::duplex::{duplex_damping_matrix, low_rank_factor};
 use super::hammer::HammerParams;
 use super::soundboard::SoundboardModes;
 use super::string::{ModeSet, StringParams};
@@ -110,9 +111,10 @@ struct KeyModel {
     /// `psi_n(x_d)` of the transverse modes, and the felt's coefficient (N s/m); empty without damper.
     damper_shape: Vec<f64>,
     damper_n_s_m: f64,
-    /// Dense duplex matrix, `duplex_n × duplex_n` (Eq. 13).
-    duplex: Vec<f64>,
+    /// The duplex matrix (Eq. 13) as `C_d = Wᵀ W`: `W` is `duplex_rank × duplex_n`, row-major.
+    duplex_w: Vec<f64>,
     duplex_n: usize,
+    duplex_rank: usize,
     hammer: HammerParams,
     contact: Contact,
 }
@@ -179,6 +181,8 @@ pub struct Instrument {
     voice_of_key: Vec<Option<usize>>,
     /// Mode ranges simulated in this step: the active voices' and the board's.
     live: Vec<Range<usize>>,
+    /// `W v` of the duplex product for up to six blocks (T and P of three strings).
+    duplex_z: Vec<f64>,
     fade_steps: u32,
     // RK4 scratch, sized once.
     qs: Vec<f64>,
@@ -206,6 +210,8 @@ pub enum BuildError {
     SharedBoard,
     #[error("an instrument needs at least one key and one voice")]
     NoVoice,
+    #[error("the duplex damping matrix cannot be factored (non-finite string parameters?)")]
+    Duplex,
     #[error(
         "RK4 would be unstable: the stiffest coupled mode (≈{freq_hz:.0} Hz) gives omega h = {omega_h:.2} \
          above the limit 2.78 at {rate_hz:.0} Hz; raise the internal rate or soften the contact"
@@ -280,6 +286,17 @@ fn build_key(spec: &UnisonSpec) -> Result<KeyModel, BuildError> {
         None => (Vec::new(), 0.0),
     };
     let duplex_n = nt.max(np);
+    let (duplex_w, duplex_rank) = low_rank_factor(
+        &duplex_damping_matrix(
+            duplex_n,
+            s0.length_m(),
+            s0.speaking_length_m,
+            spec.duplex_damping_n_s_m2,
+            s0.linear_density_kg_m,
+        ),
+        duplex_n,
+    )
+    .ok_or(BuildError::Duplex)?;
     // The stiffest coupled mode: a string's bridge point on its contact spring, with the
     // effective point mass of the retained modes, 1 / sum psi_n(L_s)^2 (DESIGN.md §5).
     let h = 1.0 / spec.sample_rate_hz;
@@ -310,14 +327,9 @@ fn build_key(spec: &UnisonSpec) -> Result<KeyModel, BuildError> {
         hammer_shape: (1..=nt).map(|k| s0.mode_shape(k, strike_x)).collect(),
         damper_shape,
         damper_n_s_m,
-        duplex: duplex_damping_matrix(
-            duplex_n,
-            s0.length_m(),
-            s0.speaking_length_m,
-            spec.duplex_damping_n_s_m2,
-            s0.linear_density_kg_m,
-        ),
+        duplex_w,
         duplex_n,
+        duplex_rank,
         hammer: spec.hammer,
         contact: spec.contact,
     })
@@ -391,7 +403,9 @@ impl Instrument {
             board_volume: first.board.volume_m2_per_sqrt_kg.clone(),
             h,
         };
+        let max_rank = model.keys.iter().map(|k| k.duplex_rank).max().unwrap_or(0);
         Ok(Instrument {
+            duplex_z: vec![0.0; 2 * MAX_STRINGS * max_rank],
             voice_of_key: vec![None; specs.len()],
             live: Vec::with_capacity(voices + 1),
             fade_steps: (STEAL_FADE_S / h).round().max(1.0) as u32,
@@ -620,7 +634,7 @@ impl Instrument {
         for s in 0..n_struck {
             struck[s] = true;
             let r = voice.ranges[s][0].clone();
-            contact_y = contact_y.max(dot(&km.hammer_shape, &self.q[r]));
+            contact_y = contact_y.max(dot::<false>(&km.hammer_shape, &self.q[r]));
         }
         self.flags.struck[k] = struck;
         self.hammer_y[k] = contact_y;
@@ -684,6 +698,7 @@ impl Instrument {
         self.advance_fades();
     }
 
+    /// The step compiled for AVX2 + FMA, with the explicit kernels of [`dot`] and [`axpy`].
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     unsafe fn step_avx2(&mut self) {
@@ -691,12 +706,13 @@ impl Instrument {
     }
 
     /// Classical RK4 over `(q, v, y_H, ydot_H)` of the active voices and the board, stage sums
-    /// accumulated in place. `SIMD` selects the explicit AVX2 + FMA kernels; it is true only on
-    /// the path entered after detecting them.
+    /// accumulated in place. `SIMD` selects the AVX2 + FMA kernels; it is true only inside
+    /// [`Self::step_avx2`], entered after detecting them.
     #[inline(always)]
     fn step_impl<const SIMD: bool>(&mut self) {
         let h = self.model.h;
         let (m, flags, live) = (&self.model, &self.flags, &self.live);
+        let z = &mut self.duplex_z;
         let (q0, v0, hy0, hv0) = (&self.q, &self.v, &self.hammer_y, &self.hammer_v);
         let (qs, vs, acc) = (&mut self.qs, &mut self.vs, &mut self.acc);
         let (sum_q, sum_v) = (&mut self.sum_q, &mut self.sum_v);
@@ -708,14 +724,19 @@ impl Instrument {
             &mut self.ah,
         );
         // Stage 1 at the current state.
-        evaluate::<SIMD>(m, flags, live, q0, v0, hy0, acc, ah);
+        evaluate::<SIMD>(m, flags, live, q0, v0, hy0, acc, ah, z);
         for r in live {
-            for i in r.clone() {
-                sum_q[i] = v0[i];
-                sum_v[i] = acc[i];
-                qs[i] = q0[i] + 0.5 * h * v0[i];
-                vs[i] = v0[i] + 0.5 * h * acc[i];
-            }
+            let r = r.clone();
+            stage::<true>(
+                0.5 * h,
+                &q0[r.clone()],
+                &v0[r.clone()],
+                &acc[r.clone()],
+                &mut qs[r.clone()],
+                &mut vs[r.clone()],
+                &mut sum_q[r.clone()],
+                &mut sum_v[r],
+            );
         }
         for k in 0..hy0.len() {
             sum_hy[k] = hv0[k];
@@ -725,15 +746,19 @@ impl Instrument {
         }
         // Stages 2 and 3: weights 2, next stage at h/2 then h.
         for c in [0.5, 1.0] {
-            evaluate::<SIMD>(m, flags, live, qs, vs, hy_s, acc, ah);
+            evaluate::<SIMD>(m, flags, live, qs, vs, hy_s, acc, ah, z);
             for r in live {
-                for i in r.clone() {
-                    let vsi = vs[i];
-                    sum_q[i] += 2.0 * vsi;
-                    sum_v[i] += 2.0 * acc[i];
-                    qs[i] = q0[i] + c * h * vsi;
-                    vs[i] = v0[i] + c * h * acc[i];
-                }
+                let r = r.clone();
+                stage::<false>(
+                    c * h,
+                    &q0[r.clone()],
+                    &v0[r.clone()],
+                    &acc[r.clone()],
+                    &mut qs[r.clone()],
+                    &mut vs[r.clone()],
+                    &mut sum_q[r.clone()],
+                    &mut sum_v[r],
+                );
             }
             for k in 0..hy0.len() {
                 let hvk = hv_s[k];
@@ -744,13 +769,17 @@ impl Instrument {
             }
         }
         // Stage 4 and the combination.
-        evaluate::<SIMD>(m, flags, live, qs, vs, hy_s, acc, ah);
+        evaluate::<SIMD>(m, flags, live, qs, vs, hy_s, acc, ah, z);
         let w = h / 6.0;
         let (q, v) = (&mut self.q, &mut self.v);
         for r in live {
-            for i in r.clone() {
-                q[i] += w * (sum_q[i] + vs[i]);
-                v[i] += w * (sum_v[i] + acc[i]);
+            let n = r.len();
+            let (q, v) = (&mut q[r.clone()], &mut v[r.clone()]);
+            let (sq, sv) = (&sum_q[r.clone()][..n], &sum_v[r.clone()][..n]);
+            let (vs, acc) = (&vs[r.clone()][..n], &acc[r.clone()][..n]);
+            for i in 0..n {
+                q[i] += w * (sq[i] + vs[i]);
+                v[i] += w * (sv[i] + acc[i]);
             }
         }
         for k in 0..self.hammer_y.len() {
@@ -801,7 +830,7 @@ impl Instrument {
         let km = &self.model.keys[key];
         for s in 0..voice.n_strings {
             if self.flags.struck[k][s] {
-                let ye = dot(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
+                let ye = dot::<false>(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
                 if ye - self.hammer_y[k] < km.hammer.release_gap_m {
                     return;
                 }
@@ -833,12 +862,12 @@ impl Instrument {
         let vb = &v[m.board.clone()];
         let mut rb = [0.0; 3];
         for d in 0..3 {
-            (rb[d], obs.bridge_velocity_m_s[d]) = dot2(&km.board_shape[d], qb, vb);
+            (rb[d], obs.bridge_velocity_m_s[d]) = dot2::<false>(&km.board_shape[d], qb, vb);
         }
         for s in 0..voice.n_strings {
             for d in 0..3 {
                 let r = voice.ranges[s][d].clone();
-                let (rs, rs_dot) = dot2(&m.bridge_shape[r.clone()], &q[r.clone()], &v[r]);
+                let (rs, rs_dot) = dot2::<false>(&m.bridge_shape[r.clone()], &q[r.clone()], &v[r]);
                 let f = gain
                     * (km.contact.stiffness_n_m[d] * (rs - rb[d])
                         + km.contact.damping_n_s_m[d] * (rs_dot - obs.bridge_velocity_m_s[d]));
@@ -846,7 +875,7 @@ impl Instrument {
                 obs.total_force_n[d] += f;
             }
             if self.flags.hammer_on[k] && self.flags.struck[k][s] {
-                let ye = dot(&km.hammer_shape, &q[voice.ranges[s][0].clone()]);
+                let ye = dot::<false>(&km.hammer_shape, &q[voice.ranges[s][0].clone()]);
                 obs.hammer_force_n[s] = km.hammer.felt_force_n(self.hammer_y[k] - ye);
             }
         }
@@ -855,7 +884,7 @@ impl Instrument {
 
     /// Net volume velocity of the board (m^3/s), the source of the radiated sound.
     pub fn volume_velocity_m3_s(&self) -> f64 {
-        dot(&self.model.board_volume, &self.v[self.model.board.clone()])
+        dot::<false>(&self.model.board_volume, &self.v[self.model.board.clone()])
     }
 
     /// Floating-point operations of one RK4 step in the current state (active voices, hammers,
@@ -877,8 +906,9 @@ impl Instrument {
             live += n;
             // ... and the strings; bridge dot products and projections (4 + 2 per mode), the
             // board's side at this point (3 directions × (4 + 2) per board mode), the duplex
-            // product (2 per matrix entry, T and P of every string).
-            eval += 3 * n + 6 * n + 18 * nb + 2 * voice.n_strings * (nt * nt + np * np);
+            // product through its rank-r factor (2 × 2 r per entry of W, T and P of every string).
+            let r = km.duplex_rank;
+            eval += 3 * n + 6 * n + 18 * nb + 4 * r * voice.n_strings * (nt + np);
             if f.damper_down[k] && !km.damper_shape.is_empty() {
                 eval += 4 * voice.n_strings * (nt + np);
             }
@@ -917,8 +947,8 @@ impl Instrument {
             for s in 0..voice.n_strings {
                 for d in 0..3 {
                     let r = voice.ranges[s][d].clone();
-                    let rs = dot(&m.bridge_shape[r.clone()], &self.q[r]);
-                    let rb = dot(&km.board_shape[d], qb);
+                    let rs = dot::<false>(&m.bridge_shape[r.clone()], &self.q[r]);
+                    let rb = dot::<false>(&km.board_shape[d], qb);
                     contact_j += 0.5
                         * self.flags.coupling[k]
                         * km.contact.stiffness_n_m[d]
@@ -929,7 +959,8 @@ impl Instrument {
                 hammer_j += 0.5 * km.hammer.mass_kg * self.hammer_v[k].powi(2);
                 for s in 0..voice.n_strings {
                     if self.flags.struck[k][s] {
-                        let ye = dot(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
+                        let ye =
+                            dot::<false>(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
                         hammer_j += km.hammer.felt_energy_j(self.hammer_y[k] - ye);
                     }
                 }
@@ -941,6 +972,38 @@ impl Instrument {
             contact_j,
             hammer_j,
         }
+    }
+}
+
+/// One RK4 stage over a range of modes, from its derivative (`v`, or `v0` at the first stage,
+/// and `acc`): the stage sums take it (weight 1 at the first stage, 2 after), and the next stage
+/// point is `(q0, v0) + ch (v, acc)`. Equal-length slices, so the loop vectorises.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn stage<const FIRST: bool>(
+    ch: f64,
+    q0: &[f64],
+    v0: &[f64],
+    acc: &[f64],
+    qs: &mut [f64],
+    vs: &mut [f64],
+    sum_q: &mut [f64],
+    sum_v: &mut [f64],
+) {
+    let n = q0.len();
+    let (v0, acc, qs, vs) = (&v0[..n], &acc[..n], &mut qs[..n], &mut vs[..n]);
+    let (sum_q, sum_v) = (&mut sum_q[..n], &mut sum_v[..n]);
+    for i in 0..n {
+        let dq = if FIRST { v0[i] } else { vs[i] };
+        if FIRST {
+            sum_q[i] = dq;
+            sum_v[i] = acc[i];
+        } else {
+            sum_q[i] += 2.0 * dq;
+            sum_v[i] += 2.0 * acc[i];
+        }
+        qs[i] = q0[i] + ch * dq;
+        vs[i] = v0[i] + ch * acc[i];
     }
 }
 
@@ -957,11 +1020,19 @@ fn evaluate<const SIMD: bool>(
     hammer_y: &[f64],
     acc: &mut [f64],
     ah: &mut [f64],
+    duplex_z: &mut [f64],
 ) {
     // Uncoupled modal oscillators: -Omega^2 q - C qdot (diagonal blocks of Eq. 11).
     for r in live {
-        for i in r.clone() {
-            acc[i] = -m.omega2[i] * q[i] - m.damp[i] * v[i];
+        let n = r.len();
+        let (w2, d) = (&m.omega2[r.clone()], &m.damp[r.clone()][..n]);
+        let (q, v, a) = (
+            &q[r.clone()][..n],
+            &v[r.clone()][..n],
+            &mut acc[r.clone()][..n],
+        );
+        for i in 0..n {
+            a[i] = -w2[i] * q[i] - d[i] * v[i];
         }
     }
     let qb = &q[m.board.clone()];
@@ -977,7 +1048,7 @@ fn evaluate<const SIMD: bool>(
         let mut rb = [0.0; 3];
         let mut rb_dot = [0.0; 3];
         for d in 0..3 {
-            (rb[d], rb_dot[d]) = dot2(&km.board_shape[d], qb, vb);
+            (rb[d], rb_dot[d]) = dot2::<SIMD>(&km.board_shape[d], qb, vb);
         }
         // Contact forces (Eq. 6) and their modal projections on each string (Eq. 17).
         let mut total = [0.0; 3];
@@ -985,31 +1056,31 @@ fn evaluate<const SIMD: bool>(
             for d in 0..3 {
                 let r = voice.ranges[s][d].clone();
                 let shape = &m.bridge_shape[r.clone()];
-                let (rs, rs_dot) = dot2(shape, &q[r.clone()], &v[r.clone()]);
+                let (rs, rs_dot) = dot2::<SIMD>(shape, &q[r.clone()], &v[r.clone()]);
                 let f = gain
                     * (km.contact.stiffness_n_m[d] * (rs - rb[d])
                         + km.contact.damping_n_s_m[d] * (rs_dot - rb_dot[d]));
                 total[d] += f;
-                axpy(&mut acc[r], shape, -f);
+                axpy::<SIMD>(&mut acc[r], shape, -f);
             }
         }
         // Duplex damping on both transverse polarisations of every string (Eq. 13).
-        duplex_damping::<SIMD>(km, &voice.ranges, v, acc);
+        duplex_damping::<SIMD>(km, &voice.ranges, v, acc, duplex_z);
         // The damper felt, while it is down: a point damper on T and P of every string.
         if flags.damper_down[k] {
             for s in 0..voice.n_strings {
                 for d in [0, 2] {
                     let r = voice.ranges[s][d].clone();
                     let shape = &km.damper_shape[..r.len()];
-                    let f = km.damper_n_s_m * dot(shape, &v[r.clone()]);
-                    axpy(&mut acc[r], shape, -f);
+                    let f = km.damper_n_s_m * dot::<SIMD>(shape, &v[r.clone()]);
+                    axpy::<SIMD>(&mut acc[r], shape, -f);
                 }
             }
         }
         // The board receives the sum of the strings' forces at this voice's point (Eq. 17).
         let ab = &mut acc[m.board.clone()];
         for d in 0..3 {
-            axpy(ab, &km.board_shape[d], total[d]);
+            axpy::<SIMD>(ab, &km.board_shape[d], total[d]);
         }
         // Hammer (Eq. 8, 14): felt force on each struck string, reaction on the hammer mass.
         if flags.hammer_on[k] {
@@ -1017,10 +1088,10 @@ fn evaluate<const SIMD: bool>(
             for s in 0..voice.n_strings {
                 if flags.struck[k][s] {
                     let r = voice.ranges[s][0].clone();
-                    let ye = dot(&km.hammer_shape, &q[r.clone()]);
+                    let ye = dot::<SIMD>(&km.hammer_shape, &q[r.clone()]);
                     let f = km.hammer.felt_force_n(hammer_y[k] - ye);
                     felt_total += f;
-                    axpy(&mut acc[r], &km.hammer_shape, f);
+                    axpy::<SIMD>(&mut acc[r], &km.hammer_shape, f);
                 }
             }
             ah[k] = -felt_total / km.hammer.mass_kg;
@@ -1042,9 +1113,15 @@ fn has_avx2_fma() -> bool {
 
 const LANES: usize = 4;
 
-/// Dot product with independent lane accumulators, so that it vectorises without reassociation.
+/// Dot product: the AVX2 + FMA kernel when `SIMD`, else independent lane accumulators (so that
+/// it vectorises without reassociation).
 #[inline(always)]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+fn dot<const SIMD: bool>(a: &[f64], b: &[f64]) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if SIMD {
+        // SAFETY: `SIMD` is true only inside `step_avx2`, entered after detecting AVX2 and FMA.
+        return unsafe { dot_avx2(a, b) };
+    }
     let n = a.len().min(b.len());
     let (a, b) = (&a[..n], &b[..n]);
     let mut lanes = [0.0; LANES];
@@ -1066,182 +1143,115 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 
 /// Two dot products sharing the left operand: `(a·b, a·c)`.
 #[inline(always)]
-fn dot2(a: &[f64], b: &[f64], c: &[f64]) -> (f64, f64) {
-    (dot(a, b), dot(a, c))
+fn dot2<const SIMD: bool>(a: &[f64], b: &[f64], c: &[f64]) -> (f64, f64) {
+    (dot::<SIMD>(a, b), dot::<SIMD>(a, c))
 }
 
 /// `y += alpha x`.
 #[inline(always)]
-fn axpy(y: &mut [f64], x: &[f64], alpha: f64) {
+fn axpy<const SIMD: bool>(y: &mut [f64], x: &[f64], alpha: f64) {
+    #[cfg(target_arch = "x86_64")]
+    if SIMD {
+        // SAFETY: as in `dot`.
+        unsafe { axpy_avx2(y, x, alpha) };
+        return;
+    }
     for (yi, xi) in y.iter_mut().zip(x) {
         *yi += alpha * xi;
     }
 }
 
-/// `acc -= C_d v` on the T and P blocks of every string (Eq. 13). All blocks share the matrix, so
-/// when they have the same length each row of `C_d` is loaded once for all of them.
+/// `a·b` over the shorter length, eight lanes in two FMA chains.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn dot_avx2(a: &[f64], b: &[f64]) -> f64 {
+    use std::arch::x86_64::*;
+    let n = a.len().min(b.len());
+    let (pa, pb) = (a.as_ptr(), b.as_ptr());
+    let (mut s0, mut s1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+    let mut i = 0;
+    // SAFETY (loads): every index read is below `n`, within both slices.
+    while i + 8 <= n {
+        s0 = _mm256_fmadd_pd(_mm256_loadu_pd(pa.add(i)), _mm256_loadu_pd(pb.add(i)), s0);
+        s1 = _mm256_fmadd_pd(
+            _mm256_loadu_pd(pa.add(i + 4)),
+            _mm256_loadu_pd(pb.add(i + 4)),
+            s1,
+        );
+        i += 8;
+    }
+    if i + 4 <= n {
+        s0 = _mm256_fmadd_pd(_mm256_loadu_pd(pa.add(i)), _mm256_loadu_pd(pb.add(i)), s0);
+        i += 4;
+    }
+    let s = _mm256_add_pd(s0, s1);
+    let h = _mm_add_pd(_mm256_castpd256_pd128(s), _mm256_extractf128_pd(s, 1));
+    let mut sum = _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
+    while i < n {
+        sum += a[i] * b[i];
+        i += 1;
+    }
+    sum
+}
+
+/// `y += alpha x` over the shorter length with FMA.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn axpy_avx2(y: &mut [f64], x: &[f64], alpha: f64) {
+    use std::arch::x86_64::*;
+    let n = y.len().min(x.len());
+    let (py, px) = (y.as_mut_ptr(), x.as_ptr());
+    let a = _mm256_set1_pd(alpha);
+    let mut i = 0;
+    // SAFETY (loads and stores): every index touched is below `n`, within both slices.
+    while i + 4 <= n {
+        let r = _mm256_fmadd_pd(a, _mm256_loadu_pd(px.add(i)), _mm256_loadu_pd(py.add(i)));
+        _mm256_storeu_pd(py.add(i), r);
+        i += 4;
+    }
+    while i < n {
+        y[i] += alpha * x[i];
+        i += 1;
+    }
+}
+
+/// `acc -= C_d v` on the T and P blocks of every string (Eq. 13), through `C_d = Wᵀ W`: first
+/// `z = W v` for every block, then `acc -= Wᵀ z`. All blocks share `W`, so each of its rows is
+/// loaded once for all of them.
 #[inline(always)]
 fn duplex_damping<const SIMD: bool>(
     m: &KeyModel,
     ranges: &[[Range<usize>; 3]; MAX_STRINGS],
     v: &[f64],
     acc: &mut [f64],
+    z: &mut [f64],
 ) {
-    let starts = |d: usize| (0..m.n_strings).map(move |s| ranges[s][d].start);
-    let (nt, np) = (ranges[0][0].len(), ranges[0][2].len());
-    if nt == np {
-        let mut offsets = [0; 2 * MAX_STRINGS];
-        for (o, start) in offsets.iter_mut().zip(starts(0).chain(starts(2))) {
-            *o = start;
-        }
-        match m.n_strings {
-            1 => duplex_kernel::<2, SIMD>(
-                &m.duplex,
-                m.duplex_n,
-                nt,
-                v,
-                offsets[..2].try_into().unwrap(),
-                acc,
-            ),
-            2 => duplex_kernel::<4, SIMD>(
-                &m.duplex,
-                m.duplex_n,
-                nt,
-                v,
-                offsets[..4].try_into().unwrap(),
-                acc,
-            ),
-            _ => duplex_kernel::<6, SIMD>(&m.duplex, m.duplex_n, nt, v, offsets, acc),
-        }
-    } else {
-        for (start, len) in starts(0).map(|o| (o, nt)).chain(starts(2).map(|o| (o, np))) {
-            duplex_kernel::<1, SIMD>(&m.duplex, m.duplex_n, len, v, [start], acc);
+    let (n, rank) = (m.duplex_n, m.duplex_rank);
+    let blocks = (0..m.n_strings).flat_map(|s| [ranges[s][0].clone(), ranges[s][2].clone()]);
+    for (b, r) in blocks.clone().enumerate() {
+        let zb = &mut z[b * rank..(b + 1) * rank];
+        for (j, zj) in zb.iter_mut().enumerate() {
+            *zj = dot::<SIMD>(&m.duplex_w[j * n..j * n + r.len()], &v[r.clone()]);
         }
     }
-}
-
-/// The duplex product through the AVX2 kernel when `SIMD`, else the scalar reference.
-#[inline(always)]
-fn duplex_kernel<const K: usize, const SIMD: bool>(
-    c: &[f64],
-    n: usize,
-    len: usize,
-    v: &[f64],
-    offsets: [usize; K],
-    acc: &mut [f64],
-) {
-    #[cfg(target_arch = "x86_64")]
-    if SIMD {
-        // SAFETY: `SIMD` is true only inside `step_avx2`, entered after detecting AVX2 and FMA.
-        unsafe { duplex_rows_avx2::<K>(c, n, len, v, offsets, acc) };
-        return;
-    }
-    duplex_rows::<K>(c, n, len, v, offsets, acc)
-}
-
-/// For `K` blocks of length `len` starting at `offsets`: `acc[block] -= C[..len, ..len] v[block]`,
-/// with `C` symmetric `n × n`, row by row, the row shared by the `K` dot products. The scalar
-/// reference that the AVX2 kernel is tested against.
-#[inline(always)]
-fn duplex_rows<const K: usize>(
-    c: &[f64],
-    n: usize,
-    len: usize,
-    v: &[f64],
-    offsets: [usize; K],
-    acc: &mut [f64],
-) {
-    let split = len - len % LANES;
-    for i in 0..len {
-        let row = &c[i * n..i * n + len];
-        let mut lanes = [[0.0; LANES]; K];
-        for j in (0..split).step_by(LANES) {
-            let cr = &row[j..j + LANES];
-            for k in 0..K {
-                let x = &v[offsets[k] + j..offsets[k] + j + LANES];
-                for l in 0..LANES {
-                    lanes[k][l] += cr[l] * x[l];
-                }
-            }
-        }
-        for k in 0..K {
-            let mut sum = (lanes[k][0] + lanes[k][2]) + (lanes[k][1] + lanes[k][3]);
-            for j in split..len {
-                sum += row[j] * v[offsets[k] + j];
-            }
-            acc[offsets[k] + i] -= sum;
+    for (b, r) in blocks.enumerate() {
+        let zb = &z[b * rank..(b + 1) * rank];
+        for (j, &zj) in zb.iter().enumerate() {
+            axpy::<SIMD>(
+                &mut acc[r.clone()],
+                &m.duplex_w[j * n..j * n + r.len()],
+                -zj,
+            );
         }
     }
-}
-
-/// The AVX2 + FMA duplex kernel: two rows of `C_d` at a time against the `K` velocity blocks, four
-/// lanes per instruction, so that every block load serves two rows and every row load `K` blocks
-/// (the product is bound by FMA throughput rather than loads).
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA. Bounds are checked once on entry.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn duplex_rows_avx2<const K: usize>(
-    c: &[f64],
-    n: usize,
-    len: usize,
-    v: &[f64],
-    offsets: [usize; K],
-    acc: &mut [f64],
-) {
-    use std::arch::x86_64::*;
-    if len == 0 {
-        return;
-    }
-    assert!(len <= n && (len - 1) * n + len <= c.len());
-    for &o in &offsets {
-        assert!(o + len <= v.len() && o + len <= acc.len());
-    }
-    let split = len - len % 4;
-    let (cp, vp) = (c.as_ptr(), v.as_ptr());
-    let mut i = 0;
-    while i < len {
-        let pair = i + 1 < len;
-        let r0 = cp.add(i * n);
-        let r1 = if pair { cp.add((i + 1) * n) } else { r0 };
-        let mut a0 = [_mm256_setzero_pd(); K];
-        let mut a1 = [_mm256_setzero_pd(); K];
-        let mut j = 0;
-        while j < split {
-            let c0 = _mm256_loadu_pd(r0.add(j));
-            let c1 = _mm256_loadu_pd(r1.add(j));
-            for k in 0..K {
-                let x = _mm256_loadu_pd(vp.add(offsets[k] + j));
-                a0[k] = _mm256_fmadd_pd(c0, x, a0[k]);
-                a1[k] = _mm256_fmadd_pd(c1, x, a1[k]);
-            }
-            j += 4;
-        }
-        for k in 0..K {
-            let (mut s0, mut s1) = (hsum_avx(a0[k]), hsum_avx(a1[k]));
-            for j in split..len {
-                let x = *vp.add(offsets[k] + j);
-                s0 += *r0.add(j) * x;
-                s1 += *r1.add(j) * x;
-            }
-            acc[offsets[k] + i] -= s0;
-            if pair {
-                acc[offsets[k] + i + 1] -= s1;
-            }
-        }
-        i += if pair { 2 } else { 1 };
-    }
-}
-
-/// Sum of the four lanes.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-unsafe fn hsum_avx(x: std::arch::x86_64::__m256d) -> f64 {
-    use std::arch::x86_64::*;
-    let s = _mm_add_pd(_mm256_castpd256_pd128(x), _mm256_extractf128_pd(x, 1));
-    _mm_cvtsd_f64(_mm_add_sd(s, _mm_unpackhi_pd(s, s)))
 }
 
 #[cfg(test)]
@@ -1249,30 +1259,29 @@ mod tests {
     use super::*;
 
     #[test]
-    fn avx2_duplex_kernel_agrees_with_the_scalar_reference() {
+    fn avx2_kernels_agree_with_the_portable_ones() {
         if !has_avx2_fma() {
             return;
         }
-        let n = 103;
-        let c: Vec<f64> = (0..n * n)
-            .map(|k| ((k * 7919) % 1000) as f64 / 1000.0 - 0.5)
+        let x: Vec<f64> = (0..203)
+            .map(|k| ((k * 7919) % 997) as f64 / 997.0 - 0.5)
             .collect();
-        let v: Vec<f64> = (0..4 * n + 9)
-            .map(|k| ((k * 104_729) % 997) as f64 / 997.0 - 0.5)
+        let y: Vec<f64> = (0..203)
+            .map(|k| ((k * 104_729) % 991) as f64 / 991.0 - 0.5)
             .collect();
-        for len in [1, 2, 5, 100, 103] {
-            let offsets = [0, n, 2 * n + 3, 3 * n + 9 - (n - len).min(9)];
-            let mut reference = vec![0.25; v.len()];
-            let mut fast = reference.clone();
-            duplex_rows::<4>(&c, n, len, &v, offsets, &mut reference);
+        for n in [0, 1, 3, 4, 7, 8, 9, 100, 203] {
+            let (a, b) = (&x[..n], &y[..n]);
             // SAFETY: the CPU supports AVX2 and FMA (checked above).
-            unsafe { duplex_rows_avx2::<4>(&c, n, len, &v, offsets, &mut fast) };
-            let worst = reference
-                .iter()
-                .zip(&fast)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
-            assert!(worst < 1e-12, "len {len}: worst difference {worst}");
+            let fast = unsafe { dot_avx2(a, b) };
+            assert!((fast - dot::<false>(a, b)).abs() < 1e-13, "dot, n = {n}");
+            let (mut y1, mut y2) = (b.to_vec(), b.to_vec());
+            axpy::<false>(&mut y1, a, 0.37);
+            // SAFETY: as above.
+            unsafe { axpy_avx2(&mut y2, a, 0.37) };
+            assert!(
+                y1.iter().zip(&y2).all(|(p, q)| (p - q).abs() < 1e-15),
+                "axpy, n = {n}"
+            );
         }
     }
 }

@@ -24,7 +24,7 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
     let spec = c2.unison_spec();
     let fast = voice_speed(&spec, seconds);
     println!(
-        "c2 voice, paper-faithful ({} × {} string modes, {} board modes, dense duplex damping, RK4 in f64 at {:.0} kHz):",
+        "c2 voice, paper-faithful ({} × {} string modes, {} board modes, duplex damping (Eq. 13, applied through its exact rank-16 factor), RK4 in f64 at {:.0} kHz):",
         spec.strings.len(),
         spec.modes.modes_t + spec.modes.modes_p + spec.modes.modes_l,
         spec.board.len(),
