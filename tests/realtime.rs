@@ -266,6 +266,68 @@ fn control_commands_reach_the_audio_thread() {
 }
 
 #[test]
+fn a_voice_that_blows_up_is_reset_and_never_reaches_the_output() {
+    let (piano, settings) = piano(&["C4"], 1);
+    let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
+    handle
+        .schedule(Scheduled {
+            frame: 0,
+            event: on(60, 90),
+        })
+        .unwrap();
+    let mut out = vec![0f32; 64];
+    let mut all = Vec::new();
+    for b in 0..40 {
+        if b == 10 {
+            // A fault inside the physics: one string mode's velocity becomes NaN.
+            synth.piano_mut().instrument.state_mut().1[3] = f64::NAN;
+        }
+        if b == 20 {
+            handle
+                .schedule(Scheduled {
+                    frame: synth.frame(),
+                    event: on(60, 90),
+                })
+                .unwrap();
+        }
+        synth.process(&mut out, 1);
+        all.push(out.iter().fold(0f32, |m, s| m.max(s.abs())));
+        assert!(out.iter().all(|s| s.is_finite()), "block {b}");
+    }
+    let resets = handle
+        .stats
+        .resets
+        .load(std::sync::atomic::Ordering::Relaxed);
+    println!(
+        "NaN injected in block 10: {resets} reset(s); block peaks before {:.3}, just after {:.3}, after the next note {:.3}",
+        all[9], all[11], all[25]
+    );
+    assert!(resets >= 1);
+    assert!(all[25] > 1e-3, "the voice plays again after the reset");
+}
+
+#[test]
+fn the_output_never_leaves_full_scale() {
+    let (piano, mut settings) = piano(&["C2", "C3"], 2);
+    // Full scale at 1/1000 of the usual: the strikes drive the output far beyond it.
+    settings.full_scale_pa *= 1e-3;
+    let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
+    for (frame, event) in [(0, on(36, 127)), (10, on(48, 127))] {
+        handle.schedule(Scheduled { frame, event }).unwrap();
+    }
+    let mut out = vec![0f32; 256];
+    let mut peak = 0f32;
+    let mut above_knee = 0;
+    for _ in 0..40 {
+        synth.process(&mut out, 1);
+        peak = out.iter().fold(peak, |m, s| m.max(s.abs()));
+        above_knee += out.iter().filter(|s| s.abs() > 0.8).count();
+    }
+    println!("output 60 dB hotter than full scale: peak {peak:.4}, {above_knee} samples in the soft clipper's knee");
+    assert!(peak <= 1.0 && above_knee > 0);
+}
+
+#[test]
 fn play_runs_the_callback_on_the_alsa_null_device() {
     // A one-note file, played "in real time" on a device that consumes as fast as it is fed.
     let mut smf = midly::Smf::new(midly::Header::new(

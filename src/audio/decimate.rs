@@ -40,6 +40,13 @@ impl Decimator {
         }
     }
 
+    /// Forget the past input (after the signal was reset).
+    pub fn reset(&mut self) {
+        for h in &mut self.history {
+            h.fill(0.0);
+        }
+    }
+
     pub fn ratio(&self) -> usize {
         self.ratio
     }

@@ -3,7 +3,9 @@
 //! commands from a channel, advance the shared-soundboard instrument at the internal rate, turn the
 //! board's volume velocity into sound pressure (a monopole, DESIGN.md §1.7) and decimate it to the
 //! output rate. [`Synth::process`] never allocates, locks, prints or blocks (a test runs it under
-//! `assert_no_alloc`), and runs with denormals flushed to zero.
+//! `assert_no_alloc`), and runs with denormals flushed to zero. Nothing non-finite or outside
+//! [-1, 1] leaves it: a voice that blows up is reset within the block, and a soft clipper bounds
+//! the output.
 
 use super::Decimator;
 use crate::engine::Instrument;
@@ -51,6 +53,24 @@ pub struct OutputSettings {
 /// Default retirement threshold: about 80 dB below the energy a mezzo-forte hammer brings (≈ 0.02 J).
 pub const SILENCE_J: f64 = 1e-10;
 
+/// Energy above which a voice (or the board) is taken as blown up and reset: a fortissimo hammer
+/// brings about 0.2 J, so 50 J is far beyond anything the model can hold legitimately.
+pub const RUNAWAY_J: f64 = 50.0;
+
+/// Output level from which the soft clipper bends the signal towards ±1.
+const KNEE: f32 = 0.8;
+
+/// Identity below `KNEE`, then a tanh curve that reaches ±1 only asymptotically: no sample leaves
+/// [-1, 1] and loud peaks are rounded rather than cut.
+fn soft_clip(x: f32) -> f32 {
+    let a = x.abs();
+    if a <= KNEE {
+        x
+    } else {
+        (KNEE + (1.0 - KNEE) * ((a - KNEE) / (1.0 - KNEE)).tanh()).copysign(x)
+    }
+}
+
 /// Counters the audio thread publishes (relaxed atomics: readable from any thread at any time).
 #[derive(Debug, Default)]
 pub struct Stats {
@@ -60,6 +80,8 @@ pub struct Stats {
     pub late_events: AtomicU64,
     /// Largest number of simultaneously simulated voices.
     pub peak_voices: AtomicU64,
+    /// Voices (or the board) reset because a value became non-finite or the energy ran away.
+    pub resets: AtomicU64,
 }
 
 /// The engine's frame clock as last published by the audio thread, so that other threads can
@@ -207,6 +229,12 @@ impl Synth {
         &self.piano
     }
 
+    /// The piano, to change its state outside the event path (tests, hosts that drive the engine
+    /// directly).
+    pub fn piano_mut(&mut self) -> &mut Piano {
+        &mut self.piano
+    }
+
     /// Whether it still plays (no shutdown received).
     pub fn is_running(&self) -> bool {
         self.running
@@ -270,10 +298,18 @@ impl Synth {
             } else {
                 0.0
             };
+            let y = if y.is_finite() {
+                soft_clip(y)
+            } else {
+                // Something blew up inside this frame: reset it now, output silence.
+                self.reset_runaways();
+                0.0
+            };
             frame_out.fill(y);
             tap(&self.piano.instrument, self.frame);
             self.frame += 1;
         }
+        self.reset_runaways();
         let inst = &mut self.piano.instrument;
         inst.retire_silent(self.silence_j);
         let active = (0..inst.n_voices()).filter(|&v| inst.is_active(v)).count() as u64;
@@ -282,6 +318,16 @@ impl Synth {
             .frames
             .fetch_add(self.frame - block_start, Ordering::Relaxed);
         self.stats.blocks.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Reset whatever has blown up, and the output stage's memory with it if anything did.
+    fn reset_runaways(&mut self) {
+        let n = self.piano.instrument.reset_runaways(RUNAWAY_J);
+        if n > 0 || !self.last_volume_velocity.is_finite() {
+            self.last_volume_velocity = self.piano.instrument.volume_velocity_m3_s();
+            self.decimator.reset();
+            self.stats.resets.fetch_add(n as u64, Ordering::Relaxed);
+        }
     }
 
     /// Advance to the next output frame; returns its sound pressure (Pa).

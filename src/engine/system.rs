@@ -609,6 +609,41 @@ impl Instrument {
         retired
     }
 
+    /// Put right what has blown up: a voice whose strings hold a non-finite value or more than
+    /// `bound_j` is set to rest, silent and out of the simulation (its key kept); a non-finite or
+    /// overloaded board is set to rest too. Returns how many parts were reset. O(modes), for once
+    /// per audio block.
+    pub fn reset_runaways(&mut self, bound_j: f64) -> usize {
+        let mut reset = 0;
+        for k in 0..self.n_voices() {
+            let e = self.voice_energy_j(k);
+            let hammer_ok = self.hammer_y[k].is_finite() && self.hammer_v[k].is_finite();
+            if self.flags.active[k] && (!e.is_finite() || e > bound_j || !hammer_ok) {
+                let voice = &self.model.voices[k];
+                let r = voice.base..voice.base + voice.n_modes;
+                self.q[r.clone()].fill(0.0);
+                self.v[r].fill(0.0);
+                (self.hammer_y[k], self.hammer_v[k]) = (0.0, 0.0);
+                let f = &mut self.flags;
+                (f.active[k], f.hammer_on[k], f.fade_left[k], f.pending[k]) =
+                    (false, false, 0, None);
+                f.coupling[k] = 1.0;
+                reset += 1;
+            }
+        }
+        let b = self.model.board.clone();
+        let board_j: f64 = b
+            .clone()
+            .map(|i| 0.5 * (self.v[i] * self.v[i] + self.model.omega2[i] * self.q[i] * self.q[i]))
+            .sum();
+        if !board_j.is_finite() || board_j > bound_j {
+            self.q[b.clone()].fill(0.0);
+            self.v[b].fill(0.0);
+            reset += 1;
+        }
+        reset
+    }
+
     /// Strike voice 0 (see [`Instrument::strike_voice`]).
     pub fn strike(&mut self, strike: Strike) {
         self.strike_voice(0, strike);

@@ -114,13 +114,14 @@ pub fn play(args: PlayArgs) -> Result<()> {
     let block = s.max_frames.load(Ordering::Relaxed);
     let deadline_ms = block as f64 / settings.rate_hz * 1e3;
     eprintln!(
-        "{} callbacks ({} frames) of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {} late events; at most {} voices sounding",
+        "{} callbacks ({} frames) of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {} late events; {} voices reset; at most {} voices sounding",
         s.callbacks.load(Ordering::Relaxed),
         stats.frames.load(Ordering::Relaxed),
         s.busy_ns.load(Ordering::Relaxed) as f64 / callbacks as f64 * 1e-6,
         s.max_ns.load(Ordering::Relaxed) as f64 * 1e-6,
         s.overruns.load(Ordering::Relaxed),
         stats.late_events.load(Ordering::Relaxed),
+        stats.resets.load(Ordering::Relaxed),
         stats.peak_voices.load(Ordering::Relaxed),
     );
     Ok(())
