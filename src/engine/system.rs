@@ -1271,14 +1271,43 @@ fn duplex_damping<const SIMD: bool>(
 ) {
     let (n, rank) = (m.duplex_n, m.duplex_rank);
     let blocks = (0..m.n_strings).flat_map(|s| [ranges[s][0].clone(), ranges[s][2].clone()]);
-    for (b, r) in blocks.clone().enumerate() {
-        let zb = &mut z[b * rank..(b + 1) * rank];
-        for (j, zj) in zb.iter_mut().enumerate() {
-            *zj = dot::<SIMD>(&m.duplex_w[j * n..j * n + r.len()], &v[r.clone()]);
+    let (nt, np) = (ranges[0][0].len(), ranges[0][2].len());
+    // z = W v: all blocks at once through the AVX2 kernel when they have one length.
+    #[cfg(target_arch = "x86_64")]
+    let projected = SIMD && nt == np && {
+        let mut offsets = [0; 2 * MAX_STRINGS];
+        for (o, r) in offsets.iter_mut().zip(blocks.clone()) {
+            *o = r.start;
+        }
+        let w = &m.duplex_w;
+        // SAFETY: `SIMD` is true only inside `step_avx2`, entered after detecting AVX2 and FMA.
+        unsafe {
+            match m.n_strings {
+                1 => project_avx2::<2>(w, n, rank, nt, v, &offsets, z),
+                2 => project_avx2::<4>(w, n, rank, nt, v, &offsets, z),
+                _ => project_avx2::<6>(w, n, rank, nt, v, &offsets, z),
+            }
+        }
+        true
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let projected = false;
+    if !projected {
+        for (b, r) in blocks.clone().enumerate() {
+            let zb = &mut z[b * rank..(b + 1) * rank];
+            for (j, zj) in zb.iter_mut().enumerate() {
+                *zj = dot::<SIMD>(&m.duplex_w[j * n..j * n + r.len()], &v[r.clone()]);
+            }
         }
     }
     for (b, r) in blocks.enumerate() {
         let zb = &z[b * rank..(b + 1) * rank];
+        #[cfg(target_arch = "x86_64")]
+        if SIMD {
+            // SAFETY: `SIMD` is true only inside `step_avx2`, entered after detecting AVX2 and FMA.
+            unsafe { project_back_avx2(&m.duplex_w, n, zb, &mut acc[r]) };
+            continue;
+        }
         for (j, &zj) in zb.iter().enumerate() {
             axpy::<SIMD>(
                 &mut acc[r.clone()],
@@ -1289,9 +1318,145 @@ fn duplex_damping<const SIMD: bool>(
     }
 }
 
+/// `z[b][j] = W[j, ..len] · v[offsets[b]..][..len]` for `K` blocks: each chunk of a row of `W` is
+/// loaded once for all blocks.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn project_avx2<const K: usize>(
+    w: &[f64],
+    n: usize,
+    rank: usize,
+    len: usize,
+    v: &[f64],
+    offsets: &[usize; 2 * MAX_STRINGS],
+    z: &mut [f64],
+) {
+    use std::arch::x86_64::*;
+    assert!(len <= n && (rank == 0 || (rank - 1) * n + len <= w.len()) && z.len() >= K * rank);
+    for &o in &offsets[..K] {
+        assert!(o + len <= v.len());
+    }
+    let (pw, pv) = (w.as_ptr(), v.as_ptr());
+    let split = len - len % 4;
+    for j in 0..rank {
+        let row = pw.add(j * n);
+        let mut s = [_mm256_setzero_pd(); K];
+        let mut i = 0;
+        // SAFETY (loads): columns below `len` of rows below `rank` lie inside `w`, and
+        // `offsets[b] + i < v.len()` (asserted).
+        while i < split {
+            let c = _mm256_loadu_pd(row.add(i));
+            for b in 0..K {
+                s[b] = _mm256_fmadd_pd(c, _mm256_loadu_pd(pv.add(offsets[b] + i)), s[b]);
+            }
+            i += 4;
+        }
+        for b in 0..K {
+            let h = _mm_add_pd(_mm256_castpd256_pd128(s[b]), _mm256_extractf128_pd(s[b], 1));
+            let mut sum = _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
+            for t in split..len {
+                sum += w[j * n + t] * v[offsets[b] + t];
+            }
+            z[b * rank + j] = sum;
+        }
+    }
+}
+
+/// `acc -= W[:, ..len]ᵀ z` for `W` row-major with `n` columns, `len = acc.len()`: each four-wide
+/// chunk of `acc` stays in a register while the `z.len()` rows are folded into it, so `acc` is
+/// loaded and stored once rather than once per row.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn project_back_avx2(w: &[f64], n: usize, z: &[f64], acc: &mut [f64]) {
+    use std::arch::x86_64::*;
+    let (len, rank) = (acc.len(), z.len());
+    assert!(len <= n && (rank == 0 || (rank - 1) * n + len <= w.len()));
+    let (pw, pa) = (w.as_ptr(), acc.as_mut_ptr());
+    let mut i = 0;
+    // SAFETY (loads and stores): rows j < rank and columns below `len` lie inside `w` (asserted),
+    // and indices below `len` inside `acc`.
+    while i + 4 <= len {
+        let mut a = _mm256_loadu_pd(pa.add(i));
+        for (j, &zj) in z.iter().enumerate() {
+            a = _mm256_fnmadd_pd(_mm256_loadu_pd(pw.add(j * n + i)), _mm256_set1_pd(zj), a);
+        }
+        _mm256_storeu_pd(pa.add(i), a);
+        i += 4;
+    }
+    while i < len {
+        for (j, &zj) in z.iter().enumerate() {
+            acc[i] -= w[j * n + i] * zj;
+        }
+        i += 1;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn avx2_projection_agrees_with_the_portable_one() {
+        if !has_avx2_fma() {
+            return;
+        }
+        let (n, rank) = (103, 16);
+        let w: Vec<f64> = (0..n * rank)
+            .map(|k| ((k * 7919) % 1000) as f64 / 1000.0 - 0.5)
+            .collect();
+        let v: Vec<f64> = (0..4 * n + 9)
+            .map(|k| ((k * 104_729) % 997) as f64 / 997.0 - 0.5)
+            .collect();
+        let offsets = [0, n, 2 * n + 3, 3 * n + 9, 0, 0];
+        for len in [0, 1, 5, 100, 103] {
+            let mut fast = vec![0.0; 4 * rank];
+            // SAFETY: the CPU supports AVX2 and FMA (checked above).
+            unsafe { project_avx2::<4>(&w, n, rank, len, &v, &offsets, &mut fast) };
+            for b in 0..4 {
+                for j in 0..rank {
+                    let reference =
+                        dot::<false>(&w[j * n..j * n + len], &v[offsets[b]..offsets[b] + len]);
+                    let d = (reference - fast[b * rank + j]).abs();
+                    assert!(d < 1e-13, "len {len}, block {b}, row {j}: {d}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn avx2_back_projection_agrees_with_the_portable_one() {
+        if !has_avx2_fma() {
+            return;
+        }
+        let (n, rank) = (103, 16);
+        let w: Vec<f64> = (0..n * rank)
+            .map(|k| ((k * 7919) % 1000) as f64 / 1000.0 - 0.5)
+            .collect();
+        let z: Vec<f64> = (0..rank).map(|k| k as f64 / 7.0 - 1.0).collect();
+        for len in [0, 1, 5, 100, 103] {
+            let mut reference = vec![0.25; len];
+            for (j, &zj) in z.iter().enumerate() {
+                axpy::<false>(&mut reference, &w[j * n..j * n + len], -zj);
+            }
+            let mut fast = vec![0.25; len];
+            // SAFETY: the CPU supports AVX2 and FMA (checked above).
+            unsafe { project_back_avx2(&w, n, &z, &mut fast) };
+            let worst = reference
+                .iter()
+                .zip(&fast)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(worst < 1e-13, "len {len}: {worst}");
+        }
+    }
 
     #[test]
     fn avx2_kernels_agree_with_the_portable_ones() {
