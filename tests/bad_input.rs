@@ -141,3 +141,98 @@ fn cli_renders_a_short_wav() {
     println!("0.2 s una corda render: peak {peak:.3} of full scale");
     assert!(samples.iter().all(|s| s.is_finite()) && peak > 1e-3 && peak <= 1.0);
 }
+
+/// A one-note MIDI file whose note-off comes `beats` quarter notes later at 120 bpm.
+fn long_midi(path: &Path, beats: u32) {
+    use midly::num::{u15, u28, u4, u7};
+    use midly::{
+        Format, Header, MetaMessage, MidiMessage, Smf, Timing, TrackEvent, TrackEventKind,
+    };
+    let note = |delta: u32, vel: u8| TrackEvent {
+        delta: u28::new(delta),
+        kind: TrackEventKind::Midi {
+            channel: u4::new(0),
+            message: MidiMessage::NoteOn {
+                key: u7::new(60),
+                vel: u7::new(vel),
+            },
+        },
+    };
+    let mut smf = Smf::new(Header::new(
+        Format::SingleTrack,
+        Timing::Metrical(u15::new(480)),
+    ));
+    smf.tracks.push(vec![
+        note(0, 80),
+        note(480 * beats, 0),
+        TrackEvent {
+            delta: u28::new(0),
+            kind: TrackEventKind::Meta(MetaMessage::EndOfTrack),
+        },
+    ]);
+    smf.save(path).unwrap();
+}
+
+#[test]
+fn midi_renders_refuse_bad_limits_and_hour_long_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let wav = dir.path().join("out.wav");
+    let wav = wav.to_str().unwrap();
+    let long = dir.path().join("long.mid");
+    // 8000 beats at 120 bpm: 4000 s, over an hour.
+    long_midi(&long, 8000);
+    let long = long.to_str().unwrap();
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["render", "--offline", "--midi", long, "--out", wav],
+            "lasts 4002 s",
+        ),
+        (
+            &[
+                "render",
+                "--offline",
+                "--midi",
+                long,
+                "--max-seconds",
+                "0",
+                "--out",
+                wav,
+            ],
+            "--max-seconds 0",
+        ),
+        (
+            &[
+                "render",
+                "--offline",
+                "--midi",
+                long,
+                "--voices",
+                "0",
+                "--max-seconds",
+                "5000",
+                "--out",
+                wav,
+            ],
+            "1 to 256 voices",
+        ),
+        (
+            &[
+                "render",
+                "--offline",
+                "--midi",
+                long,
+                "--tail",
+                "-1",
+                "--out",
+                wav,
+            ],
+            "--tail -1",
+        ),
+    ];
+    for (args, needle) in cases {
+        let (ok, stderr) = cli(args);
+        assert!(!ok, "must fail");
+        assert!(stderr.contains(needle), "message names `{needle}`");
+        assert!(!Path::new(wav).exists(), "nothing written");
+    }
+}

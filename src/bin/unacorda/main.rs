@@ -44,6 +44,15 @@ enum Command {
         /// With --midi: size of the voice pool, 1–256 (the quietest voice is stolen when it is full).
         #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES, value_name = "N")]
         voices: usize,
+        /// With --midi: refuse performances longer than this (s), 1–86400; a file whose tempo map
+        /// or deltas make it last hours is more likely a mistake than a request.
+        #[arg(
+            long,
+            default_value_t = 600.0,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
+        max_seconds: f64,
         /// With --midi: seconds of sound after the last event, 0–60.
         #[arg(
             long,
@@ -202,6 +211,7 @@ fn run(cli: Cli) -> Result<()> {
             key,
             midi,
             voices,
+            max_seconds,
             tail,
             keyboard,
             una_corda,
@@ -222,7 +232,17 @@ fn run(cli: Cli) -> Result<()> {
                 }
                 let events = unacorda::midi::file::read_file(&path)?;
                 let scaling = Scaling::resolve(&keyboard)?;
+                if !(1.0..=86_400.0).contains(&max_seconds) {
+                    bail!("--max-seconds {max_seconds}: expected a duration in [1, 86400] s");
+                }
                 let length_s = events.last().map_or(0.0, |e| e.time_s) + tail;
+                if length_s > max_seconds {
+                    bail!(
+                        "{}: the performance lasts {length_s:.0} s (last event at {:.0} s), longer than --max-seconds {max_seconds:.0}; pass a larger --max-seconds to render it",
+                        path.display(),
+                        length_s - tail
+                    );
+                }
                 let pb = progress_bar(length_s, "rendering");
                 let started = std::time::Instant::now();
                 let perf = unacorda::render::render_midi(&scaling, &events, tail, voices, |f| {
