@@ -236,3 +236,32 @@ fn midi_renders_refuse_bad_limits_and_hour_long_files() {
         assert!(!Path::new(wav).exists(), "nothing written");
     }
 }
+
+#[test]
+fn play_refuses_bad_flags_and_missing_devices() {
+    let cases: [(&[&str], &str); 4] = [
+        (&["play", "--voices", "0"], "--voices 0"),
+        (&["play", "--seconds", "-2"], "--seconds -2"),
+        (
+            &["play", "--device", "no-such-device", "--callbacks", "1"],
+            "no audio output device matches \"no-such-device\"",
+        ),
+        (
+            &[
+                "play",
+                "--device",
+                "null",
+                "--buffer",
+                "3",
+                "--callbacks",
+                "1",
+            ],
+            "--buffer 3",
+        ),
+    ];
+    for (args, needle) in cases {
+        let (ok, stderr) = cli(args);
+        assert!(!ok, "must fail");
+        assert!(stderr.contains(needle), "message names `{needle}`");
+    }
+}

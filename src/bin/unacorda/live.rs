@@ -34,6 +34,11 @@ pub fn play(args: PlayArgs) -> Result<()> {
             bail!("--seconds {s}: expected a duration in (0, 86400] s");
         }
     }
+    if let Some(b) = args.buffer {
+        if !(16..=8192).contains(&b) {
+            bail!("--buffer {b}: expected 16 to 8192 frames");
+        }
+    }
     // Read the file first: a bad file should fail before the keys are built.
     let file_events = match &args.midi {
         Some(path) => Some(unacorda::midi::file::read_file(path)?),
