@@ -208,13 +208,19 @@ impl Preset {
         ))
     }
 
-    /// Parse, validate and resolve the soundboard of preset text read from `path`.
-    pub fn from_str(text: &str, path: &Path) -> Result<LoadedPreset, PresetError> {
+    /// Parse and validate preset text read from `path`, without resolving its soundboard.
+    pub fn parse(text: &str, path: &Path) -> Result<Preset, PresetError> {
         let preset: Preset = toml::from_str(text).map_err(|e| PresetError::Parse {
             path: path.to_owned(),
             message: e.to_string().trim_end().to_owned(),
         })?;
         preset.validate(path)?;
+        Ok(preset)
+    }
+
+    /// Parse, validate and resolve the soundboard of preset text read from `path`.
+    pub fn from_str(text: &str, path: &Path) -> Result<LoadedPreset, PresetError> {
+        let preset = Self::parse(text, path)?;
         let (asset_name, board) = match BUILTIN_ASSETS
             .iter()
             .find(|(n, _)| *n == preset.soundboard.asset)

@@ -236,11 +236,16 @@ fn bad_midi_files_are_errors_that_name_the_file() {
     let mut zero_division = good.clone();
     zero_division[12] = 0;
     zero_division[13] = 0;
-    let cases: [(&str, Vec<u8>); 4] = [
+    // SMPTE division with the frame-rate byte 0x80: midly negates it as an i8 and overflows
+    // (a panic found by fuzzing).
+    let mut smpte_minus_128 = good.clone();
+    smpte_minus_128[12] = 0x80;
+    let cases: [(&str, Vec<u8>); 5] = [
         ("empty.mid", vec![]),
         ("truncated.mid", good[..good.len() - 5].to_vec()),
         ("not_midi.mid", b"RIFF\x00\x00\x00\x04WAVE".to_vec()),
         ("zero_division.mid", zero_division),
+        ("smpte_minus_128.mid", smpte_minus_128),
     ];
     for (name, bytes) in cases {
         let e = parse(&bytes, Path::new(name)).unwrap_err().to_string();

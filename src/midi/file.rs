@@ -51,6 +51,16 @@ fn check_chunks(bytes: &[u8]) -> Result<(), String> {
         pos += 8 + len;
         index += 1;
     }
+    // SMPTE division: the high byte is minus the frame rate. midly negates it as an i8, which
+    // overflows for 0x80 (found by fuzzing); only the four standard rates are meaningful anyway.
+    if bytes.len() >= 14 && &bytes[..4] == b"MThd" && bytes[12] & 0x80 != 0 {
+        let fps = -i16::from(bytes[12] as i8);
+        if ![24, 25, 29, 30].contains(&fps) {
+            return Err(format!(
+                "header: SMPTE timing at {fps} frames per second (expected 24, 25, 29 or 30)"
+            ));
+        }
+    }
     Ok(())
 }
 

@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Fuzz every parser that reads outside input, with cargo-fuzz (libFuzzer, nightly): MIDI files
+# (smf), live MIDI bytes (live_midi), presets (preset), soundboard assets (asset).
+#   bash scripts/fuzz.sh            10 000 runs per target: the smoke run CI does
+#   bash scripts/fuzz.sh 1000000    the full run quoted in the README
+# Each target starts from fuzz/seeds/<target> (committed; crash regressions included) and grows
+# fuzz/corpus/<target> (not committed). A crash stops the script with libFuzzer's report and
+# leaves the input in fuzz/artifacts/<target>/.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+runs="${1:-10000}"
+if ! rustup toolchain list 2>/dev/null | grep -q '^nightly'; then
+  echo "fuzz: skipped — cargo-fuzz needs the nightly toolchain (rustup toolchain install nightly)" >&2
+  exit 0
+fi
+command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --version 0.13.2 --locked
+cd fuzz
+mkdir -p logs
+for t in smf live_midi preset asset; do
+  mkdir -p "corpus/$t"
+  log="logs/$t.log"
+  if ! cargo +nightly fuzz run "$t" "corpus/$t" "seeds/$t" -- -runs="$runs" -max_len=8192 >"$log" 2>&1; then
+    tail -n 60 "$log" >&2
+    echo "fuzz: target $t failed (full log: fuzz/$log)" >&2
+    exit 1
+  fi
+  echo "fuzz $t: $(grep -E '^Done' "$log")"
+done
