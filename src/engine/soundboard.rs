@@ -125,6 +125,21 @@ impl SoundboardModes {
             if line.is_empty() {
                 continue;
             }
+            // Each header once, all before the mode rows (the rows' width follows `points:`).
+            for (tag, seen) in [
+                ("format:", format_seen),
+                ("points:", points.is_some()),
+                ("columns:", columns.is_some()),
+            ] {
+                if line.starts_with(tag) && (seen || !rows.is_empty()) {
+                    let what = if seen {
+                        "repeated"
+                    } else {
+                        "after the mode rows"
+                    };
+                    return Err(syntax(line_no, format!("header `{tag}` {what}")));
+                }
+            }
             if let Some(v) = line.strip_prefix("format:") {
                 if v.trim() != FORMAT_TAG {
                     return Err(syntax(
