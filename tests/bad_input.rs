@@ -37,8 +37,7 @@ fn malformed_assets_are_rejected_with_file_line_and_field() {
     // Found by fuzzing: a header after the rows used to index past the rows' width.
     let e = asset_error("bad_asset_points_after_rows.txt");
     assert!(
-        e.contains("bad_asset_points_after_rows.txt:6:")
-            && e.contains("header `points:` repeated")
+        e.contains("bad_asset_points_after_rows.txt:6:") && e.contains("header `points:` repeated")
     );
     let e = asset_error("does_not_exist.txt");
     assert!(e.contains("does_not_exist.txt") && e.contains("cannot read"));
