@@ -12,7 +12,8 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
-use unacorda::midi::{Event, Pedal};
+use unacorda::measure::{loaded_synth, percentile};
+use unacorda::midi::Event;
 use unacorda::play::Piano;
 use unacorda::scaling::{Scaling, KEYS};
 
@@ -21,11 +22,6 @@ fn keyboard() -> (Piano, unacorda::audio::synth::OutputSettings) {
     let keys: Vec<usize> = (1..=KEYS).collect();
     let piano = Piano::build(&scaling, &keys, 32).expect("the keyboard builds");
     (piano, scaling.base.output_settings())
-}
-
-/// Percentile `p` (0–1) of sorted `x`.
-fn percentile(x: &[f64], p: f64) -> f64 {
-    x[((x.len() - 1) as f64 * p).round() as usize]
 }
 
 fn callback(c: &mut Criterion) {
@@ -38,32 +34,8 @@ fn callback(c: &mut Criterion) {
     group.measurement_time(Duration::from_secs(4));
     for voices in [1usize, 8, 16, 32] {
         for frames in [64usize, 128] {
-            let (mut synth, mut handle) =
-                Synth::new(piano.clone(), settings, EVENT_QUEUE).expect("rates match");
-            let sustain = Event::Pedal {
-                pedal: Pedal::Sustain,
-                down: true,
-            };
-            handle
-                .schedule(Scheduled {
-                    frame: 0,
-                    event: sustain,
-                })
-                .expect("queue has room");
-            // Keys spread over the keyboard, A0 upwards, struck 1 ms apart.
-            for v in 0..voices {
-                let note = (21 + v * 88 / voices) as u8;
-                let event = Event::NoteOn { note, velocity: 80 };
-                let frame = v as u64 * 48;
-                handle
-                    .schedule(Scheduled { frame, event })
-                    .expect("queue has room");
-            }
+            let (mut synth, handle) = loaded_synth(&piano, settings, voices, frames);
             let mut out = vec![0f32; frames * 2];
-            // Past the strikes: every hammer has left its strings.
-            for _ in 0..(0.05 * fs) as usize / frames {
-                synth.process(&mut out, 2);
-            }
             let mut times = Vec::new();
             group.throughput(Throughput::Elements(frames as u64));
             group.bench_function(format!("{voices}v_{frames}f"), |b| {

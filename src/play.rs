@@ -184,6 +184,9 @@ pub struct Piano {
 /// Default size of the voice pool.
 pub const DEFAULT_VOICES: usize = 32;
 
+/// Largest voice pool the command line accepts.
+pub const MAX_VOICES: usize = 256;
+
 impl Piano {
     /// The `keys` (1–88) of `scaling` on one soundboard with a pool of `voices` voices. Keys are
     /// built (and tuned) on all cores.

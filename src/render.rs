@@ -204,7 +204,7 @@ pub enum RenderError {
     Synth(#[from] crate::audio::synth::SynthError),
     #[error("the MIDI file plays no key of the piano (notes 21–108)")]
     NoKeys,
-    #[error("the voice pool needs 1 to 256 voices, got {0}")]
+    #[error("the voice pool needs 1 to {max} voices, got {0}", max = crate::play::MAX_VOICES)]
     Voices(usize),
 }
 
@@ -247,9 +247,9 @@ pub fn render_midi_with(
     mut progress: impl FnMut(f64),
     mut tap: impl FnMut(&Instrument, u64),
 ) -> Result<Performance, RenderError> {
-    use crate::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
+    use crate::audio::synth::{Synth, EVENT_QUEUE};
     use crate::midi::{piano_key, Event};
-    if !(1..=256).contains(&voices) {
+    if !(1..=crate::play::MAX_VOICES).contains(&voices) {
         return Err(RenderError::Voices(voices));
     }
     let mut keys: Vec<usize> = events
@@ -274,16 +274,7 @@ pub fn render_midi_with(
     let n_blocks = samples.len().div_ceil(OFFLINE_BLOCK).max(1);
     let mut next = 0;
     for (b, block) in samples.chunks_mut(OFFLINE_BLOCK).enumerate() {
-        while next < events.len() && handle.queue_room() > 0 {
-            let e = &events[next];
-            let frame = (e.time_s * fs).round() as u64;
-            // Room was checked: the push cannot fail.
-            let _ = handle.schedule(Scheduled {
-                frame,
-                event: e.event,
-            });
-            next += 1;
-        }
+        next = handle.schedule_timed(events, next, 0);
         synth.process_with(block, 1, &mut tap);
         if b % 64 == 0 {
             progress(b as f64 / n_blocks as f64);

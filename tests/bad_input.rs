@@ -81,6 +81,18 @@ fn cli(args: &[&str]) -> (bool, String) {
     (out.status.success(), stderr)
 }
 
+/// Each command fails, its message contains the needle, and `out` (if any) was not written.
+fn assert_refused(cases: &[(&[&str], &str)], out: Option<&str>) {
+    for &(args, needle) in cases {
+        let (ok, stderr) = cli(args);
+        assert!(!ok, "must fail");
+        assert!(stderr.contains(needle), "message names `{needle}`");
+        if let Some(out) = out {
+            assert!(!Path::new(out).exists(), "nothing written");
+        }
+    }
+}
+
 #[test]
 fn cli_rejects_bad_input_without_writing() {
     let dir = tempfile::tempdir().unwrap();
@@ -114,12 +126,7 @@ fn cli_rejects_bad_input_without_writing() {
             "--seconds",
         ),
     ];
-    for (args, needle) in cases {
-        let (ok, stderr) = cli(args);
-        assert!(!ok, "must fail");
-        assert!(stderr.contains(needle), "message names `{needle}`");
-        assert!(!Path::new(wav).exists(), "nothing written");
-    }
+    assert_refused(&cases, Some(wav));
 }
 
 #[test]
@@ -234,12 +241,7 @@ fn midi_renders_refuse_bad_limits_and_hour_long_files() {
             "--tail -1",
         ),
     ];
-    for (args, needle) in cases {
-        let (ok, stderr) = cli(args);
-        assert!(!ok, "must fail");
-        assert!(stderr.contains(needle), "message names `{needle}`");
-        assert!(!Path::new(wav).exists(), "nothing written");
-    }
+    assert_refused(&cases, Some(wav));
 }
 
 #[test]
@@ -264,9 +266,5 @@ fn play_refuses_bad_flags_and_missing_devices() {
             "--buffer 3",
         ),
     ];
-    for (args, needle) in cases {
-        let (ok, stderr) = cli(args);
-        assert!(!ok, "must fail");
-        assert!(stderr.contains(needle), "message names `{needle}`");
-    }
+    assert_refused(&cases, None);
 }

@@ -66,17 +66,29 @@ pub fn output_devices(rate_hz: u32) -> Result<Vec<OutputInfo>, DeviceError> {
         .collect())
 }
 
-/// The names of the MIDI inputs, or why live MIDI is unavailable (on Linux it needs the ALSA
-/// sequencer, `/dev/snd/seq`).
-pub fn midi_inputs() -> Result<Vec<String>, String> {
+/// The MIDI input client with its ports and their names, or why live MIDI is unavailable (on
+/// Linux it needs the ALSA sequencer, `/dev/snd/seq`).
+pub fn midi_input() -> Result<(midir::MidiInput, Vec<midir::MidiInputPort>, Vec<String>), String> {
     let input = midir::MidiInput::new("unacorda").map_err(|e| {
         format!("live MIDI input is unavailable: {e} (on Linux it needs the ALSA sequencer, /dev/snd/seq)")
     })?;
-    Ok(input
-        .ports()
+    let ports = input.ports();
+    let names = ports
         .iter()
         .map(|p| input.port_name(p).unwrap_or_else(|_| "?".into()))
-        .collect())
+        .collect();
+    Ok((input, ports, names))
+}
+
+/// Frames per callback that `start` accepts.
+pub const BUFFER_FRAMES: std::ops::RangeInclusive<u32> = 16..=8192;
+
+/// Check a requested callback size before anything is built around it.
+pub fn check_buffer(buffer: Option<u32>) -> Result<(), DeviceError> {
+    match buffer {
+        Some(b) if !BUFFER_FRAMES.contains(&b) => Err(DeviceError::Buffer(b)),
+        _ => Ok(()),
+    }
 }
 
 /// A channel count for 32-bit float output at `rate_hz`, or what the device offers instead.
@@ -141,11 +153,7 @@ pub fn start(
     rate_hz: u32,
     buffer: Option<u32>,
 ) -> Result<Output, DeviceError> {
-    if let Some(b) = buffer {
-        if !(16..=8192).contains(&b) {
-            return Err(DeviceError::Buffer(b));
-        }
-    }
+    check_buffer(buffer)?;
     let host = cpal::default_host();
     let chosen = match device {
         None => host.default_output_device(),

@@ -352,9 +352,26 @@ impl SynthHandle {
         self.events.try_push(event)
     }
 
-    /// Room left in the event queue.
-    pub fn queue_room(&self) -> usize {
-        self.events.vacant_len()
+    /// Queue `events[next..]` (times from `start_frame`) as far as the queue has room; returns
+    /// the index of the first event not queued.
+    pub fn schedule_timed(
+        &mut self,
+        events: &[crate::midi::file::TimedEvent],
+        mut next: usize,
+        start_frame: u64,
+    ) -> usize {
+        let rate_hz = self.clock.rate_hz;
+        while next < events.len() && self.events.vacant_len() > 0 {
+            let e = &events[next];
+            let frame = start_frame + (e.time_s * rate_hz).round() as u64;
+            // Room was checked: the push cannot fail.
+            let _ = self.events.try_push(Scheduled {
+                frame,
+                event: e.event,
+            });
+            next += 1;
+        }
+        next
     }
 
     /// Ask the audio thread to go silent.

@@ -57,6 +57,11 @@ fn out_ye(s: usize) -> usize {
 }
 const OUTPUTS: usize = 7 * MAX_STRINGS + 6;
 
+/// `dst = a x` (`Replace`) or `dst += a x` (`Add`): faer's product, on one core.
+fn gemv(dst: &mut Mat<f64>, accum: Accum, a: &Mat<f64>, x: &Mat<f64>) {
+    matmul(dst.as_mut(), accum, a.as_ref(), x.as_ref(), 1.0, Par::Seq);
+}
+
 impl DenseUnison {
     /// Assemble `A`, `B`, `B2` and `C` for `spec`.
     pub fn new(spec: &UnisonSpec) -> DenseUnison {
@@ -176,11 +181,7 @@ impl DenseUnison {
     /// strings' current displacement, moving at the strike's speed.
     pub fn strike(&mut self, strike: Strike) {
         let ns = self.n_strings;
-        let n_struck = if strike.una_corda && ns > 1 {
-            ns - 1
-        } else {
-            ns
-        };
+        let n_struck = strike.strings_struck(ns);
         self.outputs_of_x();
         let mut contact = f64::NEG_INFINITY;
         for s in 0..ns {
@@ -196,34 +197,18 @@ impl DenseUnison {
 
     /// `y = C x` at the current state.
     fn outputs_of_x(&mut self) {
-        matmul(
-            self.y.as_mut(),
-            Accum::Replace,
-            self.c.as_ref(),
-            self.x.as_ref(),
-            1.0,
-            Par::Seq,
-        );
+        gemv(&mut self.y, Accum::Replace, &self.c, &self.x);
     }
 
     /// The right-hand side of Eq. 10 at `xs`, into `k`.
     fn evaluate(&mut self) {
         let (ns, nq) = (self.n_strings, self.nq);
-        matmul(
-            self.y.as_mut(),
-            Accum::Replace,
-            self.c.as_ref(),
-            self.xs.as_ref(),
-            1.0,
-            Par::Seq,
-        );
+        gemv(&mut self.y, Accum::Replace, &self.c, &self.xs);
         // Contact forces (Eq. 6) into F_b = (-F_1, -F_2, F_1 + F_2) (Eq. 17).
-        let ct = &self.spec.contact;
         for d in 0..3 {
             let mut total = 0.0;
             for s in 0..ns {
-                let f = ct.stiffness_n_m[d] * (self.y[(out_rs(s, d), 0)] - self.y[(out_rb(d), 0)])
-                    + ct.damping_n_s_m[d] * (self.y[(out_vs(s, d), 0)] - self.y[(out_vb(d), 0)]);
+                let f = self.contact_force_n(s, d);
                 self.fb[(3 * s + d, 0)] = -f;
                 total += f;
             }
@@ -238,30 +223,9 @@ impl DenseUnison {
                 0.0
             };
         }
-        matmul(
-            self.k.as_mut(),
-            Accum::Replace,
-            self.a.as_ref(),
-            self.xs.as_ref(),
-            1.0,
-            Par::Seq,
-        );
-        matmul(
-            self.k.as_mut(),
-            Accum::Add,
-            self.b.as_ref(),
-            self.u.as_ref(),
-            1.0,
-            Par::Seq,
-        );
-        matmul(
-            self.k.as_mut(),
-            Accum::Add,
-            self.b2.as_ref(),
-            self.fb.as_ref(),
-            1.0,
-            Par::Seq,
-        );
+        gemv(&mut self.k, Accum::Replace, &self.a, &self.xs);
+        gemv(&mut self.k, Accum::Add, &self.b, &self.u);
+        gemv(&mut self.k, Accum::Add, &self.b2, &self.fb);
         if !self.hammer_on {
             self.k[(2 * nq, 0)] = 0.0;
             self.k[(2 * nq + 1, 0)] = 0.0;
@@ -308,14 +272,19 @@ impl DenseUnison {
     /// Force of each string on the bridge per direction T, L, P (N) (Eq. 6) at the current state.
     pub fn bridge_forces_n(&mut self) -> [[f64; 3]; MAX_STRINGS] {
         self.outputs_of_x();
-        let ct = &self.spec.contact;
         let mut f = [[0.0; 3]; MAX_STRINGS];
         for (s, fs) in f.iter_mut().enumerate().take(self.n_strings) {
             for (d, fsd) in fs.iter_mut().enumerate() {
-                *fsd = ct.stiffness_n_m[d] * (self.y[(out_rs(s, d), 0)] - self.y[(out_rb(d), 0)])
-                    + ct.damping_n_s_m[d] * (self.y[(out_vs(s, d), 0)] - self.y[(out_vb(d), 0)]);
+                *fsd = self.contact_force_n(s, d);
             }
         }
         f
+    }
+
+    /// Force of string `s` on the bridge in direction `d` (Eq. 6), from the outputs `y`.
+    fn contact_force_n(&self, s: usize, d: usize) -> f64 {
+        let (y, ct) = (&self.y, &self.spec.contact);
+        ct.stiffness_n_m[d] * (y[(out_rs(s, d), 0)] - y[(out_rb(d), 0)])
+            + ct.damping_n_s_m[d] * (y[(out_vs(s, d), 0)] - y[(out_vb(d), 0)])
     }
 }

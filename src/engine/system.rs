@@ -63,6 +63,17 @@ pub struct Strike {
     pub una_corda: bool,
 }
 
+impl Strike {
+    /// How many of a unison's `n_strings` strings the hammer strikes (the first ones).
+    pub fn strings_struck(&self, n_strings: usize) -> usize {
+        if self.una_corda && n_strings > 1 {
+            n_strings - 1
+        } else {
+            n_strings
+        }
+    }
+}
+
 /// Physical outputs read from the state (Eq. 19).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Observation {
@@ -572,12 +583,27 @@ impl Instrument {
         self.flags.fade_left[k] > 0
     }
 
-    /// Mechanical energy in voice `k`'s strings (J): the measure of how loud it still is.
-    pub fn voice_energy_j(&self, k: usize) -> f64 {
-        let voice = &self.model.voices[k];
-        let r = voice.base..voice.base + voice.n_modes;
+    /// Kinetic and potential energy of the uncoupled modes `r` (J).
+    fn modal_energy_j(&self, r: Range<usize>) -> f64 {
         r.map(|i| 0.5 * (self.v[i] * self.v[i] + self.model.omega2[i] * self.q[i] * self.q[i]))
             .sum()
+    }
+
+    /// Flat-array range of voice `k`'s modes.
+    fn voice_modes(&self, k: usize) -> Range<usize> {
+        let voice = &self.model.voices[k];
+        voice.base..voice.base + voice.n_modes
+    }
+
+    /// Set the modes `r` at rest.
+    fn rest(&mut self, r: Range<usize>) {
+        self.q[r.clone()].fill(0.0);
+        self.v[r].fill(0.0);
+    }
+
+    /// Mechanical energy in voice `k`'s strings (J): the measure of how loud it still is.
+    pub fn voice_energy_j(&self, k: usize) -> f64 {
+        self.modal_energy_j(self.voice_modes(k))
     }
 
     /// Stop simulating the voices that have fallen silent: strings below `threshold_j`, no hammer,
@@ -598,10 +624,7 @@ impl Instrument {
                 && (f.damper_down[k] || undamped)
                 && self.voice_energy_j(k) < threshold_j
             {
-                let voice = &self.model.voices[k];
-                let r = voice.base..voice.base + voice.n_modes;
-                self.q[r.clone()].fill(0.0);
-                self.v[r].fill(0.0);
+                self.rest(self.voice_modes(k));
                 self.flags.active[k] = false;
                 retired += 1;
             }
@@ -619,10 +642,7 @@ impl Instrument {
             let e = self.voice_energy_j(k);
             let hammer_ok = self.hammer_y[k].is_finite() && self.hammer_v[k].is_finite();
             if self.flags.active[k] && (!e.is_finite() || e > bound_j || !hammer_ok) {
-                let voice = &self.model.voices[k];
-                let r = voice.base..voice.base + voice.n_modes;
-                self.q[r.clone()].fill(0.0);
-                self.v[r].fill(0.0);
+                self.rest(self.voice_modes(k));
                 (self.hammer_y[k], self.hammer_v[k]) = (0.0, 0.0);
                 let f = &mut self.flags;
                 (f.active[k], f.hammer_on[k], f.fade_left[k], f.pending[k]) =
@@ -631,14 +651,9 @@ impl Instrument {
                 reset += 1;
             }
         }
-        let b = self.model.board.clone();
-        let board_j: f64 = b
-            .clone()
-            .map(|i| 0.5 * (self.v[i] * self.v[i] + self.model.omega2[i] * self.q[i] * self.q[i]))
-            .sum();
+        let board_j = self.modal_energy_j(self.model.board.clone());
         if !board_j.is_finite() || board_j > bound_j {
-            self.q[b.clone()].fill(0.0);
-            self.v[b].fill(0.0);
+            self.rest(self.model.board.clone());
             reset += 1;
         }
         reset
@@ -658,12 +673,7 @@ impl Instrument {
             return;
         };
         let km = &self.model.keys[key];
-        let ns = voice.n_strings;
-        let n_struck = if strike.una_corda && ns > 1 {
-            ns - 1
-        } else {
-            ns
-        };
+        let n_struck = strike.strings_struck(voice.n_strings);
         let mut struck = [false; MAX_STRINGS];
         let mut contact_y = f64::NEG_INFINITY;
         for s in 0..n_struck {
@@ -758,50 +768,40 @@ impl Instrument {
             &mut self.sum_hv,
             &mut self.ah,
         );
+        let hammers = 0..hy0.len();
         // Stage 1 at the current state.
         evaluate::<SIMD>(m, flags, live, q0, v0, hy0, acc, ah, z);
         for r in live {
-            let r = r.clone();
-            stage::<true>(
-                0.5 * h,
-                &q0[r.clone()],
-                &v0[r.clone()],
-                &acc[r.clone()],
-                &mut qs[r.clone()],
-                &mut vs[r.clone()],
-                &mut sum_q[r.clone()],
-                &mut sum_v[r],
-            );
+            stage::<true>(0.5 * h, r.clone(), q0, v0, acc, qs, vs, sum_q, sum_v);
         }
-        for k in 0..hy0.len() {
-            sum_hy[k] = hv0[k];
-            sum_hv[k] = ah[k];
-            hy_s[k] = hy0[k] + 0.5 * h * hv0[k];
-            hv_s[k] = hv0[k] + 0.5 * h * ah[k];
-        }
+        stage::<true>(
+            0.5 * h,
+            hammers.clone(),
+            hy0,
+            hv0,
+            ah,
+            hy_s,
+            hv_s,
+            sum_hy,
+            sum_hv,
+        );
         // Stages 2 and 3: weights 2, next stage at h/2 then h.
         for c in [0.5, 1.0] {
             evaluate::<SIMD>(m, flags, live, qs, vs, hy_s, acc, ah, z);
             for r in live {
-                let r = r.clone();
-                stage::<false>(
-                    c * h,
-                    &q0[r.clone()],
-                    &v0[r.clone()],
-                    &acc[r.clone()],
-                    &mut qs[r.clone()],
-                    &mut vs[r.clone()],
-                    &mut sum_q[r.clone()],
-                    &mut sum_v[r],
-                );
+                stage::<false>(c * h, r.clone(), q0, v0, acc, qs, vs, sum_q, sum_v);
             }
-            for k in 0..hy0.len() {
-                let hvk = hv_s[k];
-                sum_hy[k] += 2.0 * hvk;
-                sum_hv[k] += 2.0 * ah[k];
-                hy_s[k] = hy0[k] + c * h * hvk;
-                hv_s[k] = hv0[k] + c * h * ah[k];
-            }
+            stage::<false>(
+                c * h,
+                hammers.clone(),
+                hy0,
+                hv0,
+                ah,
+                hy_s,
+                hv_s,
+                sum_hy,
+                sum_hv,
+            );
         }
         // Stage 4 and the combination.
         evaluate::<SIMD>(m, flags, live, qs, vs, hy_s, acc, ah, z);
@@ -966,12 +966,8 @@ impl Instrument {
     /// Mechanical energy of strings, board, contact springs and hammers (J).
     pub fn energy(&self) -> Energy {
         let m = &self.model;
-        let modal = |r: Range<usize>| -> f64 {
-            r.map(|i| 0.5 * (self.v[i] * self.v[i] + m.omega2[i] * self.q[i] * self.q[i]))
-                .sum()
-        };
-        let strings_j = modal(0..m.board.start);
-        let board_j = modal(m.board.clone());
+        let strings_j = self.modal_energy_j(0..m.board.start);
+        let board_j = self.modal_energy_j(m.board.clone());
         let qb = &self.q[m.board.clone()];
         let (mut contact_j, mut hammer_j) = (0.0, 0.0);
         for (k, voice) in m.voices.iter().enumerate() {
@@ -1010,13 +1006,15 @@ impl Instrument {
     }
 }
 
-/// One RK4 stage over a range of modes, from its derivative (`v`, or `v0` at the first stage,
-/// and `acc`): the stage sums take it (weight 1 at the first stage, 2 after), and the next stage
-/// point is `(q0, v0) + ch (v, acc)`. Equal-length slices, so the loop vectorises.
+/// One RK4 stage over the entries `r` of a second-order state `(q, v)` with acceleration `acc`
+/// (modes, or hammers): the stage sums take the derivative (`v0` at the first stage, the stage
+/// velocity after; weight 1 at the first stage, 2 after), and the next stage point is
+/// `(q0, v0) + ch (dq, acc)`. Sliced to equal lengths first, so the loop vectorises.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn stage<const FIRST: bool>(
     ch: f64,
+    r: Range<usize>,
     q0: &[f64],
     v0: &[f64],
     acc: &[f64],
@@ -1025,9 +1023,10 @@ fn stage<const FIRST: bool>(
     sum_q: &mut [f64],
     sum_v: &mut [f64],
 ) {
-    let n = q0.len();
-    let (v0, acc, qs, vs) = (&v0[..n], &acc[..n], &mut qs[..n], &mut vs[..n]);
-    let (sum_q, sum_v) = (&mut sum_q[..n], &mut sum_v[..n]);
+    let n = r.len();
+    let (q0, v0, acc) = (&q0[r.clone()], &v0[r.clone()][..n], &acc[r.clone()][..n]);
+    let (qs, vs) = (&mut qs[r.clone()][..n], &mut vs[r.clone()][..n]);
+    let (sum_q, sum_v) = (&mut sum_q[r.clone()][..n], &mut sum_v[r][..n]);
     for i in 0..n {
         let dq = if FIRST { v0[i] } else { vs[i] };
         if FIRST {

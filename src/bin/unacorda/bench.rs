@@ -6,7 +6,7 @@ use unacorda::measure::{
     block_times_s, dense_real_time_factor, loaded_synth, nominal_f64_peak, percentile,
     resident_bytes, voice_speed,
 };
-use unacorda::play::Piano;
+use unacorda::play::{Piano, MAX_VOICES};
 use unacorda::preset::Preset;
 use unacorda::scaling::{Scaling, KEYS};
 
@@ -17,8 +17,8 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
     if !(0.1..=60.0).contains(&seconds) {
         bail!("--seconds {seconds}: expected 0.1 to 60 s per measurement");
     }
-    if !(1..=256).contains(&max_voices) {
-        bail!("--voices {max_voices}: expected 1 to 256");
+    if !(1..=MAX_VOICES).contains(&max_voices) {
+        bail!("--voices {max_voices}: expected 1 to {MAX_VOICES}");
     }
     let c2 = Preset::resolve("c2")?;
     let spec = c2.unison_spec();

@@ -5,20 +5,38 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use unacorda::audio::device::{self, midi_inputs, output_devices};
+use unacorda::audio::device::{self, midi_input, output_devices};
 use unacorda::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use unacorda::midi::live::LiveParser;
-use unacorda::play::Piano;
+use unacorda::play::{Piano, MAX_VOICES};
 use unacorda::scaling::{Scaling, KEYS};
 
+/// The flags of `play`.
+#[derive(clap::Args)]
 pub struct PlayArgs {
+    /// MIDI input port: its number in `unacorda devices` or part of its name (default: the first).
+    #[arg(long, value_name = "PORT")]
     pub midi_in: Option<String>,
+    /// Play this MIDI file in real time instead of live input.
+    #[arg(long, value_name = "FILE.mid")]
     pub midi: Option<PathBuf>,
+    /// Audio output: its id in `unacorda devices` (e.g. alsa:null) or part of its name.
+    #[arg(long, value_name = "NAME")]
     pub device: Option<String>,
+    /// Frames per audio callback, 16–8192 (default: the device's).
+    #[arg(long, value_name = "N")]
     pub buffer: Option<u32>,
+    /// Size of the voice pool, 1–256.
+    #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES, value_name = "N")]
     pub voices: usize,
+    /// Keyboard scaling: built-in name (grand) or path to a .toml file.
+    #[arg(long, default_value = "grand")]
     pub keyboard: String,
+    /// Stop after this many seconds (default: at the end of --midi plus 2 s, else at Ctrl-C).
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub seconds: Option<f64>,
+    /// Stop after this many audio callbacks (for tests on devices that play faster than real time).
+    #[arg(long, value_name = "N")]
     pub callbacks: Option<u64>,
 }
 
@@ -26,19 +44,15 @@ pub struct PlayArgs {
 const FILE_TAIL_S: f64 = 2.0;
 
 pub fn play(args: PlayArgs) -> Result<()> {
-    if !(1..=256).contains(&args.voices) {
-        bail!("--voices {}: expected 1 to 256", args.voices);
+    if !(1..=MAX_VOICES).contains(&args.voices) {
+        bail!("--voices {}: expected 1 to {MAX_VOICES}", args.voices);
     }
     if let Some(s) = args.seconds {
         if !(s > 0.0 && s <= 86_400.0) {
             bail!("--seconds {s}: expected a duration in (0, 86400] s");
         }
     }
-    if let Some(b) = args.buffer {
-        if !(16..=8192).contains(&b) {
-            bail!("--buffer {b}: expected 16 to 8192 frames");
-        }
-    }
+    device::check_buffer(args.buffer)?;
     // Read the file first: a bad file should fail before the keys are built.
     let file_events = match &args.midi {
         Some(path) => Some(unacorda::midi::file::read_file(path)?),
@@ -80,12 +94,7 @@ pub fn play(args: PlayArgs) -> Result<()> {
             let length = events.last().map_or(0.0, |e| e.time_s) + FILE_TAIL_S;
             deadline.get_or_insert(started + Duration::from_secs_f64(length));
             eprintln!("playing {} events from the file ({length:.1} s)", events.len());
-            feed = Some(FileFeed {
-                events,
-                start,
-                next: 0,
-                handle,
-            });
+            feed = Some((events, start, 0, handle));
         }
         None => match connect_midi(args.midi_in.as_deref(), handle) {
             Ok((connection, name)) => {
@@ -99,8 +108,8 @@ pub fn play(args: PlayArgs) -> Result<()> {
     }
     loop {
         std::thread::sleep(Duration::from_millis(5));
-        if let Some(f) = &mut feed {
-            f.push(settings.rate_hz);
+        if let Some((events, start, next, handle)) = &mut feed {
+            *next = handle.schedule_timed(events, *next, *start);
         }
         while let Ok(e) = output.errors.try_recv() {
             eprintln!("audio: {e}");
@@ -132,29 +141,6 @@ pub fn play(args: PlayArgs) -> Result<()> {
     Ok(())
 }
 
-/// A MIDI file played in real time: events are queued with their frame, as far ahead as the
-/// queue allows.
-struct FileFeed {
-    events: Vec<unacorda::midi::file::TimedEvent>,
-    start: u64,
-    next: usize,
-    handle: SynthHandle,
-}
-
-impl FileFeed {
-    fn push(&mut self, rate_hz: f64) {
-        while self.next < self.events.len() && self.handle.queue_room() > 0 {
-            let e = &self.events[self.next];
-            let frame = self.start + (e.time_s * rate_hz).round() as u64;
-            let _ = self.handle.schedule(Scheduled {
-                frame,
-                event: e.event,
-            });
-            self.next += 1;
-        }
-    }
-}
-
 /// Open the MIDI input `port` (a number or part of a name; `None`: the first) and move the event
 /// queue's producer into its callback, which parses the bytes with the same [`LiveParser`] the
 /// tests feed and stamps each event one block ahead of the audio clock.
@@ -162,14 +148,7 @@ fn connect_midi(
     port: Option<&str>,
     mut handle: SynthHandle,
 ) -> Result<(midir::MidiInputConnection<()>, String), String> {
-    let input = midir::MidiInput::new("unacorda").map_err(|e| {
-        format!("live MIDI input is unavailable: {e} (on Linux it needs the ALSA sequencer, /dev/snd/seq)")
-    })?;
-    let ports = input.ports();
-    let names: Vec<String> = ports
-        .iter()
-        .map(|p| input.port_name(p).unwrap_or_else(|_| "?".into()))
-        .collect();
+    let (input, ports, names) = midi_input()?;
     let index = match port {
         None => (!ports.is_empty()).then_some(0),
         Some(p) => p
@@ -224,9 +203,9 @@ pub fn devices() -> Result<()> {
         );
     }
     println!("MIDI inputs (--midi-in):");
-    match midi_inputs() {
-        Ok(names) if names.is_empty() => println!("  none connected"),
-        Ok(names) => {
+    match midi_input() {
+        Ok((_, _, names)) if names.is_empty() => println!("  none connected"),
+        Ok((_, _, names)) => {
             for (i, n) in names.iter().enumerate() {
                 println!("  {i}: {n}");
             }

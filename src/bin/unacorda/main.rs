@@ -94,32 +94,7 @@ enum Command {
         out: PathBuf,
     },
     /// Play live: MIDI input (or a MIDI file in real time) on all 88 keys through an audio device.
-    Play {
-        /// MIDI input port: its number in `unacorda devices` or part of its name (default: the first).
-        #[arg(long, value_name = "PORT")]
-        midi_in: Option<String>,
-        /// Play this MIDI file in real time instead of live input.
-        #[arg(long, value_name = "FILE.mid")]
-        midi: Option<PathBuf>,
-        /// Audio output: its id in `unacorda devices` (e.g. alsa:null) or part of its name.
-        #[arg(long, value_name = "NAME")]
-        device: Option<String>,
-        /// Frames per audio callback, 16–8192 (default: the device's).
-        #[arg(long, value_name = "N")]
-        buffer: Option<u32>,
-        /// Size of the voice pool, 1–256.
-        #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES, value_name = "N")]
-        voices: usize,
-        /// Keyboard scaling: built-in name (grand) or path to a .toml file.
-        #[arg(long, default_value = "grand")]
-        keyboard: String,
-        /// Stop after this many seconds (default: at the end of --midi plus 2 s, else at Ctrl-C).
-        #[arg(long, value_name = "S", allow_negative_numbers = true)]
-        seconds: Option<f64>,
-        /// Stop after this many audio callbacks (for tests on devices that play faster than real time).
-        #[arg(long, value_name = "N")]
-        callbacks: Option<u64>,
-    },
+    Play(live::PlayArgs),
     /// List audio outputs and MIDI inputs.
     Devices,
     /// Measure the engine on this machine: real-time factor of one voice and of the dense
@@ -374,25 +349,7 @@ fn run(cli: Cli) -> Result<()> {
                 eprintln!("wrote {}", w.display());
             }
         }
-        Command::Play {
-            midi_in,
-            midi,
-            device,
-            buffer,
-            voices,
-            keyboard,
-            seconds,
-            callbacks,
-        } => live::play(live::PlayArgs {
-            midi_in,
-            midi,
-            device,
-            buffer,
-            voices,
-            keyboard,
-            seconds,
-            callbacks,
-        })?,
+        Command::Play(args) => live::play(args)?,
         Command::Devices => live::devices()?,
         Command::Bench { seconds, voices } => bench::bench(seconds, voices)?,
         Command::Soundboard { input, out } => {
