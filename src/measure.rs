@@ -91,6 +91,38 @@ pub fn voice_speed(spec: &UnisonSpec, seconds: f64) -> VoiceSpeed {
     }
 }
 
+/// Time per RK4 step (s) of a c2 voice in a long silent tail — its motion 50 ms after a strike,
+/// scaled so that the largest state value is `1e-305` (most modes' values are then subnormal, as
+/// after minutes of decay) — with flush-to-zero/denormals-are-zero set (as in the audio thread),
+/// without, and of the same voice sounding: `(sounding, tail_ftz, tail_plain)`.
+pub fn denormal_tail_step_s(spec: &UnisonSpec, steps: usize) -> (f64, f64, f64) {
+    let mut sounding = Instrument::new(spec).expect("the preset builds");
+    sounding.set_damper(false);
+    sounding.strike(Strike {
+        velocity_m_s: 2.5,
+        una_corda: false,
+    });
+    for _ in 0..(0.05 / sounding.step_s()) as usize {
+        sounding.step();
+    }
+    let mut tail = sounding.clone();
+    let (q, v) = tail.state_mut();
+    let largest = q.iter().chain(v.iter()).fold(0f64, |m, x| m.max(x.abs()));
+    let scale = 1e-305 / largest;
+    q.iter_mut().chain(v.iter_mut()).for_each(|x| *x *= scale);
+    let time = |inst: &mut Instrument| {
+        let t = Instant::now();
+        for _ in 0..steps {
+            inst.step();
+        }
+        t.elapsed().as_secs_f64() / steps as f64
+    };
+    let mut plain = tail.clone();
+    // SAFETY: FTZ/DAZ only change how subnormal results round, on this thread, for the closure.
+    let ftz = unsafe { no_denormals::no_denormals(|| time(&mut tail)) };
+    (time(&mut sounding), ftz, time(&mut plain))
+}
+
 /// Real-time factor of the dense state-space baseline on `spec` over `steps` RK4 steps.
 pub fn dense_real_time_factor(spec: &UnisonSpec, steps: usize) -> f64 {
     let mut dense = DenseUnison::new(spec);

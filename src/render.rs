@@ -9,6 +9,7 @@ use crate::audio::Decimator;
 use crate::engine::system::{BuildError, Instrument, Observation, Strike};
 use crate::engine::MAX_STRINGS;
 use crate::preset::LoadedPreset;
+use std::ops::ControlFlow;
 
 /// Number of decimated channels: hammer (3), bridge (3 × 3), total (3), bridge velocity (3), pressure.
 const CHANNELS: usize = MAX_STRINGS + 3 * MAX_STRINGS + 3 + 3 + 1;
@@ -208,12 +209,25 @@ pub enum RenderError {
     Voices(usize),
 }
 
-/// A MIDI performance rendered offline.
+/// A MIDI performance rendered offline, its sound in memory.
 #[derive(Debug, Clone)]
 pub struct Performance {
     pub rate_hz: f64,
     /// Sound pressure normalised to full scale, one channel.
     pub samples: Vec<f32>,
+    /// The piano keys (1–88) the file plays.
+    pub keys: Vec<usize>,
+    /// Size of the voice pool used.
+    pub voices: usize,
+}
+
+/// What [`render_midi_into`] rendered.
+#[derive(Debug, Clone)]
+pub struct Rendered {
+    pub rate_hz: f64,
+    /// Frames handed to the sink, and the frames the whole performance lasts.
+    pub frames: u64,
+    pub total_frames: u64,
     /// The piano keys (1–88) the file plays.
     pub keys: Vec<usize>,
     /// Size of the voice pool used.
@@ -244,9 +258,34 @@ pub fn render_midi_with(
     events: &[crate::midi::file::TimedEvent],
     tail_s: f64,
     voices: usize,
+    progress: impl FnMut(f64),
+    tap: impl FnMut(&Instrument, u64),
+) -> Result<Performance, RenderError> {
+    let mut samples = Vec::new();
+    let r = render_midi_into(scaling, events, tail_s, voices, progress, tap, |block| {
+        samples.extend_from_slice(block);
+        ControlFlow::Continue(())
+    })?;
+    Ok(Performance {
+        rate_hz: r.rate_hz,
+        samples,
+        keys: r.keys,
+        voices: r.voices,
+    })
+}
+
+/// [`render_midi_with`], handing each block of samples to `sink` as it is made (a WAV being
+/// written) instead of keeping them; the render stops early when `sink` breaks (interrupted, or
+/// the disk is full).
+pub fn render_midi_into(
+    scaling: &crate::scaling::LoadedScaling,
+    events: &[crate::midi::file::TimedEvent],
+    tail_s: f64,
+    voices: usize,
     mut progress: impl FnMut(f64),
     mut tap: impl FnMut(&Instrument, u64),
-) -> Result<Performance, RenderError> {
+    mut sink: impl FnMut(&[f32]) -> ControlFlow<()>,
+) -> Result<Rendered, RenderError> {
     use crate::audio::synth::{Synth, EVENT_QUEUE};
     use crate::midi::{piano_key, Event};
     if !(1..=crate::play::MAX_VOICES).contains(&voices) {
@@ -270,20 +309,27 @@ pub fn render_midi_with(
     let fs = settings.rate_hz;
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
     let end_s = events.last().map_or(0.0, |e| e.time_s) + tail_s;
-    let mut samples = vec![0f32; (end_s * fs).round() as usize];
-    let n_blocks = samples.len().div_ceil(OFFLINE_BLOCK).max(1);
-    let mut next = 0;
-    for (b, block) in samples.chunks_mut(OFFLINE_BLOCK).enumerate() {
+    let total_frames = (end_s * fs).round() as u64;
+    let n_blocks = total_frames.div_ceil(OFFLINE_BLOCK as u64).max(1);
+    let mut block = [0f32; OFFLINE_BLOCK];
+    let (mut next, mut frames) = (0, 0u64);
+    for b in 0..n_blocks {
+        let n = (total_frames - frames).min(OFFLINE_BLOCK as u64) as usize;
         next = handle.schedule_timed(events, next, 0);
-        synth.process_with(block, 1, &mut tap);
+        synth.process_with(&mut block[..n], 1, &mut tap);
+        frames += n as u64;
+        if sink(&block[..n]).is_break() {
+            break;
+        }
         if b % 64 == 0 {
             progress(b as f64 / n_blocks as f64);
         }
     }
     progress(1.0);
-    Ok(Performance {
+    Ok(Rendered {
         rate_hz: fs,
-        samples,
+        frames,
+        total_frames,
         keys,
         voices,
     })

@@ -134,26 +134,88 @@ pub struct CallbackStats {
 
 /// A running output stream.
 pub struct Output {
-    /// Dropping the stream stops it.
-    _stream: cpal::Stream,
+    /// Dropping the stream stops it; the synth then comes back through `synth_back`.
+    stream: cpal::Stream,
     pub device: String,
     pub channels: u16,
     pub rate_hz: u32,
     pub stats: Arc<CallbackStats>,
-    /// Errors the stream reported (device lost, xruns), as text.
-    pub errors: crossbeam_channel::Receiver<String>,
+    /// Errors the stream reported (device lost, xruns).
+    pub errors: crossbeam_channel::Receiver<cpal::Error>,
+    inject: crossbeam_channel::Sender<cpal::Error>,
+    synth_back: crossbeam_channel::Receiver<Synth>,
+}
+
+/// What a stream error asks of the program.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fault {
+    /// A buffer under- or overrun: count it, carry on.
+    Xrun,
+    /// The stream is gone (device unplugged, busy, invalidated): reopen it.
+    Lost,
+    /// Anything else: report it, carry on.
+    Note,
+}
+
+/// How `play` treats a stream error.
+pub fn classify(e: &cpal::Error) -> Fault {
+    use cpal::ErrorKind as K;
+    match e.kind() {
+        K::Xrun => Fault::Xrun,
+        K::DeviceNotAvailable
+        | K::DeviceBusy
+        | K::StreamInvalidated
+        | K::HostUnavailable
+        | K::BackendError => Fault::Lost,
+        _ => Fault::Note,
+    }
+}
+
+/// The synth inside the stream's callback; when cpal drops the callback (the stream closed), the
+/// synth is handed back so that a reopened stream continues with the same state.
+struct Returning {
+    synth: Option<Synth>,
+    back: crossbeam_channel::Sender<Synth>,
+}
+
+impl Drop for Returning {
+    fn drop(&mut self) {
+        if let Some(synth) = self.synth.take() {
+            let _ = self.back.try_send(synth);
+        }
+    }
+}
+
+impl Output {
+    /// Stop the stream and take the synth back (with its voices, queue and clock), to start it on
+    /// another stream; `None` if the stream's thread did not hand it back within a second.
+    pub fn close(self) -> Option<Synth> {
+        let back = self.synth_back.clone();
+        drop(self.stream);
+        back.recv_timeout(std::time::Duration::from_secs(1)).ok()
+    }
+
+    /// Deliver `e` as if cpal's error callback had reported it (fault-injection tests: a null
+    /// device is never unplugged).
+    pub fn inject(&self, e: cpal::Error) {
+        let _ = self.inject.try_send(e);
+    }
 }
 
 /// Open `device` (an id or part of an id or description; `None`: the default output) at
 /// `rate_hz` with `buffer` frames per callback (`None`: the device's default), and start `synth`
-/// in its callback.
+/// in its callback, which counts into `stats`. On failure the synth is returned with the error
+/// (boxed: the error stays small).
 pub fn start(
-    mut synth: Synth,
+    synth: Synth,
     device: Option<&str>,
     rate_hz: u32,
     buffer: Option<u32>,
-) -> Result<Output, DeviceError> {
-    check_buffer(buffer)?;
+    stats: Arc<CallbackStats>,
+) -> Result<Output, (DeviceError, Option<Box<Synth>>)> {
+    if let Err(e) = check_buffer(buffer) {
+        return Err((e, Some(Box::new(synth))));
+    }
     let host = cpal::default_host();
     let chosen = match device {
         None => host.default_output_device(),
@@ -164,61 +226,85 @@ pub fn start(
                 id == name || id.ends_with(&format!(":{name}")) || desc.contains(name)
             })
         }),
-    }
-    .ok_or_else(|| DeviceError::NotFound(device.map(str::to_owned)))?;
+    };
+    let Some(chosen) = chosen else {
+        return Err((
+            DeviceError::NotFound(device.map(str::to_owned)),
+            Some(Box::new(synth)),
+        ));
+    };
     let id = chosen.id().map_or_else(|_| "?".into(), |id| id.to_string());
-    let channels = f32_config(&chosen, rate_hz).map_err(|offers| DeviceError::Format {
-        device: id.clone(),
-        rate_hz,
-        offers,
-    })?;
+    let channels = match f32_config(&chosen, rate_hz) {
+        Ok(ch) => ch,
+        Err(offers) => {
+            let e = DeviceError::Format {
+                device: id,
+                rate_hz,
+                offers,
+            };
+            return Err((e, Some(Box::new(synth))));
+        }
+    };
     let config = cpal::StreamConfig {
         channels,
         sample_rate: rate_hz,
         buffer_size: buffer.map_or(cpal::BufferSize::Default, cpal::BufferSize::Fixed),
     };
-    let stats = Arc::new(CallbackStats::default());
     let (err_tx, err_rx) = crossbeam_channel::bounded(64);
+    let (back_tx, back_rx) = crossbeam_channel::bounded(1);
     let cb_stats = stats.clone();
     let ch = usize::from(channels);
     let fs = f64::from(rate_hz);
-    let stream = chosen
-        .build_output_stream(
-            config,
-            move |data: &mut [f32], _: &cpal::OutputCallbackInfo| {
-                let start = Instant::now();
+    let mut held = Returning {
+        synth: Some(synth),
+        back: back_tx,
+    };
+    let inject = err_tx.clone();
+    let built = chosen.build_output_stream(
+        config,
+        move |data: &mut [f32], _: &cpal::OutputCallbackInfo| {
+            let start = Instant::now();
+            if let Some(synth) = held.synth.as_mut() {
                 synth.process(data, ch);
-                let ns = start.elapsed().as_nanos() as u64;
-                let frames = (data.len() / ch) as u64;
-                let deadline_ns = (frames as f64 / fs * 1e9) as u64;
-                let s = &cb_stats;
-                s.callbacks.fetch_add(1, Ordering::Relaxed);
-                s.busy_ns.fetch_add(ns, Ordering::Relaxed);
-                s.max_ns.fetch_max(ns, Ordering::Relaxed);
-                s.max_frames.fetch_max(frames, Ordering::Relaxed);
-                if ns > deadline_ns {
-                    s.overruns.fetch_add(1, Ordering::Relaxed);
-                }
-            },
-            move |e: cpal::Error| {
-                let _ = err_tx.try_send(e.to_string());
-            },
-            None,
-        )
-        .map_err(|source| DeviceError::Cpal {
+            }
+            let ns = start.elapsed().as_nanos() as u64;
+            let frames = (data.len() / ch) as u64;
+            let deadline_ns = (frames as f64 / fs * 1e9) as u64;
+            let s = &cb_stats;
+            s.callbacks.fetch_add(1, Ordering::Relaxed);
+            s.busy_ns.fetch_add(ns, Ordering::Relaxed);
+            s.max_ns.fetch_max(ns, Ordering::Relaxed);
+            s.max_frames.fetch_max(frames, Ordering::Relaxed);
+            if ns > deadline_ns {
+                s.overruns.fetch_add(1, Ordering::Relaxed);
+            }
+        },
+        move |e: cpal::Error| {
+            let _ = err_tx.try_send(e);
+        },
+        None,
+    );
+    // A stream that failed to build or start drops its callback, which hands the synth back.
+    let fail = |source, back: &crossbeam_channel::Receiver<Synth>| {
+        let e = DeviceError::Cpal {
             device: id.clone(),
             source,
-        })?;
-    stream.play().map_err(|source| DeviceError::Cpal {
-        device: id.clone(),
-        source,
-    })?;
+        };
+        (e, back.try_recv().ok().map(Box::new))
+    };
+    let stream = built.map_err(|e| fail(e, &back_rx))?;
+    if let Err(e) = stream.play() {
+        drop(stream);
+        return Err(fail(e, &back_rx));
+    }
     Ok(Output {
-        _stream: stream,
+        stream,
         device: id,
         channels,
         rate_hz,
         stats,
         errors: err_rx,
+        inject,
+        synth_back: back_rx,
     })
 }

@@ -1100,8 +1100,9 @@ fn evaluate<const SIMD: bool>(
         }
         // Duplex damping on both transverse polarisations of every string (Eq. 13).
         duplex_damping::<SIMD>(km, &voice.ranges, v, acc, duplex_z);
-        // The damper felt, while it is down: a point damper on T and P of every string.
-        if flags.damper_down[k] {
+        // The damper felt, while it is down: a point damper on T and P of every string. The flag
+        // may belong to the key that follows a fading voice, so the key's own damper decides.
+        if flags.damper_down[k] && !km.damper_shape.is_empty() {
             for s in 0..voice.n_strings {
                 for d in [0, 2] {
                     let r = voice.ranges[s][d].clone();

@@ -3,9 +3,9 @@
 use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use unacorda::audio::device::{self, midi_input, output_devices};
+use unacorda::audio::device::{self, midi_input, output_devices, CallbackStats, Fault};
 use unacorda::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use unacorda::midi::live::LiveParser;
 use unacorda::play::{Piano, MAX_VOICES};
@@ -38,6 +38,68 @@ pub struct PlayArgs {
     /// Stop after this many audio callbacks (for tests on devices that play faster than real time).
     #[arg(long, value_name = "N")]
     pub callbacks: Option<u64>,
+    /// Fault test: report the device as lost after this many callbacks, as cpal would on unplug.
+    #[arg(long, value_name = "N", hide = true)]
+    pub lose_device_after: Option<u64>,
+}
+
+/// Attempts to reopen a lost audio device, and the pause before each (ms).
+const REOPEN_ATTEMPTS: u32 = 5;
+const REOPEN_PAUSE_MS: u64 = 200;
+
+/// Open the output, giving the synth back with the error when it cannot be opened.
+fn open(
+    synth: Synth,
+    args: &PlayArgs,
+    rate_hz: u32,
+    stats: &Arc<CallbackStats>,
+) -> Result<device::Output, (anyhow::Error, Option<Box<Synth>>)> {
+    device::start(
+        synth,
+        args.device.as_deref(),
+        rate_hz,
+        args.buffer,
+        stats.clone(),
+    )
+    .map_err(|(e, synth)| (e.into(), synth))
+}
+
+/// After the stream reported the device lost: take the synth back and open the device again
+/// (a few attempts), continuing with the same voices, queue and clock.
+fn reopen(
+    output: device::Output,
+    args: &PlayArgs,
+    stats: &Arc<CallbackStats>,
+) -> Result<device::Output> {
+    let (device, rate_hz) = (output.device.clone(), output.rate_hz);
+    let Some(mut synth) = output.close() else {
+        bail!("audio device {device} lost, and its stream did not return the engine; stopped");
+    };
+    let mut last = None;
+    for attempt in 1..=REOPEN_ATTEMPTS {
+        std::thread::sleep(Duration::from_millis(REOPEN_PAUSE_MS));
+        match open(synth, args, rate_hz, stats) {
+            Ok(output) => {
+                eprintln!(
+                    "audio: reopened {} (attempt {attempt}); the notes sounding go on",
+                    output.device
+                );
+                return Ok(output);
+            }
+            Err((e, back)) => {
+                eprintln!(
+                    "audio: reopening {device} failed (attempt {attempt}/{REOPEN_ATTEMPTS}): {e:#}"
+                );
+                last = Some(e);
+                match back {
+                    Some(s) => synth = *s,
+                    None => break,
+                }
+            }
+        }
+    }
+    Err(last.unwrap_or_else(|| anyhow::anyhow!("the engine was lost with the stream")))
+        .with_context(|| format!("audio device {device} was lost and could not be reopened; check the device, or choose another with --device (`unacorda devices` lists them)"))
 }
 
 /// Sound after the last event of a file played live (s).
@@ -66,12 +128,9 @@ pub fn play(args: PlayArgs) -> Result<()> {
     let (synth, handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
     let clock = handle.clock.clone();
     let stats = handle.stats.clone();
-    let output = device::start(
-        synth,
-        args.device.as_deref(),
-        settings.rate_hz as u32,
-        args.buffer,
-    )?;
+    let callback_stats = Arc::new(CallbackStats::default());
+    let mut output =
+        open(synth, &args, settings.rate_hz as u32, &callback_stats).map_err(|(e, _)| e)?;
     eprintln!(
         "playing on {} ({} ch, {} Hz, {} voices)",
         output.device, output.channels, output.rate_hz, args.voices
@@ -84,22 +143,25 @@ pub fn play(args: PlayArgs) -> Result<()> {
         let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
     }
     let started = Instant::now();
+    let (mut injected, mut xruns, mut reopened) = (false, 0u64, 0u32);
+    let mut last_watch = started;
     let mut deadline = args.seconds.map(|s| started + Duration::from_secs_f64(s));
     // The event source: a file fed in real time from this thread, or the MIDI input's callback.
     let mut feed = None;
-    let mut _connection = None;
+    let mut midi_link = None;
+    let shared = Arc::new(Mutex::new(handle));
     match file_events {
         Some(events) => {
             let start = clock.frame_at(Instant::now());
             let length = events.last().map_or(0.0, |e| e.time_s) + FILE_TAIL_S;
             deadline.get_or_insert(started + Duration::from_secs_f64(length));
             eprintln!("playing {} events from the file ({length:.1} s)", events.len());
-            feed = Some((events, start, 0, handle));
+            feed = Some((events, start, 0));
         }
-        None => match connect_midi(args.midi_in.as_deref(), handle) {
+        None => match connect_midi(args.midi_in.as_deref(), &shared) {
             Ok((connection, name)) => {
                 eprintln!("MIDI input: {name} — play; Ctrl-C stops");
-                _connection = Some(connection);
+                midi_link = Some(MidiLink::Connected(connection, name));
             }
             Err(reason) => eprintln!(
                 "{reason}\nno MIDI input: the engine runs silent until Ctrl-C; use --midi FILE to play a file in real time"
@@ -108,13 +170,31 @@ pub fn play(args: PlayArgs) -> Result<()> {
     }
     loop {
         std::thread::sleep(Duration::from_millis(5));
-        if let Some((events, start, next, handle)) = &mut feed {
+        if let (Some((events, start, next)), Ok(mut handle)) = (&mut feed, shared.lock()) {
             *next = handle.schedule_timed(events, *next, *start);
         }
-        while let Ok(e) = output.errors.try_recv() {
-            eprintln!("audio: {e}");
+        if last_watch.elapsed() >= Duration::from_secs(1) {
+            last_watch = Instant::now();
+            midi_link = midi_link.map(|l| l.watch(&shared));
         }
         let n = output.stats.callbacks.load(Ordering::Relaxed);
+        if args.lose_device_after.is_some_and(|after| n >= after) && !injected {
+            injected = true;
+            output.inject(cpal::Error::new(cpal::ErrorKind::DeviceNotAvailable));
+        }
+        let mut lost = None;
+        while let Ok(e) = output.errors.try_recv() {
+            match device::classify(&e) {
+                Fault::Xrun => xruns += 1,
+                Fault::Lost => lost = Some(e),
+                Fault::Note => eprintln!("audio: {e}"),
+            }
+        }
+        if let Some(e) = lost {
+            eprintln!("audio: device {} lost ({e}); reopening…", output.device);
+            output = reopen(output, &args, &callback_stats)?;
+            reopened += 1;
+        }
         if stop.load(Ordering::Relaxed)
             || args.callbacks.is_some_and(|c| n >= c)
             || deadline.is_some_and(|d| Instant::now() >= d)
@@ -128,7 +208,7 @@ pub fn play(args: PlayArgs) -> Result<()> {
     let block = s.max_frames.load(Ordering::Relaxed);
     let deadline_ms = block as f64 / settings.rate_hz * 1e3;
     eprintln!(
-        "{} callbacks ({} frames) of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {} late events; {} voices reset; at most {} voices sounding",
+        "{} callbacks ({} frames) of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {xruns} xruns reported by the device; device reopened {reopened} times; {} late events; {} voices reset; at most {} voices sounding",
         s.callbacks.load(Ordering::Relaxed),
         stats.frames.load(Ordering::Relaxed),
         s.busy_ns.load(Ordering::Relaxed) as f64 / callbacks as f64 * 1e-6,
@@ -143,10 +223,11 @@ pub fn play(args: PlayArgs) -> Result<()> {
 
 /// Open the MIDI input `port` (a number or part of a name; `None`: the first) and move the event
 /// queue's producer into its callback, which parses the bytes with the same [`LiveParser`] the
-/// tests feed and stamps each event one block ahead of the audio clock.
+/// tests feed and stamps each event one block ahead of the audio clock. The producer is shared
+/// (locked only by the MIDI thread, never by the audio thread) so that a reconnection can use it.
 fn connect_midi(
     port: Option<&str>,
-    mut handle: SynthHandle,
+    handle: &Arc<Mutex<SynthHandle>>,
 ) -> Result<(midir::MidiInputConnection<()>, String), String> {
     let (input, ports, names) = midi_input()?;
     let index = match port {
@@ -156,19 +237,30 @@ fn connect_midi(
             .ok()
             .filter(|&i| i < ports.len())
             .or_else(|| names.iter().position(|n| n.contains(p))),
-    }
-    .ok_or_else(|| match port {
-        Some(p) => format!("no MIDI input matches {p:?} (inputs: {})", names.join(", ")),
-        None => "no MIDI input port is connected".into(),
-    })?;
-    let clock = handle.clock.clone();
+    };
+    let Some(index) = index else {
+        let reason = match port {
+            Some(p) => format!("no MIDI input matches {p:?} (inputs: {})", names.join(", ")),
+            None => "no MIDI input port is connected".into(),
+        };
+        return Err(reason);
+    };
+    let handle = handle.clone();
+    let clock = handle
+        .lock()
+        .map_err(|_| "the event queue is gone")?
+        .clock
+        .clone();
     let mut parser = LiveParser::new();
-    let connection = input
+    input
         .connect(
             &ports[index],
             "unacorda-in",
             move |_stamp_us, bytes, _| {
                 let now = Instant::now();
+                let Ok(mut handle) = handle.lock() else {
+                    return;
+                };
                 for &b in bytes {
                     if let Some(event) = parser.push(b) {
                         let frame = clock.frame_at(now);
@@ -179,8 +271,40 @@ fn connect_midi(
             },
             (),
         )
-        .map_err(|e| format!("cannot open MIDI input {}: {e}", names[index]))?;
-    Ok((connection, names[index].clone()))
+        .map(|c| (c, names[index].clone()))
+        .map_err(|e| format!("cannot open MIDI input {}: {e}", names[index]))
+}
+
+/// The live MIDI input, watched for being unplugged (midir reports nothing: the port just leaves
+/// the sequencer's list) and reconnected when a port of that name comes back.
+enum MidiLink {
+    Connected(midir::MidiInputConnection<()>, String),
+    Unplugged(String),
+}
+
+impl MidiLink {
+    /// Check the port list (about once a second); say when the input goes or comes back.
+    fn watch(self, handle: &Arc<Mutex<SynthHandle>>) -> MidiLink {
+        let present =
+            |name: &str| midi_input().is_ok_and(|(_, _, names)| names.iter().any(|n| n == name));
+        match self {
+            MidiLink::Connected(c, name) if !present(&name) => {
+                c.close();
+                eprintln!("MIDI input {name} was unplugged: what was already played sounds on; plug it back in to go on playing (Ctrl-C stops)");
+                MidiLink::Unplugged(name)
+            }
+            MidiLink::Unplugged(name) if present(&name) => {
+                match connect_midi(Some(&name), handle) {
+                    Ok((c, name)) => {
+                        eprintln!("MIDI input {name} is back");
+                        MidiLink::Connected(c, name)
+                    }
+                    Err(_) => MidiLink::Unplugged(name),
+                }
+            }
+            link => link,
+        }
+    }
 }
 
 /// `devices`: audio outputs (with whether they can play the engine's format) and MIDI inputs.

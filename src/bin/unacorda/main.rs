@@ -3,7 +3,11 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use unacorda::audio::wav::WavStream;
 use unacorda::engine::plate::generate_asset;
 use unacorda::engine::Strike;
 use unacorda::preset::Preset;
@@ -163,8 +167,7 @@ fn write_wav(out: &Path, rec: &Recording, full_scale_pa: f64) -> Result<f64> {
 /// Write full-scale samples as a WAV; returns their peak (dBFS).
 fn write_samples(out: &Path, rate_hz: f64, samples: &[f32]) -> Result<f64> {
     let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
-    unacorda::audio::wav::write_f32(out, rate_hz as u32, samples)
-        .with_context(|| format!("writing {}", out.display()))?;
+    unacorda::audio::wav::write_f32(out, rate_hz as u32, samples)?;
     Ok(20.0 * f64::from(peak).max(1e-12).log10())
 }
 
@@ -220,22 +223,64 @@ fn run(cli: Cli) -> Result<()> {
                 }
                 let pb = progress_bar(length_s, "rendering");
                 let started = std::time::Instant::now();
-                let perf = unacorda::render::render_midi(&scaling, &events, tail, voices, |f| {
-                    pb.set_position((f * 1000.0) as u64)
-                })
-                .with_context(|| format!("{}", path.display()))?;
-                pb.finish_and_clear();
-                let peak_dbfs = write_samples(&out, perf.rate_hz, &perf.samples)?;
-                eprintln!(
-                    "wrote {} ({} events on {} keys sharing one soundboard, {} voices, {:.2} s in {:.1} s, peak {:.1} dBFS)",
-                    out.display(),
-                    events.len(),
-                    perf.keys.len(),
-                    perf.voices,
-                    length_s,
-                    started.elapsed().as_secs_f64(),
-                    peak_dbfs
+                let rate_hz = scaling.base.output_settings().rate_hz;
+                let mut wav = WavStream::create(&out, rate_hz as u32)?;
+                // Ctrl-C ends the render at the next block and keeps what is written, a valid WAV.
+                let interrupted = Arc::new(AtomicBool::new(false));
+                {
+                    let interrupted = interrupted.clone();
+                    let _ = ctrlc::set_handler(move || interrupted.store(true, Ordering::Relaxed));
+                }
+                let (mut peak, mut failure) = (0f32, None);
+                let r = unacorda::render::render_midi_into(
+                    &scaling,
+                    &events,
+                    tail,
+                    voices,
+                    |f| pb.set_position((f * 1000.0) as u64),
+                    |_, _| {},
+                    |block| {
+                        peak = block.iter().fold(peak, |m, s| m.max(s.abs()));
+                        if let Err(e) = wav.write(block) {
+                            failure = Some(e);
+                            return ControlFlow::Break(());
+                        }
+                        if interrupted.load(Ordering::Relaxed) {
+                            return ControlFlow::Break(());
+                        }
+                        ControlFlow::Continue(())
+                    },
                 );
+                pb.finish_and_clear();
+                if let Some(e) = failure {
+                    return Err(e.into());
+                }
+                let r = match r {
+                    Ok(r) => r,
+                    Err(e) => {
+                        // Nothing was rendered: leave no header-only file behind.
+                        drop(wav);
+                        let _ = std::fs::remove_file(&out);
+                        return Err(e).with_context(|| format!("{}", path.display()));
+                    }
+                };
+                let written_s = wav.finish()?;
+                let summary = format!(
+                    "{} events on {} keys sharing one soundboard, {} voices, {:.1} s of sound in {:.1} s, peak {:.1} dBFS",
+                    events.len(),
+                    r.keys.len(),
+                    r.voices,
+                    written_s,
+                    started.elapsed().as_secs_f64(),
+                    20.0 * f64::from(peak).max(1e-12).log10()
+                );
+                if r.frames < r.total_frames {
+                    bail!(
+                        "interrupted: {} holds the first {written_s:.2} s of {length_s:.2} s as a valid WAV ({summary})",
+                        out.display()
+                    );
+                }
+                eprintln!("wrote {} ({summary})", out.display());
                 return Ok(());
             }
             if !(0.001..=600.0).contains(&seconds) {

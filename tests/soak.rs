@@ -1,0 +1,161 @@
+//! Soak: the audio callback's work driven for a long time by random playing — notes over the whole
+//! keyboard at random velocities, note-offs, sustain/sostenuto/soft pedal toggles, all-notes-off
+//! and all-sound-off, on a small pool so that stealing never stops. The output must stay finite
+//! and inside [-1, 1], the callback must never allocate, and resident memory must stay flat once
+//! every voice slot has been used.
+//!
+//! `soak_short` (CI) plays 10 s; `soak_ten_minutes` is marked long (`#[ignore]`):
+//! `cargo test --release --test soak -- --ignored --nocapture` (length: `UNACORDA_SOAK_S`, s).
+
+use assert_no_alloc::{assert_no_alloc, reset_violation_count, violation_count, AllocDisabler};
+use std::sync::atomic::Ordering;
+use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
+use unacorda::measure::resident_bytes;
+use unacorda::midi::{Event, Pedal};
+use unacorda::play::Piano;
+use unacorda::scaling::{Scaling, KEYS};
+
+#[global_allocator]
+static ALLOCATOR: AllocDisabler = AllocDisabler;
+
+/// xorshift64*: a reproducible stream of random playing.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    /// True with probability 1/n.
+    fn one_in(&mut self, n: u64) -> bool {
+        self.next() % n == 0
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+}
+
+/// The next block's events: on average 12 notes and 10 releases per second, a pedal toggle every
+/// ~2.7 s, all-notes-off every ~27 s and all-sound-off every ~53 s (64-frame blocks at 48 kHz).
+fn random_events(rng: &mut Rng, held: &mut Vec<u8>, out: &mut [Option<Event>; 4]) {
+    *out = [None; 4];
+    if rng.one_in(60) {
+        let note = 21 + rng.below(88) as u8;
+        let velocity = 1 + rng.below(127) as u8;
+        if held.len() < held.capacity() {
+            held.push(note);
+        }
+        out[0] = Some(Event::NoteOn { note, velocity });
+    }
+    if !held.is_empty() && rng.one_in(70) {
+        let note = held.swap_remove(rng.below(held.len() as u64) as usize);
+        out[1] = Some(Event::NoteOff { note });
+    }
+    if rng.one_in(2000) {
+        let pedal = [Pedal::Sustain, Pedal::Sostenuto, Pedal::Soft][rng.below(3) as usize];
+        out[2] = Some(Event::Pedal {
+            pedal,
+            down: rng.one_in(2),
+        });
+    }
+    if rng.one_in(20_000) {
+        held.clear();
+        out[3] = Some(Event::AllNotesOff);
+    } else if rng.one_in(40_000) {
+        out[3] = Some(Event::AllSoundOff);
+    }
+}
+
+fn soak(seconds: f64) {
+    const VOICES: usize = 6;
+    const BLOCK: usize = 64;
+    let scaling = Scaling::resolve("grand").unwrap();
+    let keys: Vec<usize> = (1..=KEYS).collect();
+    let piano = Piano::build(&scaling, &keys, VOICES).unwrap();
+    let settings = scaling.base.output_settings();
+    let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
+    let blocks = (seconds * settings.rate_hz / BLOCK as f64) as u64;
+    let report_every = (10.0 * settings.rate_hz / BLOCK as f64) as u64;
+    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let mut held: Vec<u8> = Vec::with_capacity(128);
+    let mut events = [None; 4];
+    let mut out = vec![0f32; BLOCK];
+    let (mut peak, mut non_finite, mut sent) = (0f32, 0u64, 0u64);
+    // Resident memory once every voice slot has been touched (after 1/10 of the run), and after.
+    let warm = blocks / 10;
+    let (mut rss_warm, mut rss_max) = (0u64, 0u64);
+    let rss_start = resident_bytes().unwrap_or(0);
+    println!("soak: {seconds:.0} s of random playing on 88 keys, a pool of {VOICES} voices, {BLOCK}-frame blocks");
+    println!("     t (s)  peak |out|  voices reset  late events  resident (MiB)");
+    reset_violation_count();
+    for b in 0..blocks {
+        random_events(&mut rng, &mut held, &mut events);
+        for (i, event) in events.iter().enumerate() {
+            if let Some(event) = *event {
+                let frame = b * BLOCK as u64 + i as u64 * 13;
+                assert!(handle.schedule(Scheduled { frame, event }).is_ok());
+                sent += 1;
+            }
+        }
+        assert_no_alloc(|| synth.process(&mut out, 1));
+        for &s in &out {
+            non_finite += u64::from(!s.is_finite());
+            peak = peak.max(s.abs());
+        }
+        if b == warm {
+            rss_warm = resident_bytes().unwrap_or(0);
+        }
+        if b > warm {
+            rss_max = rss_max.max(resident_bytes().unwrap_or(0));
+        }
+        if (b + 1) % report_every == 0 || b + 1 == blocks {
+            println!(
+                "{:10.0}  {peak:10.3}  {:12}  {:11}  {:14.1}",
+                (b + 1) as f64 * BLOCK as f64 / settings.rate_hz,
+                handle.stats.resets.load(Ordering::Relaxed),
+                handle.stats.late_events.load(Ordering::Relaxed),
+                resident_bytes().unwrap_or(0) as f64 / 1048576.0
+            );
+        }
+    }
+    let allocations = violation_count();
+    let growth = rss_max.saturating_sub(rss_warm);
+    println!(
+        "{sent} events; peak voices {}; {allocations} allocations in the callback; non-finite samples {non_finite}; peak {peak:.3}; resident {:.1} MiB at start, {:.1} MiB after 1/10 of the run, at most {:.1} MiB after (growth {} kB)",
+        handle.stats.peak_voices.load(Ordering::Relaxed),
+        rss_start as f64 / 1048576.0,
+        rss_warm as f64 / 1048576.0,
+        rss_max as f64 / 1048576.0,
+        growth / 1024
+    );
+    assert_eq!(non_finite, 0, "non-finite output");
+    assert!(peak <= 1.0 && peak > 1e-3, "output peak {peak}");
+    assert_eq!(allocations, 0, "the callback allocated");
+    assert_eq!(
+        handle.stats.peak_voices.load(Ordering::Relaxed),
+        VOICES as u64,
+        "the pool was never full: no stealing"
+    );
+    assert!(rss_warm > 0, "no resident-memory figure on this system");
+    assert!(
+        growth < 1 << 20,
+        "resident memory grew by {growth} bytes after warm-up"
+    );
+}
+
+#[test]
+fn soak_short() {
+    soak(10.0);
+}
+
+#[test]
+#[ignore = "long: 10 minutes of sound (UNACORDA_SOAK_S to change)"]
+fn soak_ten_minutes() {
+    let seconds = std::env::var("UNACORDA_SOAK_S")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(600.0);
+    soak(seconds);
+}
