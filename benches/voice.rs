@@ -1,11 +1,13 @@
 //! Real-time factor of one paper-faithful c2 voice (2 strings × 205 modes, 130 board modes, dense
 //! duplex damping, RK4 at 96 kHz), and of the same voice in the paper's literal dense state-space
-//! form (`dense_baseline_1ms`, Eq. 10–11 with A of order 1082). Throughput is reported in output
+//! form (`dense_baseline_1ms`, Eq. 10–11 with A of order 1082), and on the live integrator
+//! (`exponential_10ms`: ETDRK4 on complex modes at 48 kHz, `engine::exponential`). Throughput is reported in output
 //! samples (48 kHz) per second: the real-time factor is that figure divided by 48 000, and the
 //! ratio of two throughputs is the speed-up.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
+use unacorda::engine::exponential::ExponentialUnison;
 use unacorda::engine::statespace::DenseUnison;
 use unacorda::engine::{Instrument, Strike};
 use unacorda::preset::Preset;
@@ -45,6 +47,21 @@ fn c2_voice(c: &mut Criterion) {
                 instrument.step();
             }
             black_box(instrument.observe())
+        })
+    });
+
+    // The live integrator: exponential RK4 (ETDRK4) on complex modes at the output rate.
+    let mut live_spec = spec.clone();
+    live_spec.sample_rate_hz = preset.output_rate_hz();
+    let mut live = ExponentialUnison::new(&live_spec).expect("c2 builds");
+    live.set_damper(false);
+    live.strike(strike);
+    group.bench_function("exponential_10ms", |b| {
+        b.iter(|| {
+            for _ in 0..FRAMES {
+                live.step();
+            }
+            black_box(live.observe())
         })
     });
 

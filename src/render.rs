@@ -6,8 +6,10 @@
 //! anti-alias filter to the output rate.
 
 use crate::audio::Decimator;
+use crate::engine::exponential::ExponentialUnison;
 use crate::engine::system::{BuildError, Instrument, Observation, Strike};
 use crate::engine::MAX_STRINGS;
+use crate::engine::{Engine, Integrator};
 use crate::preset::LoadedPreset;
 use std::ops::ControlFlow;
 
@@ -58,9 +60,10 @@ impl Frame {
     }
 }
 
-/// An instrument and its output stage, with analysis channels (forces of voice 0).
-pub struct Renderer {
-    instrument: Instrument,
+/// An engine (by default the RK4 [`Instrument`]) and its output stage, with analysis channels
+/// (forces of voice 0).
+pub struct Renderer<E: Engine = Instrument> {
+    instrument: E,
     decimator: Decimator,
     /// `rho0 / (4 pi r)` (kg/m^4).
     monopole: f64,
@@ -76,10 +79,24 @@ impl Renderer {
         let instrument = Instrument::new(&spec)?;
         Ok(Self::from_instrument(instrument, preset))
     }
+}
 
+impl Renderer<ExponentialUnison> {
+    /// The preset's key on the live integrator, stepping at the output rate.
+    pub fn exponential(preset: &LoadedPreset) -> Result<Self, BuildError> {
+        let mut spec = preset.unison_spec();
+        spec.sample_rate_hz = preset.output_rate_hz();
+        Ok(Self::from_instrument(
+            ExponentialUnison::new(&spec)?,
+            preset,
+        ))
+    }
+}
+
+impl<E: Engine> Renderer<E> {
     /// The output stage of `preset` (rates, radiation) around a built system; the analysis
     /// channels follow its first voice.
-    pub fn from_instrument(instrument: Instrument, preset: &LoadedPreset) -> Renderer {
+    pub fn from_instrument(instrument: E, preset: &LoadedPreset) -> Renderer<E> {
         let ratio = (preset.output_rate_hz() * instrument.step_s())
             .recip()
             .round() as usize;
@@ -95,11 +112,11 @@ impl Renderer {
         }
     }
 
-    pub fn instrument(&self) -> &Instrument {
+    pub fn instrument(&self) -> &E {
         &self.instrument
     }
 
-    pub fn instrument_mut(&mut self) -> &mut Instrument {
+    pub fn instrument_mut(&mut self) -> &mut E {
         &mut self.instrument
     }
 
@@ -163,15 +180,52 @@ impl Recording {
 }
 
 /// Strike the preset's unison, release the key after `release_s` (the damper drops; `None` holds
-/// the key) and record `seconds` of output; `progress` receives the fraction done.
+/// the key) and record `seconds` of output with RK4; `progress` receives the fraction done.
 pub fn simulate(
     preset: &LoadedPreset,
     strike: Strike,
     release_s: Option<f64>,
     seconds: f64,
+    progress: impl FnMut(f64),
+) -> Result<Recording, BuildError> {
+    simulate_with(
+        preset,
+        Integrator::Rk4,
+        strike,
+        release_s,
+        seconds,
+        progress,
+    )
+}
+
+/// [`simulate`] with the chosen integrator.
+pub fn simulate_with(
+    preset: &LoadedPreset,
+    integrator: Integrator,
+    strike: Strike,
+    release_s: Option<f64>,
+    seconds: f64,
+    progress: impl FnMut(f64),
+) -> Result<Recording, BuildError> {
+    match integrator {
+        Integrator::Rk4 => record(Renderer::new(preset)?, strike, release_s, seconds, progress),
+        Integrator::Exponential => record(
+            Renderer::exponential(preset)?,
+            strike,
+            release_s,
+            seconds,
+            progress,
+        ),
+    }
+}
+
+fn record<E: Engine>(
+    mut r: Renderer<E>,
+    strike: Strike,
+    release_s: Option<f64>,
+    seconds: f64,
     mut progress: impl FnMut(f64),
 ) -> Result<Recording, BuildError> {
-    let mut r = Renderer::new(preset)?;
     r.strike(strike);
     let n = (seconds * r.output_rate_hz()).round() as usize;
     let release_frame = release_s.map(|s| (s * r.output_rate_hz()).round() as usize);

@@ -223,6 +223,8 @@ pub enum BuildError {
     NoVoice,
     #[error("the duplex damping matrix cannot be factored (non-finite string parameters?)")]
     Duplex,
+    #[error("the complex modes of a string direction or the board cannot be computed (non-finite parameters?)")]
+    Modes,
     #[error(
         "RK4 would be unstable: the stiffest coupled mode (≈{freq_hz:.0} Hz) gives omega h = {omega_h:.2} \
          above the limit 2.78 at {rate_hz:.0} Hz; raise the internal rate or soften the contact"
@@ -1135,7 +1137,7 @@ fn evaluate<const SIMD: bool>(
 }
 
 /// Whether this CPU can run the AVX2 + FMA build of the step.
-fn has_avx2_fma() -> bool {
+pub(super) fn has_avx2_fma() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")

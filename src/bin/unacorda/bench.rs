@@ -3,8 +3,8 @@
 
 use anyhow::{bail, Result};
 use unacorda::measure::{
-    block_times_s, denormal_tail_step_s, dense_real_time_factor, loaded_synth, nominal_f64_peak,
-    percentile, resident_bytes, voice_speed,
+    block_times_s, denormal_tail_step_s, dense_real_time_factor, exponential_speed, loaded_synth,
+    nominal_f64_peak, percentile, resident_bytes, voice_speed,
 };
 use unacorda::play::{Piano, MAX_VOICES};
 use unacorda::preset::Preset;
@@ -44,6 +44,19 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
         ),
         None => println!("  {:.1} GFLOP/s", fast.flops_per_s / 1e9),
     }
+    let rate = c2.output_rate_hz();
+    let live = exponential_speed(&spec, rate, seconds);
+    println!(
+        "same voice on the live integrator (exponential RK4, ETDRK4, on each string direction's complex modes with its contact spring and duplex damping; board coupling, hammer and damper explicit) at {:.0} kHz:\n  real-time factor {:.2} ({:.1} × the paper-faithful RK4), {:.1} GFLOP/s{}",
+        rate / 1e3,
+        live.real_time_factor,
+        live.real_time_factor / fast.real_time_factor,
+        live.flops_per_s / 1e9,
+        nominal_f64_peak().map_or(String::new(), |(peak, _)| format!(
+            " = {:.0} % of nominal f64 peak",
+            100.0 * live.flops_per_s / peak
+        ))
+    );
     // The dense baseline is a few hundred times slower: time a slice of the same length in steps
     // that takes about `seconds`.
     let steps = ((seconds * spec.sample_rate_hz * fast.real_time_factor / 400.0) as usize).max(20);
