@@ -1,5 +1,6 @@
 //! The real-time path under load, at the engine's 48 kHz output:
-//! - `callback/{voices}v_{frames}f`: one audio callback ([`Synth::process`]) with 1, 8, 16 or 32
+//! - `callback/{voices}v_{frames}f` (RK4 at 96 kHz) and `callback_etd/…` (ETDRK4 at 48 kHz, the
+//!   live integrator): one audio callback ([`Synth::process`]) with 1, 8, 16 or 32
 //!   voices sounding (keys spread over the keyboard, sustain held, one shared soundboard) and 64-
 //!   or 128-frame blocks. Besides criterion's estimate, every block's time is recorded and the
 //!   median and p99.9 are printed as a fraction of the block's deadline.
@@ -12,23 +13,30 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
+use unacorda::engine::exponential::ExponentialInstrument;
+use unacorda::engine::{Instrument, VoicePool};
 use unacorda::measure::{loaded_synth, percentile};
 use unacorda::midi::Event;
 use unacorda::play::Piano;
 use unacorda::scaling::{Scaling, KEYS};
 
-fn keyboard() -> (Piano, unacorda::audio::synth::OutputSettings) {
+fn keyboard<E: VoicePool>() -> (Piano<E>, unacorda::audio::synth::OutputSettings) {
     let scaling = Scaling::resolve("grand").expect("built-in keyboard");
     let keys: Vec<usize> = (1..=KEYS).collect();
-    let piano = Piano::build(&scaling, &keys, 32).expect("the keyboard builds");
+    let piano = Piano::<E>::build(&scaling, &keys, 32).expect("the keyboard builds");
     (piano, scaling.base.output_settings())
 }
 
 fn callback(c: &mut Criterion) {
-    let (piano, settings) = keyboard();
+    callback_on::<Instrument>(c, "callback", "RK4 at 96 kHz");
+    callback_on::<ExponentialInstrument>(c, "callback_etd", "ETDRK4 at 48 kHz");
+}
+
+fn callback_on<E: VoicePool>(c: &mut Criterion, name: &str, label: &str) {
+    let (piano, settings) = keyboard::<E>();
     let fs = settings.rate_hz;
     let mut report = Vec::new();
-    let mut group = c.benchmark_group("callback");
+    let mut group = c.benchmark_group(name);
     group.sample_size(10);
     group.warm_up_time(Duration::from_secs(1));
     group.measurement_time(Duration::from_secs(4));
@@ -68,14 +76,14 @@ fn callback(c: &mut Criterion) {
         }
     }
     group.finish();
-    println!("\nAudio callback block time (deadline = block length at {fs} Hz):");
+    println!("\nAudio callback block time, {label} (deadline = block length at {fs} Hz):");
     for line in report {
         println!("  {line}");
     }
 }
 
 fn latency(c: &mut Criterion) {
-    let (piano, settings) = keyboard();
+    let (piano, settings) = keyboard::<Instrument>();
     let frames = 64;
     let (silent, _handle) = Synth::new(piano, settings, EVENT_QUEUE).expect("rates match");
     let mut delays = Vec::new();

@@ -5,7 +5,7 @@
 use crate::audio::synth::{OutputSettings, Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use crate::engine::exponential::ExponentialUnison;
 use crate::engine::statespace::DenseUnison;
-use crate::engine::{Instrument, Strike, UnisonSpec};
+use crate::engine::{Instrument, Strike, UnisonSpec, VoicePool};
 use crate::midi::{Event, Pedal};
 use crate::play::Piano;
 use std::time::Instant;
@@ -13,12 +13,12 @@ use std::time::Instant;
 /// A synth on `piano` with `voices` keys sounding under the sustain pedal — spread over the
 /// keyboard from A0 upwards, struck 1 ms apart at MIDI velocity 80 — run for 50 ms so that every
 /// hammer has left its strings. `piano` must hold all 88 keys and at least `voices` voices.
-pub fn loaded_synth(
-    piano: &Piano,
+pub fn loaded_synth<E: VoicePool>(
+    piano: &Piano<E>,
     settings: OutputSettings,
     voices: usize,
     frames: usize,
-) -> (Synth, SynthHandle) {
+) -> (Synth<E>, SynthHandle<E>) {
     let (mut synth, mut handle) =
         Synth::new(piano.clone(), settings, EVENT_QUEUE).expect("the keyboard's rates match");
     let sustain = Event::Pedal {
@@ -42,7 +42,7 @@ pub fn loaded_synth(
 }
 
 /// Time each of `blocks` callbacks of `frames` frames (s), sorted.
-pub fn block_times_s(synth: &mut Synth, frames: usize, blocks: usize) -> Vec<f64> {
+pub fn block_times_s<E: VoicePool>(synth: &mut Synth<E>, frames: usize, blocks: usize) -> Vec<f64> {
     let mut out = vec![0f32; frames];
     let mut times: Vec<f64> = (0..blocks)
         .map(|_| {

@@ -2,7 +2,7 @@
 //! one soundboard, with the pedals' logic and the voice pool's allocation. A key struck again is
 //! struck in its current motion; a key without a voice takes a free one, or steals the quietest.
 
-use crate::engine::{Instrument, Strike};
+use crate::engine::{Instrument, Strike, VoicePool};
 use crate::midi::{hammer_speed_m_s, piano_key, Event, Pedal};
 
 /// The performer's state: which keys are down and what the pedals do.
@@ -47,7 +47,7 @@ impl Player {
 
     /// Apply one event to the instrument. Events for keys the instrument lacks are ignored.
     /// Never allocates.
-    pub fn apply(&mut self, event: Event, instrument: &mut Instrument) {
+    pub fn apply(&mut self, event: Event, instrument: &mut impl VoicePool) {
         match event {
             Event::NoteOn { note, velocity } => {
                 let (Some(key), Some(speed)) = (piano_key(note), hammer_speed_m_s(velocity)) else {
@@ -127,7 +127,7 @@ impl Player {
     /// The voice a newly sounding key takes: a silent one if there is any (one that never played
     /// first), else the quietest by string energy, preferring keys whose dampers are down over
     /// keys held by a finger or a pedal, and never one already fading.
-    fn voice_for_new_key(&self, instrument: &Instrument) -> usize {
+    fn voice_for_new_key(&self, instrument: &impl VoicePool) -> usize {
         let n = instrument.n_voices();
         let free = |v: &usize| !instrument.is_active(*v) && !instrument.is_fading(*v);
         if let Some(v) = (0..n)
@@ -153,7 +153,7 @@ impl Player {
     }
 
     /// Lift or drop one key's damper from the key and the pedals.
-    fn settle_damper(&self, key: usize, instrument: &mut Instrument) {
+    fn settle_damper(&self, key: usize, instrument: &mut impl VoicePool) {
         let Some(v) = self.bank_of_key[key].and_then(|b| instrument.voice_of_key(b)) else {
             return;
         };
@@ -165,7 +165,7 @@ impl Player {
         }
     }
 
-    fn settle_all(&self, instrument: &mut Instrument) {
+    fn settle_all(&self, instrument: &mut impl VoicePool) {
         for key in 1..=88 {
             self.settle_damper(key, instrument);
         }
@@ -174,8 +174,8 @@ impl Player {
 
 /// An instrument with its player: what the audio thread owns.
 #[derive(Debug, Clone)]
-pub struct Piano {
-    pub instrument: Instrument,
+pub struct Piano<E: VoicePool = Instrument> {
+    pub instrument: E,
     pub player: Player,
     /// Piano key (1–88) of each bank index.
     pub keys: Vec<usize>,
@@ -187,14 +187,14 @@ pub const DEFAULT_VOICES: usize = 32;
 /// Largest voice pool the command line accepts.
 pub const MAX_VOICES: usize = 256;
 
-impl Piano {
+impl<E: VoicePool> Piano<E> {
     /// The `keys` (1–88) of `scaling` on one soundboard with a pool of `voices` voices. Keys are
     /// built (and tuned) on all cores.
     pub fn build(
         scaling: &crate::scaling::LoadedScaling,
         keys: &[usize],
         voices: usize,
-    ) -> Result<Piano, crate::render::RenderError> {
+    ) -> Result<Piano<E>, crate::render::RenderError> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let chunk = keys.len().div_ceil(threads).max(1);
         let specs = std::thread::scope(|scope| {
@@ -215,7 +215,7 @@ impl Piano {
         })?;
         let specs: Vec<_> = specs.into_iter().flatten().collect();
         Ok(Piano {
-            instrument: Instrument::with_pool(&specs, voices)?,
+            instrument: E::build_pool(&specs, voices, scaling.base.output_rate_hz())?,
             player: Player::new(keys),
             keys: keys.to_vec(),
         })

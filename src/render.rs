@@ -316,10 +316,11 @@ pub fn render_midi_with(
     tap: impl FnMut(&Instrument, u64),
 ) -> Result<Performance, RenderError> {
     let mut samples = Vec::new();
-    let r = render_midi_into(scaling, events, tail_s, voices, progress, tap, |block| {
-        samples.extend_from_slice(block);
-        ControlFlow::Continue(())
-    })?;
+    let r =
+        render_midi_into::<Instrument>(scaling, events, tail_s, voices, progress, tap, |block| {
+            samples.extend_from_slice(block);
+            ControlFlow::Continue(())
+        })?;
     Ok(Performance {
         rate_hz: r.rate_hz,
         samples,
@@ -328,16 +329,17 @@ pub fn render_midi_with(
     })
 }
 
-/// [`render_midi_with`], handing each block of samples to `sink` as it is made (a WAV being
-/// written) instead of keeping them; the render stops early when `sink` breaks (interrupted, or
-/// the disk is full).
-pub fn render_midi_into(
+/// [`render_midi_with`] on the engine `E` (RK4 [`Instrument`] or the live integrator,
+/// [`crate::engine::exponential::ExponentialInstrument`]), handing each block of samples to `sink`
+/// as it is made (a WAV being written) instead of keeping them; the render stops early when
+/// `sink` breaks (interrupted, or the disk is full).
+pub fn render_midi_into<E: crate::engine::VoicePool>(
     scaling: &crate::scaling::LoadedScaling,
     events: &[crate::midi::file::TimedEvent],
     tail_s: f64,
     voices: usize,
     mut progress: impl FnMut(f64),
-    mut tap: impl FnMut(&Instrument, u64),
+    mut tap: impl FnMut(&E, u64),
     mut sink: impl FnMut(&[f32]) -> ControlFlow<()>,
 ) -> Result<Rendered, RenderError> {
     use crate::audio::synth::{Synth, EVENT_QUEUE};
@@ -358,7 +360,7 @@ pub fn render_midi_into(
         return Err(RenderError::NoKeys);
     }
     let voices = voices.min(keys.len());
-    let piano = crate::play::Piano::build(scaling, &keys, voices)?;
+    let piano = crate::play::Piano::<E>::build(scaling, &keys, voices)?;
     let settings = scaling.base.output_settings();
     let fs = settings.rate_hz;
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE)?;

@@ -198,3 +198,63 @@ fn the_radiated_sound_agrees_through_the_renderer() {
     );
     assert!((e - r).abs() < 0.1);
 }
+
+#[test]
+fn keys_couple_through_the_shared_board_alike() {
+    // Two keys on one board: C2 struck, C3 held silently (damper lifted, not struck). C3 sounds
+    // only through the board. Its bridge force over 0.3–0.6 s, and C2's, must agree between RK4
+    // at 96 kHz and ETDRK4 at 48 kHz.
+    use unacorda::engine::exponential::ExponentialInstrument;
+    use unacorda::engine::VoicePool;
+    use unacorda::scaling::{parse_key, Scaling};
+    let scaling = Scaling::resolve("grand").unwrap();
+    let specs: Vec<_> = ["C2", "C3"]
+        .iter()
+        .map(|k| {
+            scaling
+                .key_preset(parse_key(k).unwrap())
+                .unwrap()
+                .unison_spec()
+        })
+        .collect();
+    let strike = Strike {
+        velocity_m_s: 2.5,
+        una_corda: false,
+    };
+    fn run<E: VoicePool>(specs: &[unacorda::engine::UnisonSpec], strike: Strike) -> [f64; 2] {
+        let mut quiet = E::build_pool(specs, 2, FS).unwrap();
+        quiet.steal(0, 0, strike);
+        quiet.assign(1, 1);
+        quiet.set_active(1, true);
+        let steps = (0.6 / quiet.step_s()) as usize;
+        let from = (0.3 / quiet.step_s()) as usize;
+        let mut power = [0.0; 2];
+        for k in 0..steps {
+            quiet.step();
+            if k >= from {
+                for (v, p) in power.iter_mut().enumerate() {
+                    *p += quiet.observe_voice(v).total_force_n[0].powi(2);
+                }
+            }
+        }
+        power.map(|p| 10.0 * (p / (steps - from) as f64).log10())
+    }
+    let rk4 = run::<Instrument>(&specs, strike);
+    let etd = run::<ExponentialInstrument>(&specs, strike);
+    for (v, name) in ["C2 (struck)", "C3 (held, through the board)"]
+        .iter()
+        .enumerate()
+    {
+        println!(
+            "{name}: bridge T force power 0.3–0.6 s: RK4 {:.2} dB, ETDRK4 {:.2} dB ({:+.3} dB)",
+            rk4[v],
+            etd[v],
+            etd[v] - rk4[v]
+        );
+        assert!((etd[v] - rk4[v]).abs() < 0.5);
+    }
+    assert!(
+        rk4[1].is_finite() && rk4[1] > rk4[0] - 40.0,
+        "the held key moves with the board"
+    );
+}

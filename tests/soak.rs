@@ -10,6 +10,8 @@
 use assert_no_alloc::{assert_no_alloc, reset_violation_count, violation_count, AllocDisabler};
 use std::sync::atomic::Ordering;
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
+use unacorda::engine::exponential::ExponentialInstrument;
+use unacorda::engine::{Instrument, VoicePool};
 use unacorda::measure::resident_bytes;
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Piano;
@@ -68,12 +70,12 @@ fn random_events(rng: &mut Rng, held: &mut Vec<u8>, out: &mut [Option<Event>; 4]
     }
 }
 
-fn soak(seconds: f64) {
+fn soak<E: VoicePool>(seconds: f64, engine: &str) {
     const VOICES: usize = 6;
     const BLOCK: usize = 64;
     let scaling = Scaling::resolve("grand").unwrap();
     let keys: Vec<usize> = (1..=KEYS).collect();
-    let piano = Piano::build(&scaling, &keys, VOICES).unwrap();
+    let piano = Piano::<E>::build(&scaling, &keys, VOICES).unwrap();
     let settings = scaling.base.output_settings();
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
     let blocks = (seconds * settings.rate_hz / BLOCK as f64) as u64;
@@ -87,7 +89,7 @@ fn soak(seconds: f64) {
     let warm = blocks / 10;
     let (mut rss_warm, mut rss_max) = (0u64, 0u64);
     let rss_start = resident_bytes().unwrap_or(0);
-    println!("soak: {seconds:.0} s of random playing on 88 keys, a pool of {VOICES} voices, {BLOCK}-frame blocks");
+    println!("soak ({engine}): {seconds:.0} s of random playing on 88 keys, a pool of {VOICES} voices, {BLOCK}-frame blocks");
     println!("     t (s)  peak |out|  voices reset  late events  resident (MiB)");
     reset_violation_count();
     for b in 0..blocks {
@@ -147,7 +149,8 @@ fn soak(seconds: f64) {
 
 #[test]
 fn soak_short() {
-    soak(10.0);
+    soak::<Instrument>(10.0, "RK4 at 96 kHz");
+    soak::<ExponentialInstrument>(10.0, "ETDRK4 at 48 kHz");
 }
 
 #[test]
@@ -157,5 +160,6 @@ fn soak_ten_minutes() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(600.0);
-    soak(seconds);
+    soak::<Instrument>(seconds, "RK4 at 96 kHz");
+    soak::<ExponentialInstrument>(seconds, "ETDRK4 at 48 kHz");
 }

@@ -3,6 +3,7 @@
 //! measures itself against the block's deadline; nothing in it allocates, locks or prints.
 
 use super::synth::Synth;
+use crate::engine::VoicePool;
 use cpal::traits::{DeviceTrait, HostTrait, StreamTrait};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -132,8 +133,12 @@ pub struct CallbackStats {
     pub max_frames: AtomicU64,
 }
 
+/// Why a stream did not start, with the synth handed back when it could be (boxed: the error
+/// stays small).
+pub type Refused<E> = (DeviceError, Option<Box<Synth<E>>>);
+
 /// A running output stream.
-pub struct Output {
+pub struct Output<E: VoicePool = crate::engine::Instrument> {
     /// Dropping the stream stops it; the synth then comes back through `synth_back`.
     stream: cpal::Stream,
     pub device: String,
@@ -143,7 +148,7 @@ pub struct Output {
     /// Errors the stream reported (device lost, xruns).
     pub errors: crossbeam_channel::Receiver<cpal::Error>,
     inject: crossbeam_channel::Sender<cpal::Error>,
-    synth_back: crossbeam_channel::Receiver<Synth>,
+    synth_back: crossbeam_channel::Receiver<Synth<E>>,
 }
 
 /// What a stream error asks of the program.
@@ -173,12 +178,12 @@ pub fn classify(e: &cpal::Error) -> Fault {
 
 /// The synth inside the stream's callback; when cpal drops the callback (the stream closed), the
 /// synth is handed back so that a reopened stream continues with the same state.
-struct Returning {
-    synth: Option<Synth>,
-    back: crossbeam_channel::Sender<Synth>,
+struct Returning<E: VoicePool> {
+    synth: Option<Synth<E>>,
+    back: crossbeam_channel::Sender<Synth<E>>,
 }
 
-impl Drop for Returning {
+impl<E: VoicePool> Drop for Returning<E> {
     fn drop(&mut self) {
         if let Some(synth) = self.synth.take() {
             let _ = self.back.try_send(synth);
@@ -186,10 +191,10 @@ impl Drop for Returning {
     }
 }
 
-impl Output {
+impl<E: VoicePool> Output<E> {
     /// Stop the stream and take the synth back (with its voices, queue and clock), to start it on
     /// another stream; `None` if the stream's thread did not hand it back within a second.
-    pub fn close(self) -> Option<Synth> {
+    pub fn close(self) -> Option<Synth<E>> {
         let back = self.synth_back.clone();
         drop(self.stream);
         back.recv_timeout(std::time::Duration::from_secs(1)).ok()
@@ -206,13 +211,13 @@ impl Output {
 /// `rate_hz` with `buffer` frames per callback (`None`: the device's default), and start `synth`
 /// in its callback, which counts into `stats`. On failure the synth is returned with the error
 /// (boxed: the error stays small).
-pub fn start(
-    synth: Synth,
+pub fn start<E: VoicePool>(
+    synth: Synth<E>,
     device: Option<&str>,
     rate_hz: u32,
     buffer: Option<u32>,
     stats: Arc<CallbackStats>,
-) -> Result<Output, (DeviceError, Option<Box<Synth>>)> {
+) -> Result<Output<E>, Refused<E>> {
     if let Err(e) = check_buffer(buffer) {
         return Err((e, Some(Box::new(synth))));
     }
@@ -285,7 +290,7 @@ pub fn start(
         None,
     );
     // A stream that failed to build or start drops its callback, which hands the synth back.
-    let fail = |source, back: &crossbeam_channel::Receiver<Synth>| {
+    let fail = |source, back: &crossbeam_channel::Receiver<Synth<E>>| {
         let e = DeviceError::Cpal {
             device: id.clone(),
             source,

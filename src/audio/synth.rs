@@ -8,7 +8,7 @@
 //! the output.
 
 use super::Decimator;
-use crate::engine::Instrument;
+use crate::engine::{Instrument, VoicePool};
 use crate::midi::Event;
 use crate::play::Piano;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
@@ -28,12 +28,12 @@ pub struct Scheduled {
 
 /// Commands from the controlling thread.
 #[derive(Debug)]
-pub enum Control {
+pub enum Control<E: VoicePool = Instrument> {
     /// Output silence from now on and stop simulating.
     Shutdown,
     /// Play another piano (a preset or keyboard change), built off the audio thread; the old
     /// one is handed back through the handle so that it is never freed on the audio thread.
-    Replace(Box<Piano>),
+    Replace(Box<Piano<E>>),
 }
 
 /// Output stage settings.
@@ -139,11 +139,11 @@ impl Clock {
 }
 
 /// The audio thread's side: owns the piano, reads events and commands.
-pub struct Synth {
-    piano: Box<Piano>,
+pub struct Synth<E: VoicePool = Instrument> {
+    piano: Box<Piano<E>>,
     events: HeapCons<Scheduled>,
-    control: Receiver<Control>,
-    returned: Sender<Box<Piano>>,
+    control: Receiver<Control<E>>,
+    returned: Sender<Box<Piano<E>>>,
     clock: Arc<Clock>,
     stats: Arc<Stats>,
     decimator: Decimator,
@@ -157,10 +157,10 @@ pub struct Synth {
 }
 
 /// The other threads' side: schedule events, send commands, read the clock and the counters.
-pub struct SynthHandle {
+pub struct SynthHandle<E: VoicePool = Instrument> {
     pub events: HeapProd<Scheduled>,
-    control: Sender<Control>,
-    returned: Receiver<Box<Piano>>,
+    control: Sender<Control<E>>,
+    returned: Receiver<Box<Piano<E>>>,
     pub clock: Arc<Clock>,
     pub stats: Arc<Stats>,
 }
@@ -177,13 +177,13 @@ pub enum SynthError {
 /// Room in the event queue: a second of dense playing.
 pub const EVENT_QUEUE: usize = 4096;
 
-impl Synth {
+impl<E: VoicePool> Synth<E> {
     /// A synth playing `piano` with its pair of handles; `queue` events fit in the queue.
     pub fn new(
-        piano: Piano,
+        piano: Piano<E>,
         out: OutputSettings,
         queue: usize,
-    ) -> Result<(Synth, SynthHandle), SynthError> {
+    ) -> Result<(Synth<E>, SynthHandle<E>), SynthError> {
         let internal_rate_hz = 1.0 / piano.instrument.step_s();
         let ratio = (internal_rate_hz / out.rate_hz).round();
         if ratio < 1.0 || (ratio * out.rate_hz - internal_rate_hz).abs() > 1e-6 * internal_rate_hz {
@@ -225,13 +225,13 @@ impl Synth {
     }
 
     /// The piano being played.
-    pub fn piano(&self) -> &Piano {
+    pub fn piano(&self) -> &Piano<E> {
         &self.piano
     }
 
     /// The piano, to change its state outside the event path (tests, hosts that drive the engine
     /// directly).
-    pub fn piano_mut(&mut self) -> &mut Piano {
+    pub fn piano_mut(&mut self) -> &mut Piano<E> {
         &mut self.piano
     }
 
@@ -252,18 +252,13 @@ impl Synth {
 
     /// [`Synth::process`], calling `tap(instrument, frame)` after each output frame (for tests and
     /// analysis; the no-op tap of `process` compiles away).
-    pub fn process_with(
-        &mut self,
-        out: &mut [f32],
-        channels: usize,
-        mut tap: impl FnMut(&Instrument, u64),
-    ) {
+    pub fn process_with(&mut self, out: &mut [f32], channels: usize, mut tap: impl FnMut(&E, u64)) {
         // SAFETY: flush-to-zero and denormals-are-zero only change how subnormal results are
         // rounded (to zero) for the duration of the block on this thread; the guard restores MXCSR.
         unsafe { no_denormals::no_denormals(|| self.render(out, channels.max(1), &mut tap)) }
     }
 
-    fn render(&mut self, out: &mut [f32], channels: usize, tap: &mut impl FnMut(&Instrument, u64)) {
+    fn render(&mut self, out: &mut [f32], channels: usize, tap: &mut impl FnMut(&E, u64)) {
         self.clock
             .publish(self.frame, Instant::now(), (out.len() / channels) as u64);
         while let Ok(command) = self.control.try_recv() {
@@ -346,7 +341,7 @@ impl Synth {
     }
 }
 
-impl SynthHandle {
+impl<E: VoicePool> SynthHandle<E> {
     /// Queue an event; returns it back if the queue is full.
     pub fn schedule(&mut self, event: Scheduled) -> Result<(), Scheduled> {
         self.events.try_push(event)
@@ -381,7 +376,7 @@ impl SynthHandle {
 
     /// Hand the audio thread a new piano and wait until it gives the old one back, which is then
     /// freed here. `process` must be running (the wait ends when it picks the command up).
-    pub fn replace(&self, piano: Piano) -> Option<Box<Piano>> {
+    pub fn replace(&self, piano: Piano<E>) -> Option<Box<Piano<E>>> {
         self.control.send(Control::Replace(Box::new(piano))).ok()?;
         self.returned.recv().ok()
     }

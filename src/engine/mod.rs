@@ -27,6 +27,123 @@ pub mod tuning;
 
 pub use system::{Instrument, Observation, Strike, UnisonSpec};
 
+/// A pool of voices on one shared board, as the player and the audio callback drive it: RK4 at
+/// the paper's rate ([`Instrument`], the reference) or ETDRK4 at the output rate
+/// ([`exponential::ExponentialInstrument`], the live integrator). See [`Instrument`] for what each
+/// method does; both behave alike.
+pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
+    /// Build the pool for `specs` (one per key) with `voices` voices; an engine that steps at the
+    /// output rate runs at `output_rate_hz` instead of the specs' internal rate.
+    fn build_pool(
+        specs: &[UnisonSpec],
+        voices: usize,
+        output_rate_hz: f64,
+    ) -> Result<Self, system::BuildError>;
+    fn n_voices(&self) -> usize;
+    fn step_s(&self) -> f64;
+    fn step(&mut self);
+    fn is_active(&self, k: usize) -> bool;
+    fn set_active(&mut self, k: usize, active: bool);
+    fn is_fading(&self, k: usize) -> bool;
+    fn key_of_voice(&self, k: usize) -> Option<usize>;
+    fn voice_of_key(&self, key: usize) -> Option<usize>;
+    fn assign(&mut self, k: usize, key: usize);
+    fn steal(&mut self, k: usize, key: usize, strike: Strike);
+    fn strike_voice(&mut self, k: usize, strike: Strike);
+    fn set_damper_voice(&mut self, k: usize, down: bool);
+    fn voice_energy_j(&self, k: usize) -> f64;
+    fn retire_silent(&mut self, threshold_j: f64) -> usize;
+    fn reset_runaways(&mut self, bound_j: f64) -> usize;
+    fn volume_velocity_m3_s(&self) -> f64;
+    fn observe_voice(&self, k: usize) -> Observation;
+    fn bytes_per_voice(&self) -> usize;
+}
+
+/// Both pools implement [`VoicePool`] with their own inherent methods.
+macro_rules! voice_pool {
+    ($t:ty, $rate:expr) => {
+        impl VoicePool for $t {
+            fn build_pool(
+                specs: &[UnisonSpec],
+                voices: usize,
+                output_rate_hz: f64,
+            ) -> Result<Self, system::BuildError> {
+                let rate: Option<f64> = $rate(output_rate_hz);
+                match rate {
+                    Some(r) => {
+                        let specs: Vec<UnisonSpec> = specs
+                            .iter()
+                            .map(|s| UnisonSpec {
+                                sample_rate_hz: r,
+                                ..s.clone()
+                            })
+                            .collect();
+                        <$t>::with_pool(&specs, voices)
+                    }
+                    None => <$t>::with_pool(specs, voices),
+                }
+            }
+            fn n_voices(&self) -> usize {
+                <$t>::n_voices(self)
+            }
+            fn step_s(&self) -> f64 {
+                <$t>::step_s(self)
+            }
+            fn step(&mut self) {
+                <$t>::step(self)
+            }
+            fn is_active(&self, k: usize) -> bool {
+                <$t>::is_active(self, k)
+            }
+            fn set_active(&mut self, k: usize, active: bool) {
+                <$t>::set_active(self, k, active)
+            }
+            fn is_fading(&self, k: usize) -> bool {
+                <$t>::is_fading(self, k)
+            }
+            fn key_of_voice(&self, k: usize) -> Option<usize> {
+                <$t>::key_of_voice(self, k)
+            }
+            fn voice_of_key(&self, key: usize) -> Option<usize> {
+                <$t>::voice_of_key(self, key)
+            }
+            fn assign(&mut self, k: usize, key: usize) {
+                <$t>::assign(self, k, key)
+            }
+            fn steal(&mut self, k: usize, key: usize, strike: Strike) {
+                <$t>::steal(self, k, key, strike)
+            }
+            fn strike_voice(&mut self, k: usize, strike: Strike) {
+                <$t>::strike_voice(self, k, strike)
+            }
+            fn set_damper_voice(&mut self, k: usize, down: bool) {
+                <$t>::set_damper_voice(self, k, down)
+            }
+            fn voice_energy_j(&self, k: usize) -> f64 {
+                <$t>::voice_energy_j(self, k)
+            }
+            fn retire_silent(&mut self, threshold_j: f64) -> usize {
+                <$t>::retire_silent(self, threshold_j)
+            }
+            fn reset_runaways(&mut self, bound_j: f64) -> usize {
+                <$t>::reset_runaways(self, bound_j)
+            }
+            fn volume_velocity_m3_s(&self) -> f64 {
+                <$t>::volume_velocity_m3_s(self)
+            }
+            fn observe_voice(&self, k: usize) -> Observation {
+                <$t>::observe_voice(self, k)
+            }
+            fn bytes_per_voice(&self) -> usize {
+                <$t>::bytes_per_voice(self)
+            }
+        }
+    };
+}
+
+voice_pool!(Instrument, |_| None);
+voice_pool!(exponential::ExponentialInstrument, Some);
+
 /// What the offline renderer needs of a one-key engine: RK4 on [`Instrument`] (the reference, at
 /// the paper's rate) or ETDRK4 on [`exponential::ExponentialUnison`] (at the output rate).
 pub trait Engine {

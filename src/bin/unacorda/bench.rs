@@ -2,13 +2,15 @@
 //! within the deadline, FLOP rate against the core's peak, memory).
 
 use anyhow::{bail, Result};
+use unacorda::engine::exponential::ExponentialInstrument;
+use unacorda::engine::{Instrument, VoicePool};
 use unacorda::measure::{
     block_times_s, denormal_tail_step_s, dense_real_time_factor, exponential_speed, loaded_synth,
     nominal_f64_peak, percentile, resident_bytes, voice_speed,
 };
 use unacorda::play::{Piano, MAX_VOICES};
 use unacorda::preset::Preset;
-use unacorda::scaling::{Scaling, KEYS};
+use unacorda::scaling::{LoadedScaling, Scaling, KEYS};
 
 /// Block length of the live figures (frames at 48 kHz).
 const BLOCK: usize = 64;
@@ -81,12 +83,34 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
     );
 
     let scaling = Scaling::resolve("grand")?;
+    callback::<Instrument>(
+        &scaling,
+        seconds,
+        max_voices,
+        "RK4 at 96 kHz, the reference",
+    )?;
+    callback::<ExponentialInstrument>(
+        &scaling,
+        seconds,
+        max_voices,
+        "ETDRK4 at 48 kHz, the live integrator",
+    )?;
+    Ok(())
+}
+
+/// The audio callback on engine `E` with 1, 2, 4 … `max_voices` voices sounding, and memory.
+fn callback<E: VoicePool>(
+    scaling: &LoadedScaling,
+    seconds: f64,
+    max_voices: usize,
+    label: &str,
+) -> Result<()> {
     let keys: Vec<usize> = (1..=KEYS).collect();
-    let piano = Piano::build(&scaling, &keys, max_voices)?;
+    let piano = Piano::<E>::build(scaling, &keys, max_voices)?;
     let settings = scaling.base.output_settings();
     let deadline = BLOCK as f64 / settings.rate_hz;
     println!(
-        "live callback, {BLOCK}-frame blocks at {:.0} kHz (deadline {:.2} ms), keys spread from A0 under the sustain pedal:",
+        "live callback ({label}), {BLOCK}-frame blocks at {:.0} kHz (deadline {:.2} ms), keys spread from A0 under the sustain pedal:",
         settings.rate_hz / 1e3,
         deadline * 1e3
     );
@@ -117,7 +141,7 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
     println!("  voices within the deadline (p99.9 below 50 % of it): {within}");
     let (synth, _handle) = loaded_synth(&piano, settings, max_voices, BLOCK);
     println!(
-        "memory: {:.1} kB of state and coefficients per voice; resident {:.0} MB with {max_voices} voices sounding",
+        "  memory: {:.1} kB of state per voice; resident {:.0} MB with {max_voices} voices sounding",
         synth.piano().instrument.bytes_per_voice() as f64 / 1e3,
         resident_bytes().unwrap_or(0) as f64 / 1e6
     );

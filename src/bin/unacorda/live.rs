@@ -1,5 +1,6 @@
 //! `play` and `devices`: the live shell around the library's audio engine.
 
+use crate::IntegratorArg;
 use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -7,6 +8,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use unacorda::audio::device::{self, midi_input, output_devices, CallbackStats, Fault};
 use unacorda::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
+use unacorda::engine::exponential::ExponentialInstrument;
+use unacorda::engine::{Instrument, VoicePool};
 use unacorda::midi::live::LiveParser;
 use unacorda::play::{Piano, MAX_VOICES};
 use unacorda::scaling::{Scaling, KEYS};
@@ -38,6 +41,10 @@ pub struct PlayArgs {
     /// Stop after this many audio callbacks (for tests on devices that play faster than real time).
     #[arg(long, value_name = "N")]
     pub callbacks: Option<u64>,
+    /// `exponential` (default): ETDRK4 on complex modes at 48 kHz, the live integrator; `rk4`: the
+    /// paper's RK4 at 96 kHz, the reference (slower: see `unacorda bench`).
+    #[arg(long, value_enum, default_value_t = IntegratorArg::Exponential)]
+    pub integrator: IntegratorArg,
     /// Fault test: report the device as lost after this many callbacks, as cpal would on unplug.
     #[arg(long, value_name = "N", hide = true)]
     pub lose_device_after: Option<u64>,
@@ -48,12 +55,12 @@ const REOPEN_ATTEMPTS: u32 = 5;
 const REOPEN_PAUSE_MS: u64 = 200;
 
 /// Open the output, giving the synth back with the error when it cannot be opened.
-fn open(
-    synth: Synth,
+fn open<E: VoicePool>(
+    synth: Synth<E>,
     args: &PlayArgs,
     rate_hz: u32,
     stats: &Arc<CallbackStats>,
-) -> Result<device::Output, (anyhow::Error, Option<Box<Synth>>)> {
+) -> Result<device::Output<E>, device::Refused<E>> {
     device::start(
         synth,
         args.device.as_deref(),
@@ -61,16 +68,15 @@ fn open(
         args.buffer,
         stats.clone(),
     )
-    .map_err(|(e, synth)| (e.into(), synth))
 }
 
 /// After the stream reported the device lost: take the synth back and open the device again
 /// (a few attempts), continuing with the same voices, queue and clock.
-fn reopen(
-    output: device::Output,
+fn reopen<E: VoicePool>(
+    output: device::Output<E>,
     args: &PlayArgs,
     stats: &Arc<CallbackStats>,
-) -> Result<device::Output> {
+) -> Result<device::Output<E>> {
     let (device, rate_hz) = (output.device.clone(), output.rate_hz);
     let Some(mut synth) = output.close() else {
         bail!("audio device {device} lost, and its stream did not return the engine; stopped");
@@ -90,7 +96,7 @@ fn reopen(
                 eprintln!(
                     "audio: reopening {device} failed (attempt {attempt}/{REOPEN_ATTEMPTS}): {e:#}"
                 );
-                last = Some(e);
+                last = Some(anyhow::Error::from(e));
                 match back {
                     Some(s) => synth = *s,
                     None => break,
@@ -106,6 +112,14 @@ fn reopen(
 const FILE_TAIL_S: f64 = 2.0;
 
 pub fn play(args: PlayArgs) -> Result<()> {
+    match args.integrator {
+        IntegratorArg::Rk4 => play_on::<Instrument>(args),
+        IntegratorArg::Exponential => play_on::<ExponentialInstrument>(args),
+    }
+}
+
+/// `play` on the engine `E`.
+fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     if !(1..=MAX_VOICES).contains(&args.voices) {
         bail!("--voices {}: expected 1 to {MAX_VOICES}", args.voices);
     }
@@ -123,7 +137,7 @@ pub fn play(args: PlayArgs) -> Result<()> {
     let scaling = Scaling::resolve(&args.keyboard)?;
     let keys: Vec<usize> = (1..=KEYS).collect();
     eprintln!("building {} keys on one soundboard…", keys.len());
-    let piano = Piano::build(&scaling, &keys, args.voices)?;
+    let piano = Piano::<E>::build(&scaling, &keys, args.voices)?;
     let settings = scaling.base.output_settings();
     let (synth, handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
     let clock = handle.clock.clone();
@@ -225,9 +239,9 @@ pub fn play(args: PlayArgs) -> Result<()> {
 /// queue's producer into its callback, which parses the bytes with the same [`LiveParser`] the
 /// tests feed and stamps each event one block ahead of the audio clock. The producer is shared
 /// (locked only by the MIDI thread, never by the audio thread) so that a reconnection can use it.
-fn connect_midi(
+fn connect_midi<E: VoicePool>(
     port: Option<&str>,
-    handle: &Arc<Mutex<SynthHandle>>,
+    handle: &Arc<Mutex<SynthHandle<E>>>,
 ) -> Result<(midir::MidiInputConnection<()>, String), String> {
     let (input, ports, names) = midi_input()?;
     let index = match port {
@@ -284,7 +298,7 @@ enum MidiLink {
 
 impl MidiLink {
     /// Check the port list (about once a second); say when the input goes or comes back.
-    fn watch(self, handle: &Arc<Mutex<SynthHandle>>) -> MidiLink {
+    fn watch<E: VoicePool>(self, handle: &Arc<Mutex<SynthHandle<E>>>) -> MidiLink {
         let present =
             |name: &str| midi_input().is_ok_and(|(_, _, names)| names.iter().any(|n| n == name));
         match self {

@@ -71,10 +71,10 @@ enum Command {
         /// Soft pedal: the hammer strikes one string of two (two of three).
         #[arg(long)]
         una_corda: bool,
-        /// One-key renders: `rk4`, the paper's RK4 at 10 × f_max (the reference), or
-        /// `exponential`, ETDRK4 on complex modes at the output rate (the live integrator, ~5 ×
-        /// faster, within 0.06 cents and 2 % decay of RK4 on c2).
-        #[arg(long, value_enum, default_value_t = IntegratorArg::Rk4, conflicts_with = "midi")]
+        /// `rk4`, the paper's RK4 at 10 × f_max (the reference), or `exponential`, ETDRK4 on
+        /// complex modes at the output rate (the live integrator: several times faster, within
+        /// 0.06 cents and 2 % decay of RK4 on c2).
+        #[arg(long, value_enum, default_value_t = IntegratorArg::Rk4)]
         integrator: IntegratorArg,
         /// Hammer speed at the strings (m/s), 0.01–10; default: the preset's.
         #[arg(
@@ -146,7 +146,7 @@ mod live;
 
 /// `--integrator` values.
 #[derive(Clone, Copy, clap::ValueEnum)]
-enum IntegratorArg {
+pub enum IntegratorArg {
     Rk4,
     Exponential,
 }
@@ -190,6 +190,80 @@ fn write_samples(out: &Path, rate_hz: f64, samples: &[f32]) -> Result<f64> {
     let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
     unacorda::audio::wav::write_f32(out, rate_hz as u32, samples)?;
     Ok(20.0 * f64::from(peak).max(1e-12).log10())
+}
+
+/// `render --offline --midi` on the engine `E`: the WAV streamed as it is rendered, Ctrl-C and
+/// write failures leaving a valid file and saying how much it holds.
+fn render_midi_file<E: unacorda::engine::VoicePool>(
+    scaling: &unacorda::scaling::LoadedScaling,
+    events: &[unacorda::midi::file::TimedEvent],
+    tail: f64,
+    voices: usize,
+    path: &Path,
+    out: &Path,
+    length_s: f64,
+) -> Result<()> {
+    let pb = progress_bar(length_s, "rendering");
+    let started = std::time::Instant::now();
+    let rate_hz = scaling.base.output_settings().rate_hz;
+    let mut wav = WavStream::create(out, rate_hz as u32)?;
+    // Ctrl-C ends the render at the next block and keeps what is written, a valid WAV.
+    let interrupted = Arc::new(AtomicBool::new(false));
+    {
+        let interrupted = interrupted.clone();
+        let _ = ctrlc::set_handler(move || interrupted.store(true, Ordering::Relaxed));
+    }
+    let (mut peak, mut failure) = (0f32, None);
+    let r = unacorda::render::render_midi_into::<E>(
+        scaling,
+        events,
+        tail,
+        voices,
+        |f| pb.set_position((f * 1000.0) as u64),
+        |_, _| {},
+        |block| {
+            peak = block.iter().fold(peak, |m, s| m.max(s.abs()));
+            if let Err(e) = wav.write(block) {
+                failure = Some(e);
+                return ControlFlow::Break(());
+            }
+            if interrupted.load(Ordering::Relaxed) {
+                return ControlFlow::Break(());
+            }
+            ControlFlow::Continue(())
+        },
+    );
+    pb.finish_and_clear();
+    if let Some(e) = failure {
+        return Err(e.into());
+    }
+    let r = match r {
+        Ok(r) => r,
+        Err(e) => {
+            // Nothing was rendered: leave no header-only file behind.
+            drop(wav);
+            let _ = std::fs::remove_file(out);
+            return Err(e).with_context(|| format!("{}", path.display()));
+        }
+    };
+    let written_s = wav.finish()?;
+    let summary = format!(
+        "{} events on {} keys sharing one soundboard, {} voices, {:.1} s of sound in {:.1} s, peak {:.1} dBFS",
+        events.len(),
+        r.keys.len(),
+        r.voices,
+        written_s,
+        started.elapsed().as_secs_f64(),
+        20.0 * f64::from(peak).max(1e-12).log10()
+    );
+    if r.frames < r.total_frames {
+        bail!(
+            "interrupted: {} holds the first {written_s:.2} s of {length_s:.2} s as a valid WAV ({summary})",
+            out.display()
+        );
+    }
+    eprintln!("wrote {} ({summary})", out.display());
+    Ok(())
 }
 
 fn main() -> std::process::ExitCode {
@@ -243,67 +317,16 @@ fn run(cli: Cli) -> Result<()> {
                         length_s - tail
                     );
                 }
-                let pb = progress_bar(length_s, "rendering");
-                let started = std::time::Instant::now();
-                let rate_hz = scaling.base.output_settings().rate_hz;
-                let mut wav = WavStream::create(&out, rate_hz as u32)?;
-                // Ctrl-C ends the render at the next block and keeps what is written, a valid WAV.
-                let interrupted = Arc::new(AtomicBool::new(false));
-                {
-                    let interrupted = interrupted.clone();
-                    let _ = ctrlc::set_handler(move || interrupted.store(true, Ordering::Relaxed));
-                }
-                let (mut peak, mut failure) = (0f32, None);
-                let r = unacorda::render::render_midi_into(
-                    &scaling,
-                    &events,
-                    tail,
-                    voices,
-                    |f| pb.set_position((f * 1000.0) as u64),
-                    |_, _| {},
-                    |block| {
-                        peak = block.iter().fold(peak, |m, s| m.max(s.abs()));
-                        if let Err(e) = wav.write(block) {
-                            failure = Some(e);
-                            return ControlFlow::Break(());
-                        }
-                        if interrupted.load(Ordering::Relaxed) {
-                            return ControlFlow::Break(());
-                        }
-                        ControlFlow::Continue(())
-                    },
-                );
-                pb.finish_and_clear();
-                if let Some(e) = failure {
-                    return Err(e.into());
-                }
-                let r = match r {
-                    Ok(r) => r,
-                    Err(e) => {
-                        // Nothing was rendered: leave no header-only file behind.
-                        drop(wav);
-                        let _ = std::fs::remove_file(&out);
-                        return Err(e).with_context(|| format!("{}", path.display()));
+                return match integrator {
+                    IntegratorArg::Rk4 => render_midi_file::<unacorda::engine::Instrument>(
+                        &scaling, &events, tail, voices, &path, &out, length_s,
+                    ),
+                    IntegratorArg::Exponential => {
+                        render_midi_file::<unacorda::engine::exponential::ExponentialInstrument>(
+                            &scaling, &events, tail, voices, &path, &out, length_s,
+                        )
                     }
                 };
-                let written_s = wav.finish()?;
-                let summary = format!(
-                    "{} events on {} keys sharing one soundboard, {} voices, {:.1} s of sound in {:.1} s, peak {:.1} dBFS",
-                    events.len(),
-                    r.keys.len(),
-                    r.voices,
-                    written_s,
-                    started.elapsed().as_secs_f64(),
-                    20.0 * f64::from(peak).max(1e-12).log10()
-                );
-                if r.frames < r.total_frames {
-                    bail!(
-                        "interrupted: {} holds the first {written_s:.2} s of {length_s:.2} s as a valid WAV ({summary})",
-                        out.display()
-                    );
-                }
-                eprintln!("wrote {} ({summary})", out.display());
-                return Ok(());
             }
             if !(0.001..=600.0).contains(&seconds) {
                 bail!("--seconds {seconds}: expected a duration in [0.001, 600] s");
