@@ -23,7 +23,8 @@
 //! a few input vectors `g_j = V^-1 b_j` and is read through a few output rows `r_o = c_o V`, so the
 //! stage states are never formed: each stage output is a dot product of the step's starting `z`
 //! with a precomputed row (`r`, `r E` or `r E²`) plus precomputed scalar responses to the earlier
-//! stages' inputs — for the board, responses at each voice's point to every voice's input.
+//! stages' inputs. The board, whose modes are known in closed form, is formed once per stage as
+//! modal displacements and velocities and read at each voice's point ([`Board`]).
 
 use super::duplex::duplex_damping_matrix;
 use super::hammer::HammerParams;
@@ -401,15 +402,33 @@ impl Board {
     }
 
     /// Fill `start` with the modal displacements and velocities through `1`, `E`, `E²`.
+    #[inline(always)]
     fn read_start(&mut self) {
-        for i in 0..self.zr.len() {
-            for (which, e) in [None, Some(&self.eh), Some(&self.ef)]
-                .into_iter()
-                .enumerate()
-            {
-                let (q, v) = self.modal(e, i);
-                self.start[which][0][i] = q;
-                self.start[which][1][i] = v;
+        let n = self.zr.len();
+        let (zr, zi) = (&self.zr[..n], &self.zi[..n]);
+        let (lr, li) = (&self.lam[0][..n], &self.lam[1][..n]);
+        for (which, e) in [None, Some(&self.eh), Some(&self.ef)]
+            .into_iter()
+            .enumerate()
+        {
+            let [q, v] = &mut self.start[which];
+            let (q, v) = (&mut q[..n], &mut v[..n]);
+            match e {
+                None => {
+                    for i in 0..n {
+                        q[i] = 2.0 * zr[i];
+                        v[i] = 2.0 * (lr[i] * zr[i] - li[i] * zi[i]);
+                    }
+                }
+                Some([er, ei]) => {
+                    let (er, ei) = (&er[..n], &ei[..n]);
+                    for i in 0..n {
+                        let a = er[i] * zr[i] - ei[i] * zi[i];
+                        let b = er[i] * zi[i] + ei[i] * zr[i];
+                        q[i] = 2.0 * a;
+                        v[i] = 2.0 * (lr[i] * a - li[i] * b);
+                    }
+                }
             }
         }
     }
@@ -438,22 +457,28 @@ impl Board {
     #[inline(always)]
     fn advance<const FMA: bool>(&mut self) {
         let n = self.zr.len();
+        let (zr, zi) = (&mut self.zr[..n], &mut self.zi[..n]);
+        let (er, ei) = (&self.ef[0][..n], &self.ef[1][..n]);
+        let [[g1r, g1i], [g2r, g2i], [g3r, g3i]] = &self.g;
+        let [f0, f1, f2, f3] = &self.force;
+        let (f0, f1, f2, f3) = (&f0[..n], &f1[..n], &f2[..n], &f3[..n]);
         for i in 0..n {
-            let (a, b) = (self.zr[i], self.zi[i]);
-            let (er, ei) = (self.ef[0][i], self.ef[1][i]);
-            let f = [
-                self.force[0][i],
-                self.force[1][i] + self.force[2][i],
-                self.force[3][i],
-            ];
-            let mut re = fma::<FMA>(er, a, -ei * b);
-            let mut im = fma::<FMA>(er, b, ei * a);
-            for (g, f) in self.g.iter().zip(f) {
-                re = fma::<FMA>(g[0][i], f, re);
-                im = fma::<FMA>(g[1][i], f, im);
-            }
-            self.zr[i] = re;
-            self.zi[i] = im;
+            let (a, b) = (zr[i], zi[i]);
+            let mid = f1[i] + f2[i];
+            let re = fma::<FMA>(er[i], a, -ei[i] * b);
+            let im = fma::<FMA>(er[i], b, ei[i] * a);
+            let re = fma::<FMA>(
+                g1r[i],
+                f0[i],
+                fma::<FMA>(g2r[i], mid, fma::<FMA>(g3r[i], f3[i], re)),
+            );
+            let im = fma::<FMA>(
+                g1i[i],
+                f0[i],
+                fma::<FMA>(g2i[i], mid, fma::<FMA>(g3i[i], f3[i], im)),
+            );
+            zr[i] = re;
+            zi[i] = im;
         }
         self.force.iter_mut().for_each(|f| f.fill(0.0));
     }
@@ -755,11 +780,6 @@ impl ExponentialInstrument {
     /// Number of voices in the pool.
     pub fn n_voices(&self) -> usize {
         self.voices.len()
-    }
-
-    /// Number of keys in the bank.
-    pub fn n_keys(&self) -> usize {
-        self.keys.len()
     }
 
     /// Step (s).
@@ -1224,7 +1244,6 @@ impl ExponentialUnison {
         let mut pool = ExponentialInstrument::with_pool(std::slice::from_ref(spec), 1)?;
         pool.assign(0, 0);
         pool.set_active(0, true);
-        pool.voices[0].active = true;
         Ok(ExponentialUnison(pool))
     }
 
@@ -1250,17 +1269,6 @@ impl ExponentialUnison {
 
     pub fn flops_per_step(&self) -> f64 {
         self.0.flops_per_step()
-    }
-
-    /// Complex modes stored over all blocks.
-    pub fn n_modes(&self) -> usize {
-        self.0.keys[0]
-            .strings
-            .iter()
-            .flatten()
-            .map(|b| b.e_full[0].len())
-            .sum::<usize>()
-            + self.0.board.zr.len()
     }
 }
 
