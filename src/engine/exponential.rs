@@ -1081,7 +1081,7 @@ impl ExponentialInstrument {
                 for (s, blocks) in km.strings.iter().enumerate() {
                     for (d, b) in blocks.iter().enumerate() {
                         let x = &w.start[s][d];
-                        let us = w.inputs.map(|i| i.strings[s][d]);
+                        let us: [[f64; 3]; 4] = std::array::from_fn(|p| w.inputs[p].strings[s][d]);
                         let out = |o: usize| string_out(&x[o], &b.resp[o][..], &us, which, &terms);
                         at.bridge[s][d] = [out(BRIDGE_Q), out(BRIDGE_V)];
                         if d == 0 && v.hammer_on && v.struck[s] {
@@ -1115,7 +1115,7 @@ impl ExponentialInstrument {
             let v = &mut self.voices[k];
             let km = &self.keys[v.key.expect("live voices have a key")];
             let w = &self.work[k];
-            let ah = w.inputs.map(|i| i.hammer_acc);
+            let ah: [f64; 4] = std::array::from_fn(|p| w.inputs[p].hammer_acc);
             if v.hammer_on {
                 let v0 = v.hammer_v;
                 let (v2, v3, v4) = (v0 + 0.5 * h * ah[0], v0 + 0.5 * h * ah[1], v0 + h * ah[2]);
@@ -1127,7 +1127,8 @@ impl ExponentialInstrument {
                     let z = &mut v.z[s][d];
                     propagate::<FMA>(&b.e_full, z);
                     for (j, gain) in b.gains.iter().enumerate() {
-                        drive::<FMA>(gain, w.inputs.map(|i| i.strings[s][d][j]), z);
+                        let u = std::array::from_fn(|p| w.inputs[p].strings[s][d][j]);
+                        drive::<FMA>(gain, u, z);
                     }
                 }
             }
