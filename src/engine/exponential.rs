@@ -1093,20 +1093,11 @@ impl ExponentialInstrument {
                     }
                 }
                 // The board at this voice's point, as every voice's earlier stages left it.
-                for d in 0..3 {
-                    let phi = &km.board_shape[d];
-                    at.board[d] = [
-                        dot::<FMA>(phi, &self.board.stage[0]),
-                        dot::<FMA>(phi, &self.board.stage[1]),
-                    ];
-                }
+                at.board = read_point::<FMA>(&km.board_shape, &self.board.stage);
                 at.hammer_y = hammer_stage_y(v, &w.inputs, stage, h);
                 let inputs = Self::forces(km, v, &at);
                 self.work[k].inputs[stage] = inputs;
-                let force = &mut self.board.force[stage];
-                for (phi, f) in km.board_shape.iter().zip(inputs.board) {
-                    axpy::<FMA>(force, phi, f);
-                }
+                drive_point::<FMA>(&mut self.board.force[stage], &km.board_shape, inputs.board);
             }
         }
         // The final update: hammers (classical RK4), strings, board.
@@ -1347,13 +1338,68 @@ unsafe fn dot_avx2(a: &[f64], b: &[f64]) -> f64 {
     sum
 }
 
-/// `y += a x` (equal lengths).
+/// The board at one point: `(phi_d . q, phi_d . qdot)` for d = T, L, P, in one pass over the modal
+/// displacements and velocities `qv` (six accumulators, SIMD lanes).
 #[inline(always)]
-fn axpy<const FMA: bool>(y: &mut [f64], x: &[f64], a: f64) {
-    let n = y.len().min(x.len());
-    let (y, x) = (&mut y[..n], &x[..n]);
+fn read_point<const FMA: bool>(phi: &[Vec<f64>; 3], qv: &[Vec<f64>; 2]) -> [[f64; 2]; 3] {
+    #[cfg(target_arch = "x86_64")]
+    if FMA {
+        // SAFETY: `FMA` is true only inside `step_avx2`, entered after detecting AVX2 and FMA.
+        return unsafe { read_point_avx2(phi, qv) };
+    }
+    std::array::from_fn(|d| [dot::<FMA>(&phi[d], &qv[0]), dot::<FMA>(&phi[d], &qv[1])])
+}
+
+/// [`read_point`] with explicit AVX2 + FMA.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn read_point_avx2(phi: &[Vec<f64>; 3], qv: &[Vec<f64>; 2]) -> [[f64; 2]; 3] {
+    use std::arch::x86_64::*;
+    let n = qv[0]
+        .len()
+        .min(qv[1].len())
+        .min(phi.iter().map(Vec::len).min().unwrap_or(0));
+    let (q, v) = (qv[0].as_ptr(), qv[1].as_ptr());
+    let p = [phi[0].as_ptr(), phi[1].as_ptr(), phi[2].as_ptr()];
+    let mut acc = [_mm256_setzero_pd(); 6];
+    let mut i = 0;
+    while i + LANES <= n {
+        let (x, y) = (_mm256_loadu_pd(q.add(i)), _mm256_loadu_pd(v.add(i)));
+        for d in 0..3 {
+            let f = _mm256_loadu_pd(p[d].add(i));
+            acc[2 * d] = _mm256_fmadd_pd(f, x, acc[2 * d]);
+            acc[2 * d + 1] = _mm256_fmadd_pd(f, y, acc[2 * d + 1]);
+        }
+        i += LANES;
+    }
+    let mut out = [[0.0; 2]; 3];
+    for d in 0..3 {
+        for k in 0..2 {
+            let mut x = [0.0; LANES];
+            _mm256_storeu_pd(x.as_mut_ptr(), acc[2 * d + k]);
+            out[d][k] = (x[0] + x[1]) + (x[2] + x[3]);
+        }
+    }
+    for j in i..n {
+        for d in 0..3 {
+            out[d][0] += phi[d][j] * qv[0][j];
+            out[d][1] += phi[d][j] * qv[1][j];
+        }
+    }
+    out
+}
+
+/// `force += phi_T u_T + phi_L u_L + phi_P u_P`, in one pass.
+#[inline(always)]
+fn drive_point<const FMA: bool>(force: &mut [f64], phi: &[Vec<f64>; 3], u: [f64; 3]) {
+    let n = force.len();
+    let (a, b, c) = (&phi[0][..n], &phi[1][..n], &phi[2][..n]);
     for i in 0..n {
-        y[i] = fma::<FMA>(x[i], a, y[i]);
+        force[i] = fma::<FMA>(
+            a[i],
+            u[0],
+            fma::<FMA>(b[i], u[1], fma::<FMA>(c[i], u[2], force[i])),
+        );
     }
 }
 
