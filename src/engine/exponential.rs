@@ -28,7 +28,7 @@
 
 use super::duplex::duplex_damping_matrix;
 use super::hammer::HammerParams;
-use super::system::{BuildError, Observation, Strike, UnisonSpec, STEAL_FADE_S};
+use super::system::{dot, BuildError, Observation, Strike, UnisonSpec, LANES, STEAL_FADE_S};
 use super::MAX_STRINGS;
 use faer::linalg::solvers::{PartialPivLu, Solve};
 use faer::{c64, Mat};
@@ -1295,49 +1295,6 @@ unsafe fn read3_avx2(zr: &[f64], zi: &[f64], rows: [&[f64]; 6]) -> [f64; 3] {
     ]
 }
 
-/// `a · b` (equal lengths), in SIMD lanes.
-#[inline(always)]
-fn dot<const FMA: bool>(a: &[f64], b: &[f64]) -> f64 {
-    #[cfg(target_arch = "x86_64")]
-    if FMA {
-        // SAFETY: `FMA` is true only inside `step_avx2`, entered after detecting AVX2 and FMA.
-        return unsafe { dot_avx2(a, b) };
-    }
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-/// [`dot`] with explicit AVX2 + FMA, four accumulators.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-unsafe fn dot_avx2(a: &[f64], b: &[f64]) -> f64 {
-    use std::arch::x86_64::*;
-    let n = a.len().min(b.len());
-    let mut acc = [_mm256_setzero_pd(); 4];
-    let mut i = 0;
-    while i + 16 <= n {
-        for (k, acc) in acc.iter_mut().enumerate() {
-            let at = i + 4 * k;
-            *acc = _mm256_fmadd_pd(
-                _mm256_loadu_pd(a.as_ptr().add(at)),
-                _mm256_loadu_pd(b.as_ptr().add(at)),
-                *acc,
-            );
-        }
-        i += 16;
-    }
-    let mut x = [0.0; LANES];
-    _mm256_storeu_pd(
-        x.as_mut_ptr(),
-        _mm256_add_pd(_mm256_add_pd(acc[0], acc[1]), _mm256_add_pd(acc[2], acc[3])),
-    );
-    let mut sum = (x[0] + x[1]) + (x[2] + x[3]);
-    while i < n {
-        sum += a[i] * b[i];
-        i += 1;
-    }
-    sum
-}
-
 /// The board at one point: `(phi_d . q, phi_d . qdot)` for d = T, L, P, in one pass over the modal
 /// displacements and velocities `qv` (six accumulators, SIMD lanes).
 #[inline(always)]
@@ -1402,9 +1359,6 @@ fn drive_point<const FMA: bool>(force: &mut [f64], phi: &[Vec<f64>; 3], u: [f64;
         );
     }
 }
-
-/// SIMD lanes of the mode loops (four f64 in an AVX2 register).
-const LANES: usize = 4;
 
 /// `a b + c`, fused when the step runs with FMA (a separate multiply and add otherwise, never
 /// the slow software `fma`).

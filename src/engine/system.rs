@@ -1148,12 +1148,12 @@ pub(super) fn has_avx2_fma() -> bool {
     }
 }
 
-const LANES: usize = 4;
+pub(super) const LANES: usize = 4;
 
 /// Dot product: the AVX2 + FMA kernel when `SIMD`, else independent lane accumulators (so that
 /// it vectorises without reassociation).
 #[inline(always)]
-fn dot<const SIMD: bool>(a: &[f64], b: &[f64]) -> f64 {
+pub(super) fn dot<const SIMD: bool>(a: &[f64], b: &[f64]) -> f64 {
     #[cfg(target_arch = "x86_64")]
     if SIMD {
         // SAFETY: `SIMD` is true only inside `step_avx2`, entered after detecting AVX2 and FMA.
