@@ -242,54 +242,62 @@ fn read(row: &[Vec<f64>; 2], z: &Modes) -> f64 {
         .sum()
 }
 
-/// One output's three rows read in one pass over `z` (SIMD lanes, re and im products in separate
-/// accumulators: six independent FMA chains).
+/// `R` outputs, each through its three rows `r`, `r E`, `r E²`, read in one pass over `z`.
 #[inline(always)]
-fn read3<const FMA: bool>(rows: &[[Vec<f64>; 2]; 3], z: &Modes) -> [f64; 3] {
-    let n = rows[0][0].len();
-    let [[r0, i0], [r1, i1], [r2, i2]] = rows;
+fn read_rows<const FMA: bool, const R: usize>(
+    rows: [&[[Vec<f64>; 2]; 3]; R],
+    z: &Modes,
+) -> [[f64; 3]; R] {
+    let n = rows[0][0][0].len();
+    let (zr, zi) = (&z.re[..n], &z.im[..n]);
     #[cfg(target_arch = "x86_64")]
     if FMA {
-        let rows = [&r0[..n], &i0[..n], &r1[..n], &i1[..n], &r2[..n], &i2[..n]];
         // SAFETY: `FMA` is true only inside `step_avx2`, entered after detecting AVX2 and FMA;
         // every row holds the block's `n` (a multiple of 4) modes and `z` at least as many.
-        return unsafe { read3_avx2(&z.re[..n], &z.im[..n], rows) };
+        return unsafe { read_rows_avx2(zr, zi, rows) };
     }
-    let mut a = [[0.0; LANES]; 6];
-    let zs = z.re[..n]
-        .chunks_exact(LANES)
-        .zip(z.im[..n].chunks_exact(LANES));
-    let rs = r0.chunks_exact(LANES).zip(i0.chunks_exact(LANES));
-    let rs1 = r1.chunks_exact(LANES).zip(i1.chunks_exact(LANES));
-    let rs2 = r2.chunks_exact(LANES).zip(i2.chunks_exact(LANES));
-    for ((((zr, zi), (r0, i0)), (r1, i1)), (r2, i2)) in zs.zip(rs).zip(rs1).zip(rs2) {
-        for l in 0..LANES {
-            a[0][l] = fma::<FMA>(r0[l], zr[l], a[0][l]);
-            a[1][l] = fma::<FMA>(i0[l], zi[l], a[1][l]);
-            a[2][l] = fma::<FMA>(r1[l], zr[l], a[2][l]);
-            a[3][l] = fma::<FMA>(i1[l], zi[l], a[3][l]);
-            a[4][l] = fma::<FMA>(r2[l], zr[l], a[4][l]);
-            a[5][l] = fma::<FMA>(i2[l], zi[l], a[5][l]);
-        }
-    }
-    let sum = |x: [f64; LANES]| (x[0] + x[1]) + (x[2] + x[3]);
-    [
-        sum(a[0]) - sum(a[1]),
-        sum(a[2]) - sum(a[3]),
-        sum(a[4]) - sum(a[5]),
-    ]
+    rows.map(|r| {
+        r.each_ref()
+            .map(|[re, im]| dot::<FMA>(re, zr) - dot::<FMA>(im, zi))
+    })
 }
 
-/// `z <- e^{lambda h} z` over the first `e[0].len()` modes.
+/// `z <- e^{lambda h} z + f1 g a + f2 g (b + c) + f3 g d` for the bridge input with stage values
+/// `[a, b, c, d]`, in one pass.
 #[inline(always)]
-fn propagate<const FMA: bool>(e: &[Vec<f64>; 2], z: &mut Modes) {
+fn propagate_drive<const FMA: bool>(
+    e: &[Vec<f64>; 2],
+    gain: &[[Vec<f64>; 2]; 3],
+    u: [f64; 4],
+    z: &mut Modes,
+) {
     let n = e[0].len();
     let (er, ei) = (&e[0][..n], &e[1][..n]);
+    let [[g1r, g1i], [g2r, g2i], [g3r, g3i]] = gain;
+    let (g1r, g1i, g2r, g2i, g3r, g3i) = (
+        &g1r[..n],
+        &g1i[..n],
+        &g2r[..n],
+        &g2i[..n],
+        &g3r[..n],
+        &g3i[..n],
+    );
     let (zr, zi) = (&mut z.re[..n], &mut z.im[..n]);
+    let (s1, s2, s3) = (u[0], u[1] + u[2], u[3]);
     for m in 0..n {
         let (a, b) = (zr[m], zi[m]);
-        zr[m] = fma::<FMA>(er[m], a, -ei[m] * b);
-        zi[m] = fma::<FMA>(er[m], b, ei[m] * a);
+        let re = fma::<FMA>(er[m], a, -ei[m] * b);
+        let im = fma::<FMA>(er[m], b, ei[m] * a);
+        zr[m] = fma::<FMA>(
+            g1r[m],
+            s1,
+            fma::<FMA>(g2r[m], s2, fma::<FMA>(g3r[m], s3, re)),
+        );
+        zi[m] = fma::<FMA>(
+            g1i[m],
+            s1,
+            fma::<FMA>(g2i[m], s2, fma::<FMA>(g3i[m], s3, im)),
+        );
     }
 }
 
@@ -528,6 +536,48 @@ struct KeyModes {
     damper_n_s_m: f64,
     /// `phi_T`, `phi_L`, `phi_P` of the board at this key's point (Eq. 5).
     board_shape: [Vec<f64>; 3],
+    /// Per block (zero where the key has no such string): contact stiffness and damping, the
+    /// damper felt's damping (T and P of a damped key), and `resp[o][j][kind]`, what one unit of
+    /// input `j` adds to output `o` at the later stages (see [`ETDRK4_STAGES`]).
+    lane_k: Lanes,
+    lane_c: Lanes,
+    lane_damper: Lanes,
+    resp: [[[Lanes; 2]; 3]; 4],
+}
+
+impl KeyModes {
+    fn new(strings: Vec<[Block; 3]>, spec: &UnisonSpec, board_shape: &[Vec<f64>; 3]) -> KeyModes {
+        let mut key = KeyModes {
+            contact_k: spec.contact.stiffness_n_m,
+            contact_c: spec.contact.damping_n_s_m,
+            hammer: spec.hammer,
+            has_damper: spec.damper.is_some(),
+            damper_n_s_m: spec.damper.map_or(0.0, |d| d.damping_n_s_m),
+            board_shape: board_shape.clone(),
+            lane_k: [0.0; BLOCKS],
+            lane_c: [0.0; BLOCKS],
+            lane_damper: [0.0; BLOCKS],
+            resp: [[[[0.0; BLOCKS]; 2]; 3]; 4],
+            strings,
+        };
+        for (s, blocks) in key.strings.iter().enumerate() {
+            for (d, block) in blocks.iter().enumerate() {
+                let b = 3 * s + d;
+                key.lane_k[b] = key.contact_k[d];
+                key.lane_c[b] = key.contact_c[d];
+                if d != 1 {
+                    key.lane_damper[b] = key.damper_n_s_m;
+                }
+                for (o, resp) in block.resp.iter().enumerate() {
+                    for (j, r) in resp.iter().enumerate() {
+                        key.resp[o][j][0][b] = r[0];
+                        key.resp[o][j][1][b] = r[1];
+                    }
+                }
+            }
+        }
+        key
+    }
 }
 
 /// Build one key's string blocks (the board's rows and inputs are added by the instrument).
@@ -617,26 +667,10 @@ fn key_strings(spec: &UnisonSpec, h: f64) -> Result<Vec<[Block; 3]>, BuildError>
     Ok(strings)
 }
 
-/// What the blocks read at one stage: `(psi.q, psi.qdot)` of each string direction at the bridge,
-/// the board's `(phi_d.q_b, phi_d.qdot_b)` at the voice's point, the strike-point displacements,
-/// the damper-point velocities (T, P) and the hammer's position.
-#[derive(Debug, Clone, Copy, Default)]
-struct StageOutputs {
-    bridge: [[[f64; 2]; 3]; MAX_STRINGS],
-    board: [[f64; 2]; 3],
-    strike_q: [f64; MAX_STRINGS],
-    damper_v: [[f64; 2]; MAX_STRINGS],
-    hammer_y: f64,
-}
-
-/// The explicit forces of one stage: each string block's inputs (bridge, felt, damper felt), the
-/// board's at the voice's point (T, L, P), the hammer's acceleration.
-#[derive(Debug, Clone, Copy, Default)]
-struct StageInputs {
-    strings: [[[f64; 3]; 3]; MAX_STRINGS],
-    board: [f64; 3],
-    hammer_acc: f64,
-}
+/// Blocks of one voice, `b = 3 s + d` for string `s` and direction `d` (T = 0, L = 1, P = 2): the
+/// per-stage glue (outputs, contact forces, inputs) runs lane-wise over all of them at once.
+const BLOCKS: usize = MAX_STRINGS * 3;
+type Lanes = [f64; BLOCKS];
 
 /// Per stage: the row read from the start state (0: `r`, 1: `r E`, 2: `r E²`) and the terms
 /// `(earlier stage, response kind (0: `r Q g`, 1: `r (E - 1) Q g`), coefficient)` (see the
@@ -669,8 +703,12 @@ struct Voice {
 /// A voice's working values within one step (kept between steps only to avoid allocation).
 #[derive(Debug, Clone, Copy, Default)]
 struct Work {
-    start: [[[[f64; 3]; 4]; 3]; MAX_STRINGS],
-    inputs: [StageInputs; 4],
+    /// `start[o][which][b]`: output `o` of block `b` through row `which` (`r`, `r E`, `r E²`) of
+    /// the step's starting modes.
+    start: [[Lanes; 3]; 4],
+    /// `u[p][j][b]`: input `j` (bridge, felt, damper felt) of block `b` at stage `p`.
+    u: [[Lanes; 3]; 4],
+    hammer_acc: [f64; 4],
 }
 
 /// Strings of up to 88 keys on one shared soundboard, advanced by ETDRK4 at the output rate: a
@@ -733,15 +771,7 @@ impl ExponentialInstrument {
                 .points
                 .get(spec.bridge_point)
                 .ok_or(BuildError::BridgePoint(spec.bridge_point))?;
-            keys.push(KeyModes {
-                strings,
-                contact_k: spec.contact.stiffness_n_m,
-                contact_c: spec.contact.damping_n_s_m,
-                hammer: spec.hammer,
-                has_damper: spec.damper.is_some(),
-                damper_n_s_m: spec.damper.map_or(0.0, |d| d.damping_n_s_m),
-                board_shape: point.shape.clone(),
-            });
+            keys.push(KeyModes::new(strings, spec, &point.shape));
         }
         let nk = keys.len();
         // Voice state sized for the largest key in each direction.
@@ -1018,33 +1048,6 @@ impl ExponentialInstrument {
         self.step_impl::<true>();
     }
 
-    /// The explicit forces of voice `k` at one stage.
-    fn forces(km: &KeyModes, v: &Voice, at: &StageOutputs) -> StageInputs {
-        let mut inputs = StageInputs::default();
-        let mut felt_total = 0.0;
-        for s in 0..km.strings.len() {
-            for d in 0..3 {
-                let (k, c) = (km.contact_k[d], km.contact_c[d]);
-                let [q, qd] = at.bridge[s][d];
-                let f = v.coupling * (k * (q - at.board[d][0]) + c * (qd - at.board[d][1]));
-                // The linear part holds -psi (k psi.q + c psi.qdot); the rest of -psi F is this.
-                inputs.strings[s][d][0] = k * q + c * qd - f;
-                inputs.board[d] += f;
-            }
-            if v.hammer_on && v.struck[s] {
-                let f = km.hammer.felt_force_n(at.hammer_y - at.strike_q[s]);
-                inputs.strings[s][0][1] = f;
-                felt_total += f;
-            }
-            if v.damper_down {
-                inputs.strings[s][0][2] = -km.damper_n_s_m * at.damper_v[s][0];
-                inputs.strings[s][2][2] = -km.damper_n_s_m * at.damper_v[s][1];
-            }
-        }
-        inputs.hammer_acc = -felt_total / km.hammer.mass_kg;
-        inputs
-    }
-
     #[inline(always)]
     fn step_impl<const FMA: bool>(&mut self) {
         let h = self.h;
@@ -1053,16 +1056,22 @@ impl ExponentialInstrument {
             let v = &self.voices[k];
             let km = &self.keys[v.key.expect("live voices have a key")];
             let w = &mut self.work[k];
+            w.start = [[[0.0; BLOCKS]; 3]; 4];
             for (s, blocks) in km.strings.iter().enumerate() {
                 for (d, b) in blocks.iter().enumerate() {
-                    let z = &v.z[s][d];
-                    w.start[s][d][BRIDGE_Q] = read3::<FMA>(&b.rows[BRIDGE_Q], z);
-                    w.start[s][d][BRIDGE_V] = read3::<FMA>(&b.rows[BRIDGE_V], z);
+                    let (z, lane) = (&v.z[s][d], 3 * s + d);
+                    let [q, qd] = read_rows::<FMA, 2>([&b.rows[BRIDGE_Q], &b.rows[BRIDGE_V]], z);
+                    for which in 0..3 {
+                        w.start[BRIDGE_Q][which][lane] = q[which];
+                        w.start[BRIDGE_V][which][lane] = qd[which];
+                    }
                     if d == 0 && v.hammer_on && v.struck[s] {
-                        w.start[s][d][STRIKE_Q] = read3::<FMA>(&b.rows[STRIKE_Q], z);
+                        let [y] = read_rows::<FMA, 1>([&b.rows[STRIKE_Q]], z);
+                        (0..3).for_each(|which| w.start[STRIKE_Q][which][lane] = y[which]);
                     }
                     if d != 1 && v.damper_down {
-                        w.start[s][d][DAMPER_V] = read3::<FMA>(&b.rows[DAMPER_V], z);
+                        let [y] = read_rows::<FMA, 1>([&b.rows[DAMPER_V]], z);
+                        (0..3).for_each(|which| w.start[DAMPER_V][which][lane] = y[which]);
                     }
                 }
             }
@@ -1070,34 +1079,14 @@ impl ExponentialInstrument {
         self.board.read_start();
         for (stage, &(which, terms)) in ETDRK4_STAGES.iter().enumerate() {
             self.board.form_stage::<FMA>(which, &terms);
-            for i in 0..self.live.len() {
-                let k = self.live[i];
+            for &k in &self.live {
                 let v = &self.voices[k];
-                let a = v.key.expect("live voices have a key");
-                let km = &self.keys[a];
-                let w = &self.work[k];
-                // Row `which` of the start plus the responses to earlier stages' inputs.
-                let mut at = StageOutputs::default();
-                for (s, blocks) in km.strings.iter().enumerate() {
-                    for (d, b) in blocks.iter().enumerate() {
-                        let x = &w.start[s][d];
-                        let us: [[f64; 3]; 4] = std::array::from_fn(|p| w.inputs[p].strings[s][d]);
-                        let out = |o: usize| string_out(&x[o], &b.resp[o][..], &us, which, &terms);
-                        at.bridge[s][d] = [out(BRIDGE_Q), out(BRIDGE_V)];
-                        if d == 0 && v.hammer_on && v.struck[s] {
-                            at.strike_q[s] = out(STRIKE_Q);
-                        }
-                        if d != 1 && v.damper_down {
-                            at.damper_v[s][d / 2] = out(DAMPER_V);
-                        }
-                    }
-                }
+                let km = &self.keys[v.key.expect("live voices have a key")];
+                let w = &mut self.work[k];
                 // The board at this voice's point, as every voice's earlier stages left it.
-                at.board = read_point::<FMA>(&km.board_shape, &self.board.stage);
-                at.hammer_y = hammer_stage_y(v, &w.inputs, stage, h);
-                let inputs = Self::forces(km, v, &at);
-                self.work[k].inputs[stage] = inputs;
-                drive_point::<FMA>(&mut self.board.force[stage], &km.board_shape, inputs.board);
+                let board = read_point::<FMA>(&km.board_shape, &self.board.stage);
+                let force = voice_stage(km, v, w, stage, which, &terms, board, h);
+                drive_point::<FMA>(&mut self.board.force[stage], &km.board_shape, force);
             }
         }
         // The final update: hammers (classical RK4), strings, board.
@@ -1106,8 +1095,9 @@ impl ExponentialInstrument {
             let v = &mut self.voices[k];
             let km = &self.keys[v.key.expect("live voices have a key")];
             let w = &self.work[k];
-            let ah: [f64; 4] = std::array::from_fn(|p| w.inputs[p].hammer_acc);
-            if v.hammer_on {
+            let ah = w.hammer_acc;
+            let felt = v.hammer_on;
+            if felt {
                 let v0 = v.hammer_v;
                 let (v2, v3, v4) = (v0 + 0.5 * h * ah[0], v0 + 0.5 * h * ah[1], v0 + h * ah[2]);
                 v.hammer_y += h / 6.0 * (v0 + 2.0 * v2 + 2.0 * v3 + v4);
@@ -1115,11 +1105,14 @@ impl ExponentialInstrument {
             }
             for (s, blocks) in km.strings.iter().enumerate() {
                 for (d, b) in blocks.iter().enumerate() {
-                    let z = &mut v.z[s][d];
-                    propagate::<FMA>(&b.e_full, z);
-                    for (j, gain) in b.gains.iter().enumerate() {
-                        let u = std::array::from_fn(|p| w.inputs[p].strings[s][d][j]);
-                        drive::<FMA>(gain, u, z);
+                    let (z, lane) = (&mut v.z[s][d], 3 * s + d);
+                    let u = |j: usize| std::array::from_fn(|p| w.u[p][j][lane]);
+                    propagate_drive::<FMA>(&b.e_full, &b.gains[0], u(0), z);
+                    if felt && d == 0 {
+                        drive::<FMA>(&b.gains[1], u(1), z);
+                    }
+                    if v.damper_down && d != 1 {
+                        drive::<FMA>(&b.gains[2], u(2), z);
                     }
                 }
             }
@@ -1197,32 +1190,85 @@ impl ExponentialInstrument {
     }
 }
 
-/// A string block's output at a stage: row `which` of the start state plus the responses to the
-/// inputs `u` of the earlier stages named in `terms`.
+/// One stage of one voice, lane-wise over its blocks: each block's outputs (row `which` of the
+/// start plus the responses to the earlier stages' inputs), the contact forces against the board
+/// at the voice's point (`board`: `(q, qdot)` for T, L, P), the felt and damper forces. Stores the
+/// stage's inputs in `w` and returns the force on the board at the voice's point (T, L, P).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn string_out(
-    x: &[f64; 3],
-    resp: &[[f64; 2]],
-    u: &[[f64; 3]; 4],
+fn voice_stage(
+    km: &KeyModes,
+    v: &Voice,
+    w: &mut Work,
+    stage: usize,
     which: usize,
     terms: &[(usize, usize, f64); 2],
-) -> f64 {
-    let mut y = x[which];
-    for &(p, kind, coef) in terms {
-        y += coef * (resp[0][kind] * u[p][0] + resp[1][kind] * u[p][1] + resp[2][kind] * u[p][2]);
+    board: [[f64; 2]; 3],
+    h: f64,
+) -> [f64; 3] {
+    let (felt, damped) = (v.hammer_on, v.damper_down);
+    let out = |o: usize| {
+        let mut y = w.start[o][which];
+        for &(p, kind, coef) in terms {
+            if coef == 0.0 {
+                continue;
+            }
+            for j in 0..3 {
+                if (j == 1 && !felt) || (j == 2 && !damped) {
+                    continue;
+                }
+                let (r, u) = (&km.resp[o][j][kind], &w.u[p][j]);
+                for b in 0..BLOCKS {
+                    y[b] += coef * r[b] * u[b];
+                }
+            }
+        }
+        y
+    };
+    let (q, qd) = (out(BRIDGE_Q), out(BRIDGE_V));
+    let (kc, cc) = (&km.lane_k, &km.lane_c);
+    let mut bridge = [0.0; BLOCKS];
+    let mut force = [0.0; BLOCKS];
+    for b in 0..BLOCKS {
+        let [bq, bv] = board[b % 3];
+        let f = v.coupling * (kc[b] * (q[b] - bq) + cc[b] * (qd[b] - bv));
+        // The linear part holds -psi (k psi.q + c psi.qdot); the rest of -psi F is this.
+        bridge[b] = kc[b] * q[b] + cc[b] * qd[b] - f;
+        force[b] = f;
     }
-    y
+    let mut felt_u = [0.0; BLOCKS];
+    let mut felt_total = 0.0;
+    if felt {
+        let y = hammer_stage_y(v, &w.hammer_acc, stage, h);
+        let strike = out(STRIKE_Q);
+        for s in (0..km.strings.len()).filter(|&s| v.struck[s]) {
+            let f = km.hammer.felt_force_n(y - strike[3 * s]);
+            felt_u[3 * s] = f;
+            felt_total += f;
+        }
+    }
+    let mut damper_u = [0.0; BLOCKS];
+    if damped {
+        let dv = out(DAMPER_V);
+        for b in 0..BLOCKS {
+            damper_u[b] = -km.lane_damper[b] * dv[b];
+        }
+    }
+    w.u[stage] = [bridge, felt_u, damper_u];
+    w.hammer_acc[stage] = -felt_total / km.hammer.mass_kg;
+    std::array::from_fn(|d| (0..MAX_STRINGS).map(|s| force[3 * s + d]).sum())
 }
 
 /// The hammer's position at `stage` of classical RK4 (it has no linear part): `y0`,
-/// `y0 + h/2 v0`, `y0 + h/2 v2`, `y0 + h v3` with `v2 = v0 + h/2 a1`, `v3 = v0 + h/2 a2`.
-fn hammer_stage_y(v: &Voice, inputs: &[StageInputs; 4], stage: usize, h: f64) -> f64 {
+/// `y0 + h/2 v0`, `y0 + h/2 v2`, `y0 + h v3` with `v2 = v0 + h/2 a1`, `v3 = v0 + h/2 a2`, from
+/// the accelerations `acc` of the earlier stages.
+fn hammer_stage_y(v: &Voice, acc: &[f64; 4], stage: usize, h: f64) -> f64 {
     let (y0, v0) = (v.hammer_y, v.hammer_v);
     match stage {
         0 => y0,
         1 => y0 + 0.5 * h * v0,
-        2 => y0 + 0.5 * h * (v0 + 0.5 * h * inputs[0].hammer_acc),
-        _ => y0 + h * (v0 + 0.5 * h * inputs[1].hammer_acc),
+        2 => y0 + 0.5 * h * (v0 + 0.5 * h * acc[0]),
+        _ => y0 + h * (v0 + 0.5 * h * acc[1]),
     }
 }
 
@@ -1264,35 +1310,54 @@ impl ExponentialUnison {
     }
 }
 
-/// [`read3`] with explicit AVX2 + FMA: six accumulators (re and im products of the three
-/// rows) over `n` modes, `n` a multiple of 4 and every slice `n` long.
+/// [`read_rows`] with explicit AVX2 + FMA: `6 R` accumulators (re and im products of every
+/// row) over `n` modes, `n` a multiple of 4 and every slice `n` long.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn read3_avx2(zr: &[f64], zi: &[f64], rows: [&[f64]; 6]) -> [f64; 3] {
+unsafe fn read_rows_avx2<const R: usize>(
+    zr: &[f64],
+    zi: &[f64],
+    rows: [&[[Vec<f64>; 2]; 3]; R],
+) -> [[f64; 3]; R] {
     use std::arch::x86_64::*;
     let n = zr.len();
-    debug_assert!(n % LANES == 0 && zi.len() == n && rows.iter().all(|r| r.len() == n));
-    let mut a = [_mm256_setzero_pd(); 6];
+    debug_assert!(n % LANES == 0 && zi.len() == n);
+    let mut ptr = [[[std::ptr::null::<f64>(); 2]; 3]; R];
+    for r in 0..R {
+        for which in 0..3 {
+            for k in 0..2 {
+                ptr[r][which][k] = rows[r][which][k][..n].as_ptr();
+            }
+        }
+    }
+    let mut acc = [[[_mm256_setzero_pd(); 2]; 3]; R];
     let mut i = 0;
     while i < n {
-        let x = _mm256_loadu_pd(zr.as_ptr().add(i));
-        let y = _mm256_loadu_pd(zi.as_ptr().add(i));
-        for (k, acc) in a.iter_mut().enumerate() {
-            let z = if k % 2 == 0 { x } else { y };
-            *acc = _mm256_fmadd_pd(_mm256_loadu_pd(rows[k].as_ptr().add(i)), z, *acc);
+        let z = [
+            _mm256_loadu_pd(zr.as_ptr().add(i)),
+            _mm256_loadu_pd(zi.as_ptr().add(i)),
+        ];
+        for (acc, ptr) in acc.iter_mut().zip(&ptr) {
+            for (acc, ptr) in acc.iter_mut().zip(ptr) {
+                for k in 0..2 {
+                    acc[k] = _mm256_fmadd_pd(_mm256_loadu_pd(ptr[k].add(i)), z[k], acc[k]);
+                }
+            }
         }
         i += LANES;
     }
-    let sum = |v: __m256d| {
-        let mut x = [0.0; LANES];
-        _mm256_storeu_pd(x.as_mut_ptr(), v);
-        (x[0] + x[1]) + (x[2] + x[3])
-    };
-    [
-        sum(a[0]) - sum(a[1]),
-        sum(a[2]) - sum(a[3]),
-        sum(a[4]) - sum(a[5]),
-    ]
+    // Horizontal sums written out (closures here would not inherit the target features).
+    let mut out = [[0.0; 3]; R];
+    for r in 0..R {
+        for which in 0..3 {
+            let mut x = [[0.0; LANES]; 2];
+            _mm256_storeu_pd(x[0].as_mut_ptr(), acc[r][which][0]);
+            _mm256_storeu_pd(x[1].as_mut_ptr(), acc[r][which][1]);
+            out[r][which] = ((x[0][0] + x[0][1]) + (x[0][2] + x[0][3]))
+                - ((x[1][0] + x[1][1]) + (x[1][2] + x[1][3]));
+        }
+    }
+    out
 }
 
 /// The board at one point: `(phi_d . q, phi_d . qdot)` for d = T, L, P, in one pass over the modal
