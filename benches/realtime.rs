@@ -1,6 +1,6 @@
 //! The real-time path under load, at the engine's 48 kHz output:
 //! - `callback/{voices}v_{frames}f` (RK4 at 96 kHz) and `callback_etd/…` (ETDRK4 at 48 kHz, the
-//!   live integrator): one audio callback ([`Synth::process`]) with 1, 8, 16 or 32
+//!   live integrator; `callback_etd_2cores/…` with its voices split over two cores): one audio callback ([`Synth::process`]) with 1, 8, 16 or 32
 //!   voices sounding (keys spread over the keyboard, sustain held, one shared soundboard) and 64-
 //!   or 128-frame blocks. Besides criterion's estimate, every block's time is recorded and the
 //!   median and p99.9 are printed as a fraction of the block's deadline.
@@ -28,11 +28,17 @@ fn keyboard<E: VoicePool>() -> (Piano<E>, unacorda::audio::synth::OutputSettings
 }
 
 fn callback(c: &mut Criterion) {
-    callback_on::<Instrument>(c, "callback", "RK4 at 96 kHz");
-    callback_on::<ExponentialInstrument>(c, "callback_etd", "ETDRK4 at 48 kHz");
+    callback_on::<Instrument>(c, "callback", "RK4 at 96 kHz", false);
+    callback_on::<ExponentialInstrument>(c, "callback_etd", "ETDRK4 at 48 kHz", false);
+    callback_on::<ExponentialInstrument>(
+        c,
+        "callback_etd_2cores",
+        "ETDRK4 at 48 kHz, voices split over two cores",
+        true,
+    );
 }
 
-fn callback_on<E: VoicePool>(c: &mut Criterion, name: &str, label: &str) {
+fn callback_on<E: VoicePool>(c: &mut Criterion, name: &str, label: &str, two_cores: bool) {
     let (piano, settings) = keyboard::<E>();
     let fs = settings.rate_hz;
     let mut report = Vec::new();
@@ -43,6 +49,9 @@ fn callback_on<E: VoicePool>(c: &mut Criterion, name: &str, label: &str) {
     for voices in [1usize, 8, 16, 32] {
         for frames in [64usize, 128] {
             let (mut synth, handle) = loaded_synth(&piano, settings, voices, frames);
+            if two_cores {
+                synth.use_second_core().expect("a helper thread starts");
+            }
             let mut out = vec![0f32; frames * 2];
             let mut times = Vec::new();
             group.throughput(Throughput::Elements(frames as u64));

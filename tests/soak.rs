@@ -4,7 +4,7 @@
 //! and inside [-1, 1], the callback must never allocate, and resident memory must stay flat once
 //! every voice slot has been used.
 //!
-//! `soak_short` (CI) plays 10 s on each engine; `soak_ten_minutes_rk4` and `…_etd` are marked
+//! `soak_short` (CI) plays 10 s on each engine (the live one on two cores, as `play` runs it); `soak_ten_minutes_rk4` and `…_etd` are marked
 //! long (`#[ignore]`):
 //! `cargo test --release --test soak -- --ignored --nocapture` (length: `UNACORDA_SOAK_S`, s).
 
@@ -71,7 +71,8 @@ fn random_events(rng: &mut Rng, held: &mut Vec<u8>, out: &mut [Option<Event>; 4]
     }
 }
 
-fn soak<E: VoicePool>(seconds: f64, engine: &str) {
+/// `two_cores`: as `play` runs the live integrator, half of the voices on a helper thread.
+fn soak<E: VoicePool>(seconds: f64, engine: &str, two_cores: bool) {
     const VOICES: usize = 6;
     const BLOCK: usize = 64;
     let scaling = Scaling::resolve("grand").unwrap();
@@ -79,6 +80,9 @@ fn soak<E: VoicePool>(seconds: f64, engine: &str) {
     let piano = Piano::<E>::build(&scaling, &keys, VOICES).unwrap();
     let settings = scaling.base.output_settings();
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
+    if two_cores {
+        synth.use_second_core().unwrap();
+    }
     let blocks = (seconds * settings.rate_hz / BLOCK as f64) as u64;
     let report_every = (10.0 * settings.rate_hz / BLOCK as f64) as u64;
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
@@ -150,8 +154,8 @@ fn soak<E: VoicePool>(seconds: f64, engine: &str) {
 
 #[test]
 fn soak_short() {
-    soak::<Instrument>(10.0, "RK4 at 96 kHz");
-    soak::<ExponentialInstrument>(10.0, "ETDRK4 at 48 kHz");
+    soak::<Instrument>(10.0, "RK4 at 96 kHz", false);
+    soak::<ExponentialInstrument>(10.0, "ETDRK4 at 48 kHz on two cores", true);
 }
 
 fn long_seconds() -> f64 {
@@ -164,11 +168,11 @@ fn long_seconds() -> f64 {
 #[test]
 #[ignore = "long: 10 minutes of sound (UNACORDA_SOAK_S to change)"]
 fn soak_ten_minutes_rk4() {
-    soak::<Instrument>(long_seconds(), "RK4 at 96 kHz");
+    soak::<Instrument>(long_seconds(), "RK4 at 96 kHz", false);
 }
 
 #[test]
 #[ignore = "long: 10 minutes of sound (UNACORDA_SOAK_S to change)"]
 fn soak_ten_minutes_etd() {
-    soak::<ExponentialInstrument>(long_seconds(), "ETDRK4 at 48 kHz");
+    soak::<ExponentialInstrument>(long_seconds(), "ETDRK4 at 48 kHz on two cores", true);
 }

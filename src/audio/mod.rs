@@ -1,8 +1,10 @@
 //! The sound shell: decimation to the output rate, the audio thread's engine ([`synth`]), the
-//! audio device ([`device`]) and WAV files.
+//! audio device ([`device`]), the helper thread that lends the callback a second core ([`helper`])
+//! and WAV files.
 
 pub mod decimate;
 pub mod device;
+pub mod helper;
 pub mod synth;
 pub mod wav;
 

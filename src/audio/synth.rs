@@ -7,7 +7,9 @@
 //! [-1, 1] leaves it: a voice that blows up is reset within the block, and a soft clipper bounds
 //! the output.
 
+use super::helper::Helper;
 use super::Decimator;
+use crate::engine::exponential::Pair;
 use crate::engine::{Instrument, VoicePool};
 use crate::midi::Event;
 use crate::play::Piano;
@@ -154,7 +156,13 @@ pub struct Synth<E: VoicePool = Instrument> {
     silence_j: f64,
     frame: u64,
     running: bool,
+    /// The board's volume velocity after each step of the current run of steps.
+    volume: Vec<f64>,
+    helper: Option<Helper>,
 }
+
+/// Most output frames advanced in one run of the engine (longer blocks take several).
+const RUN_FRAMES: usize = 1024;
 
 /// The other threads' side: schedule events, send commands, read the clock and the counters.
 pub struct SynthHandle<E: VoicePool = Instrument> {
@@ -213,6 +221,8 @@ impl<E: VoicePool> Synth<E> {
             silence_j: out.silence_j,
             frame: 0,
             running: true,
+            volume: vec![0.0; RUN_FRAMES * ratio as usize],
+            helper: None,
         };
         let handle = SynthHandle {
             events: prod,
@@ -247,18 +257,37 @@ impl<E: VoicePool> Synth<E> {
 
     /// Fill an interleaved block of `channels` channels (every channel the same signal).
     pub fn process(&mut self, out: &mut [f32], channels: usize) {
-        self.process_with(out, channels, |_, _| {});
+        // SAFETY: as in `process_with`.
+        unsafe {
+            no_denormals::no_denormals(|| self.render(out, channels.max(1), &mut |_, _| {}, false))
+        }
     }
 
     /// [`Synth::process`], calling `tap(instrument, frame)` after each output frame (for tests and
-    /// analysis; the no-op tap of `process` compiles away).
+    /// analysis; the engine then runs one frame at a time).
     pub fn process_with(&mut self, out: &mut [f32], channels: usize, mut tap: impl FnMut(&E, u64)) {
         // SAFETY: flush-to-zero and denormals-are-zero only change how subnormal results are
         // rounded (to zero) for the duration of the block on this thread; the guard restores MXCSR.
-        unsafe { no_denormals::no_denormals(|| self.render(out, channels.max(1), &mut tap)) }
+        unsafe { no_denormals::no_denormals(|| self.render(out, channels.max(1), &mut tap, true)) }
     }
 
-    fn render(&mut self, out: &mut [f32], channels: usize, tap: &mut impl FnMut(&E, u64)) {
+    /// Give the engine a second core from now on: a helper thread that advances half of the
+    /// live pool's voices while the callback advances the other half (engines that cannot split
+    /// ignore it).
+    pub fn use_second_core(&mut self) -> std::io::Result<()> {
+        self.helper = Some(Helper::spawn()?);
+        Ok(())
+    }
+
+    /// `frame_by_frame`: the engine runs one frame at a time (so that `tap` sees every frame);
+    /// otherwise it runs from event to event.
+    fn render(
+        &mut self,
+        out: &mut [f32],
+        channels: usize,
+        tap: &mut impl FnMut(&E, u64),
+        frame_by_frame: bool,
+    ) {
         self.clock
             .publish(self.frame, Instant::now(), (out.len() / channels) as u64);
         while let Ok(command) = self.control.try_recv() {
@@ -277,7 +306,9 @@ impl<E: VoicePool> Synth<E> {
             }
         }
         let block_start = self.frame;
-        for frame_out in out.chunks_exact_mut(channels) {
+        let ratio = self.decimator.ratio();
+        let mut frames = out.chunks_exact_mut(channels);
+        loop {
             while let Some(&Scheduled { frame, event }) = self.events.try_peek() {
                 if frame > self.frame {
                     break;
@@ -288,21 +319,39 @@ impl<E: VoicePool> Synth<E> {
                 }
                 self.piano.apply(event);
             }
-            let y = if self.running {
-                (self.next_pressure_pa() * self.scale) as f32
-            } else {
-                0.0
-            };
-            let y = if y.is_finite() {
-                soft_clip(y)
-            } else {
-                // Something blew up inside this frame: reset it now, output silence.
+            // The frames up to the next event (or the block's end) in one run of the engine.
+            let left = frames.len();
+            if left == 0 {
+                break;
+            }
+            let next = self.events.try_peek().map_or(u64::MAX, |e| e.frame);
+            let until = usize::try_from(next - self.frame).unwrap_or(usize::MAX);
+            let n = if frame_by_frame { 1 } else { left.min(until) };
+            let n = n.min(RUN_FRAMES);
+            if self.running {
+                let helper = self.helper.as_ref().map(|h| h as &dyn Pair);
+                let inst = &mut self.piano.instrument;
+                inst.run(&mut self.volume[..n * ratio], helper);
+            }
+            let mut blown = false;
+            for i in 0..n {
+                let y = if self.running {
+                    (self.pressure_pa(i * ratio..(i + 1) * ratio) * self.scale) as f32
+                } else {
+                    0.0
+                };
+                // Something blew up: silence until it is reset, below.
+                blown |= !y.is_finite();
+                let y = if blown { 0.0 } else { soft_clip(y) };
+                if let Some(frame_out) = frames.next() {
+                    frame_out.fill(y);
+                }
+                tap(&self.piano.instrument, self.frame);
+                self.frame += 1;
+            }
+            if blown {
                 self.reset_runaways();
-                0.0
-            };
-            frame_out.fill(y);
-            tap(&self.piano.instrument, self.frame);
-            self.frame += 1;
+            }
         }
         self.reset_runaways();
         let inst = &mut self.piano.instrument;
@@ -325,19 +374,16 @@ impl<E: VoicePool> Synth<E> {
         }
     }
 
-    /// Advance to the next output frame; returns its sound pressure (Pa).
-    fn next_pressure_pa(&mut self) -> f64 {
+    /// The sound pressure (Pa) of one output frame from the volume velocities of its steps.
+    fn pressure_pa(&mut self, steps: std::ops::Range<usize>) -> f64 {
         let mut out = [0.0];
-        loop {
-            let inst = &mut self.piano.instrument;
-            inst.step();
-            let q = inst.volume_velocity_m3_s();
+        for i in steps {
+            let q = self.volume[i];
             let p = self.monopole * (q - self.last_volume_velocity) * self.internal_rate_hz;
             self.last_volume_velocity = q;
-            if self.decimator.push(&[p], &mut out) {
-                return out[0];
-            }
+            self.decimator.push(&[p], &mut out);
         }
+        out[0]
     }
 }
 

@@ -33,6 +33,8 @@ use super::MAX_STRINGS;
 use faer::linalg::solvers::{PartialPivLu, Solve};
 use faer::{c64, Mat};
 use std::f64::consts::PI;
+use std::panic::AssertUnwindSafe;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// A block `x' = A x + B u` in its complex modes: eigen-decomposition and ETDRK4 weights.
 ///
@@ -350,7 +352,9 @@ struct Board {
     /// modal force of each stage.
     start: [[Vec<f64>; 2]; 3],
     stage: [Vec<f64>; 2],
+    /// This half's modal force of each stage, and both halves' together.
     force: [Vec<f64>; 4],
+    total: [Vec<f64>; 4],
 }
 
 impl Board {
@@ -370,6 +374,7 @@ impl Board {
             start: std::array::from_fn(|_| [vec![0.0; n], vec![0.0; n]]),
             stage: [vec![0.0; n], vec![0.0; n]],
             force: std::array::from_fn(|_| vec![0.0; n]),
+            total: std::array::from_fn(|_| vec![0.0; n]),
         };
         for i in 0..n {
             let w = 2.0 * PI * board.freq_hz[i];
@@ -451,7 +456,7 @@ impl Board {
             dst.copy_from_slice(&self.start[which][x]);
             for &(p, kind, coef) in terms {
                 if coef != 0.0 {
-                    let (c, f) = (&c[kind][..n], &self.force[p][..n]);
+                    let (c, f) = (&c[kind][..n], &self.total[p][..n]);
                     for i in 0..n {
                         dst[i] = fma::<FMA>(coef * c[i], f[i], dst[i]);
                     }
@@ -468,7 +473,7 @@ impl Board {
         let (zr, zi) = (&mut self.zr[..n], &mut self.zi[..n]);
         let (er, ei) = (&self.ef[0][..n], &self.ef[1][..n]);
         let [[g1r, g1i], [g2r, g2i], [g3r, g3i]] = &self.g;
-        let [f0, f1, f2, f3] = &self.force;
+        let [f0, f1, f2, f3] = &self.total;
         let (f0, f1, f2, f3) = (&f0[..n], &f1[..n], &f2[..n], &f3[..n]);
         for i in 0..n {
             let (a, b) = (zr[i], zi[i]);
@@ -711,17 +716,94 @@ struct Work {
     hammer_acc: [f64; 4],
 }
 
-/// Strings of up to 88 keys on one shared soundboard, advanced by ETDRK4 at the output rate: a
-/// bank of keys and a fixed pool of voices with the same behaviour as [`super::Instrument`] (assign,
-/// steal with a fade, strike in the current motion, dampers, silent voices retired, runaways reset).
+/// Half of the pool's voices (even or odd indices) with its working values and its own replica of
+/// the board: what one core advances. Both replicas see the same forces in the same order, so they
+/// stay identical bit for bit whether the halves run in turn on one core or at once on two.
 #[derive(Debug, Clone)]
-pub struct ExponentialInstrument {
-    keys: Vec<KeyModes>,
+struct Half {
+    set: VoiceSet,
     board: Board,
+    steps: u64,
+}
+
+/// Voices with their working values, and which of them are simulated.
+#[derive(Debug, Clone)]
+struct VoiceSet {
     voices: Vec<Voice>,
     work: Vec<Work>,
     live: Vec<usize>,
+}
+
+/// What the two halves hand each other within a step: each half's modal force on the board at
+/// each stage (f64 bits; relaxed stores and loads ordered by the meeting counters), and each half's
+/// last finished phase (`4 step + stage + 1`). Lock-free: a half waits for the other by spinning
+/// on its counter, never by blocking.
+#[derive(Debug)]
+struct Exchange {
+    force: Vec<AtomicU64>,
+    modes: usize,
+    phase: [Padded; 2],
+    abandoned: AtomicBool,
+}
+
+/// A counter on its own cache line (the two halves write theirs from different cores).
+#[derive(Debug, Default)]
+#[repr(align(128))]
+struct Padded(AtomicU64);
+
+impl Exchange {
+    fn new(modes: usize) -> Exchange {
+        Exchange {
+            force: (0..2 * 4 * modes).map(|_| AtomicU64::new(0)).collect(),
+            modes,
+            phase: Default::default(),
+            abandoned: AtomicBool::new(false),
+        }
+    }
+
+    fn slot(&self, half: usize, stage: usize) -> &[AtomicU64] {
+        let start = (half * 4 + stage) * self.modes;
+        &self.force[start..start + self.modes]
+    }
+
+    /// Announce that `half` has finished `phase` and wait until the other half has too (or has
+    /// been abandoned after a panic).
+    fn meet(&self, half: usize, phase: u64) {
+        self.phase[half].0.store(phase, Ordering::Release);
+        while self.phase[1 - half].0.load(Ordering::Acquire) < phase {
+            if self.abandoned.load(Ordering::Relaxed) {
+                return;
+            }
+            std::hint::spin_loop();
+        }
+    }
+}
+
+impl Clone for Exchange {
+    fn clone(&self) -> Exchange {
+        Exchange::new(self.modes)
+    }
+}
+
+/// Runs two jobs at once, one on another core. The real-time shell implements it with a helper
+/// thread (the engine holds no threads); the live pool uses it to split its voices over two cores.
+pub trait Pair {
+    /// Run `there` on the other core and `here` on this one; return when both have finished.
+    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut());
+}
+
+/// Strings of up to 88 keys on one shared soundboard, advanced by ETDRK4 at the output rate: a
+/// bank of keys and a fixed pool of voices with the same behaviour as [`super::Instrument`] (assign,
+/// steal with a fade, strike in the current motion, dampers, silent voices retired, runaways reset).
+/// Voices `k` live in half `k % 2`; [`ExponentialInstrument::run`] advances the halves on two
+/// cores when given a [`Pair`], in turn on one otherwise, with the same result.
+#[derive(Debug, Clone)]
+pub struct ExponentialInstrument {
+    keys: Vec<KeyModes>,
+    halves: [Half; 2],
+    exchange: Exchange,
     voice_of_key: Vec<Option<usize>>,
+    n_voices: usize,
     h: f64,
     fade_steps: u32,
     fast_path: bool,
@@ -794,22 +876,46 @@ impl ExponentialInstrument {
             hammer_y: 0.0,
             hammer_v: 0.0,
         };
+        let board = Board::new(board, h);
+        let halves = std::array::from_fn(|half| {
+            let n = (voices + 1 - half) / 2;
+            Half {
+                set: VoiceSet {
+                    voices: vec![voice.clone(); n],
+                    work: vec![Work::default(); n],
+                    live: Vec::with_capacity(n),
+                },
+                board: board.clone(),
+                steps: 0,
+            }
+        });
         Ok(ExponentialInstrument {
-            board: Board::new(board, h),
+            exchange: Exchange::new(board.zr.len()),
+            halves,
             keys,
-            voices: vec![voice; voices],
-            work: vec![Work::default(); voices],
-            live: Vec::with_capacity(voices),
             voice_of_key: vec![None; nk],
+            n_voices: voices,
             h,
             fade_steps: ((STEAL_FADE_S / h).round() as u32).max(1),
             fast_path: super::system::has_avx2_fma(),
         })
     }
 
+    fn voice(&self, k: usize) -> &Voice {
+        &self.halves[k % 2].set.voices[k / 2]
+    }
+
+    fn voice_mut(&mut self, k: usize) -> &mut Voice {
+        &mut self.halves[k % 2].set.voices[k / 2]
+    }
+
+    fn board(&self) -> &Board {
+        &self.halves[0].board
+    }
+
     /// Number of voices in the pool.
     pub fn n_voices(&self) -> usize {
-        self.voices.len()
+        self.n_voices
     }
 
     /// Step (s).
@@ -818,7 +924,7 @@ impl ExponentialInstrument {
     }
 
     pub fn key_of_voice(&self, k: usize) -> Option<usize> {
-        self.voices[k].key
+        self.voice(k).key
     }
 
     pub fn voice_of_key(&self, key: usize) -> Option<usize> {
@@ -826,20 +932,20 @@ impl ExponentialInstrument {
     }
 
     pub fn is_active(&self, k: usize) -> bool {
-        self.voices[k].active
+        self.voice(k).active
     }
 
     pub fn is_fading(&self, k: usize) -> bool {
-        self.voices[k].fade_left > 0
+        self.voice(k).fade_left > 0
     }
 
     /// Give voice `k` to `key`, at rest, damper lifted, inactive until struck (as
     /// [`super::Instrument::assign`]); never allocates.
     pub fn assign(&mut self, k: usize, key: usize) {
-        if let Some(old) = self.voices[k].key {
+        if let Some(old) = self.voice(k).key {
             self.voice_of_key[old] = None;
         }
-        let v = &mut self.voices[k];
+        let v = self.voice_mut(k);
         v.key = Some(key);
         v.z.iter_mut().flatten().for_each(Modes::clear);
         (v.active, v.hammer_on, v.damper_down) = (false, false, false);
@@ -849,25 +955,26 @@ impl ExponentialInstrument {
 
     /// Hand sounding voice `k` to `key` after a fade (as [`super::Instrument::steal`]).
     pub fn steal(&mut self, k: usize, key: usize, strike: Strike) {
-        if !self.voices[k].active {
+        if !self.voice(k).active {
             self.assign(k, key);
             self.strike_voice(k, strike);
             return;
         }
-        if let Some(old) = self.voices[k].key {
+        if let Some(old) = self.voice(k).key {
             if self.voice_of_key[old] == Some(k) {
                 self.voice_of_key[old] = None;
             }
         }
-        if let Some((old_pending, _)) = self.voices[k].pending {
+        if let Some((old_pending, _)) = self.voice(k).pending {
             if old_pending != key {
                 self.voice_of_key[old_pending] = None;
             }
         }
         self.voice_of_key[key] = Some(k);
-        let v = &mut self.voices[k];
+        let fade_steps = self.fade_steps;
+        let v = self.voice_mut(k);
         if v.fade_left == 0 {
-            v.fade_left = self.fade_steps;
+            v.fade_left = fade_steps;
         }
         v.pending = Some((key, strike));
         v.damper_down = false;
@@ -875,12 +982,12 @@ impl ExponentialInstrument {
 
     /// Launch voice `k`'s hammer at its strings from their current displacement.
     pub fn strike_voice(&mut self, k: usize, strike: Strike) {
-        let Some(key) = self.voices[k].key else {
+        let Some(key) = self.voice(k).key else {
             return;
         };
         let km = &self.keys[key];
         let n = strike.strings_struck(km.strings.len());
-        let v = &mut self.voices[k];
+        let v = &mut self.halves[k % 2].set.voices[k / 2];
         v.struck = [false; MAX_STRINGS];
         v.struck[..n].iter_mut().for_each(|s| *s = true);
         v.hammer_y = (0..n)
@@ -897,17 +1004,17 @@ impl ExponentialInstrument {
 
     /// Include voice `k` in the simulation without striking it, or leave it out.
     pub fn set_active(&mut self, k: usize, active: bool) {
-        let v = &mut self.voices[k];
+        let v = self.voice_mut(k);
         v.active = v.key.is_some() && (active || v.hammer_on || v.fade_left > 0);
     }
 
     /// Lower or lift voice `k`'s damper (keys without one ignore it; a fading voice's applies to
     /// the key that follows).
     pub fn set_damper_voice(&mut self, k: usize, down: bool) {
-        let v = &self.voices[k];
+        let v = self.voice(k);
         let key = v.pending.map(|(key, _)| key).or(v.key);
         let has = key.is_some_and(|key| self.keys[key].has_damper);
-        self.voices[k].damper_down = down && has;
+        self.voice_mut(k).damper_down = down && has;
     }
 
     /// Voice 0's damper.
@@ -917,7 +1024,7 @@ impl ExponentialInstrument {
 
     /// Mechanical energy in voice `k`'s strings (J), from its complex modes.
     pub fn voice_energy_j(&self, k: usize) -> f64 {
-        let v = &self.voices[k];
+        let v = self.voice(k);
         let Some(key) = v.key else {
             return 0.0;
         };
@@ -934,8 +1041,8 @@ impl ExponentialInstrument {
     /// Stop simulating silent voices (as [`super::Instrument::retire_silent`]).
     pub fn retire_silent(&mut self, threshold_j: f64) -> usize {
         let mut retired = 0;
-        for k in 0..self.voices.len() {
-            let v = &self.voices[k];
+        for k in 0..self.n_voices {
+            let v = self.voice(k);
             let Some(key) = v.key else {
                 continue;
             };
@@ -946,7 +1053,7 @@ impl ExponentialInstrument {
                 && (v.damper_down || undamped)
                 && self.voice_energy_j(k) < threshold_j
             {
-                let v = &mut self.voices[k];
+                let v = self.voice_mut(k);
                 v.z.iter_mut().flatten().for_each(Modes::clear);
                 v.active = false;
                 retired += 1;
@@ -958,9 +1065,9 @@ impl ExponentialInstrument {
     /// Reset voices (and the board) that hold a non-finite value or more than `bound_j`.
     pub fn reset_runaways(&mut self, bound_j: f64) -> usize {
         let mut reset = 0;
-        for k in 0..self.voices.len() {
+        for k in 0..self.n_voices {
             let e = self.voice_energy_j(k);
-            let v = &mut self.voices[k];
+            let v = self.voice_mut(k);
             let hammer_ok = v.hammer_y.is_finite() && v.hammer_v.is_finite();
             if v.active && (!e.is_finite() || e > bound_j || !hammer_ok) {
                 v.z.iter_mut().flatten().for_each(Modes::clear);
@@ -970,9 +1077,9 @@ impl ExponentialInstrument {
                 reset += 1;
             }
         }
-        let board_j = self.board.energy_j();
+        let board_j = self.board().energy_j();
         if !board_j.is_finite() || board_j > bound_j {
-            self.board.clear();
+            self.halves.iter_mut().for_each(|h| h.board.clear());
             reset += 1;
         }
         reset
@@ -980,7 +1087,7 @@ impl ExponentialInstrument {
 
     /// Net volume velocity of the board (m^3/s).
     pub fn volume_velocity_m3_s(&self) -> f64 {
-        self.board.volume_velocity()
+        self.board().volume_velocity()
     }
 
     /// Forces of voice `k` and the board's velocity at its point, now (Eq. 19).
@@ -989,14 +1096,14 @@ impl ExponentialInstrument {
             volume_velocity_m3_s: self.volume_velocity_m3_s(),
             ..Observation::default()
         };
-        let v = &self.voices[k];
+        let v = self.voice(k);
         let Some(key) = v.key else {
             return obs;
         };
         let km = &self.keys[key];
         let mut rb = [[0.0; 2]; 3];
         for (d, rb) in rb.iter_mut().enumerate() {
-            let (q, v) = self.board.at(&km.board_shape[d]);
+            let (q, v) = self.board().at(&km.board_shape[d]);
             *rb = [q, v];
             obs.bridge_velocity_m_s[d] = rb[1];
         }
@@ -1024,38 +1131,189 @@ impl ExponentialInstrument {
 
     /// Advance one step of ETDRK4 over the active voices and the board; never allocates.
     pub fn step(&mut self) {
-        self.live.clear();
-        for (k, v) in self.voices.iter().enumerate() {
-            if v.active && v.key.is_some() {
-                self.live.push(k);
+        self.run(&mut [0.0], None);
+    }
+
+    /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity (m^3/s)
+    /// after each; the two halves of the pool on two cores through `pair`, in turn without one
+    /// (the same result bit for bit). Never allocates.
+    pub fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn Pair>) {
+        let mut done = 0;
+        while done < volume_velocity.len() {
+            // Chunks end where a stolen voice's fade does, so its next key starts between steps.
+            let fade = self.halves.iter().flat_map(|h| &h.set.voices);
+            let fade = fade
+                .filter(|v| v.fade_left > 0)
+                .map(|v| v.fade_left as usize);
+            let n = fade.min().unwrap_or(usize::MAX);
+            let n = n.min(volume_velocity.len() - done);
+            for half in &mut self.halves {
+                let set = &mut half.set;
+                set.live.clear();
+                for (i, v) in set.voices.iter().enumerate() {
+                    if v.active && v.key.is_some() {
+                        set.live.push(i);
+                    }
+                }
             }
+            let out = &mut volume_velocity[done..done + n];
+            match pair {
+                Some(pair) if self.halves.iter().all(|h| !h.set.live.is_empty()) => {
+                    self.run_split(out, pair)
+                }
+                _ => self.run_alone(out),
+            }
+            self.finish_fades();
+            done += n;
         }
+    }
+
+    /// Both halves in turn, stage by stage, on this core.
+    fn run_alone(&mut self, out: &mut [f64]) {
         #[cfg(target_arch = "x86_64")]
         if self.fast_path {
             // SAFETY: `fast_path` is set only when the CPU reports AVX2 and FMA.
-            unsafe { self.step_avx2() };
-            self.advance_fades();
+            unsafe { self.run_alone_avx2(out) };
             return;
         }
-        self.step_impl::<false>();
-        self.advance_fades();
+        self.run_alone_impl::<false>(out);
     }
 
-    /// The step compiled for AVX2 + FMA.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn step_avx2(&mut self) {
-        self.step_impl::<true>();
+    unsafe fn run_alone_avx2(&mut self, out: &mut [f64]) {
+        self.run_alone_impl::<true>(out);
     }
 
+    /// Both halves' voices against half 0's board replica, each half's forces summed as on two
+    /// cores (half 1's replica is brought up to date when the halves next split).
     #[inline(always)]
-    fn step_impl<const FMA: bool>(&mut self) {
-        let h = self.h;
-        // Every row each live voice reads, from the step's start.
-        for &k in &self.live {
-            let v = &self.voices[k];
-            let km = &self.keys[v.key.expect("live voices have a key")];
-            let w = &mut self.work[k];
+    fn run_alone_impl<const FMA: bool>(&mut self, out: &mut [f64]) {
+        let (keys, h, fade) = (&self.keys, self.h, self.fade_steps);
+        let [h0, h1] = &mut self.halves;
+        for q in out {
+            h0.set.begin::<FMA>(keys);
+            h1.set.begin::<FMA>(keys);
+            h0.board.read_start();
+            for (stage, plan) in ETDRK4_STAGES.iter().enumerate() {
+                let b0 = &mut h0.board;
+                b0.form_stage::<FMA>(plan.0, &plan.1);
+                h0.set
+                    .stage::<FMA>(keys, stage, plan, h, &b0.stage, &mut b0.force[stage]);
+                let mine = &mut h1.board.force[stage];
+                h1.set.stage::<FMA>(keys, stage, plan, h, &b0.stage, mine);
+                for ((t, f), o) in b0.total[stage].iter_mut().zip(&b0.force[stage]).zip(&*mine) {
+                    *t = f + o;
+                }
+                mine.fill(0.0);
+            }
+            h0.board.advance::<FMA>();
+            h0.set.finish::<FMA>(keys, h, fade);
+            h1.set.finish::<FMA>(keys, h, fade);
+            h0.steps += 1;
+            h1.steps += 1;
+            *q = h0.board.volume_velocity();
+        }
+    }
+
+    /// Half 1 on the other core through `pair`, half 0 here, meeting after every stage.
+    fn run_split(&mut self, out: &mut [f64], pair: &dyn Pair) {
+        let (keys, ex) = (&self.keys, &self.exchange);
+        let timing = (self.h, self.fade_steps, self.fast_path);
+        let [h0, h1] = &mut self.halves;
+        // Half 1's replica of the board was left behind while the halves ran on one core.
+        h1.board.zr.copy_from_slice(&h0.board.zr);
+        h1.board.zi.copy_from_slice(&h0.board.zi);
+        let steps = out.len();
+        // A panic on either side abandons the meetings, so the other side cannot wait forever,
+        // and is raised again here once both have stopped.
+        let mut panic = [None, None];
+        let [p0, p1] = &mut panic;
+        let mut there = || {
+            let run = AssertUnwindSafe(|| h1.run_part(keys, ex, 1, timing, steps, None));
+            if let Err(e) = std::panic::catch_unwind(run) {
+                ex.abandoned.store(true, Ordering::Relaxed);
+                *p1 = Some(e);
+            }
+        };
+        let mut here = || {
+            let run = AssertUnwindSafe(|| h0.run_part(keys, ex, 0, timing, steps, Some(out)));
+            if let Err(e) = std::panic::catch_unwind(run) {
+                ex.abandoned.store(true, Ordering::Relaxed);
+                *p0 = Some(e);
+            }
+        };
+        pair.join(&mut there, &mut here);
+        if let Some(e) = panic.into_iter().flatten().next() {
+            std::panic::resume_unwind(e);
+        }
+    }
+
+    /// At the end of a chunk, give every voice whose fade has ended its next key.
+    fn finish_fades(&mut self) {
+        for k in 0..self.n_voices {
+            let v = self.voice(k);
+            if v.fade_left != 0 || v.pending.is_none() {
+                continue;
+            }
+            if let Some((key, strike)) = self.voice_mut(k).pending.take() {
+                let damper_down = self.voice(k).damper_down;
+                self.assign(k, key);
+                self.strike_voice(k, strike);
+                self.set_damper_voice(k, damper_down);
+            }
+        }
+    }
+
+    /// Floating-point operations of one step in the current state, counted from the loops of
+    /// [`read_rows`], [`propagate_drive`] and [`drive`]: 4 per mode for each row read (a complex
+    /// multiply-add, real part), 6 for the propagation, 4 per non-zero input and final weight.
+    pub fn flops_per_step(&self) -> f64 {
+        let nb = self.board().zr.len();
+        // The board once per half: start reads (3 × 6), stage forms (2 × 2 per term), the
+        // update (14).
+        let mut flops = 2 * nb * (18 + 16 + 14);
+        for v in self.halves.iter().flat_map(|h| &h.set.voices) {
+            let (true, Some(key)) = (v.active, v.key) else {
+                continue;
+            };
+            let km = &self.keys[key];
+            for (s, blocks) in km.strings.iter().enumerate() {
+                for (d, b) in blocks.iter().enumerate() {
+                    let n = b.e_full[0].len();
+                    let struck = d == 0 && v.hammer_on && v.struck[s];
+                    let damped = d != 1 && v.damper_down;
+                    let ports = 2 + usize::from(struck) + usize::from(damped);
+                    let inputs = 1 + usize::from(struck) + usize::from(damped);
+                    flops += n * (ports * 3 * 4 + 6 + inputs * 3 * 4);
+                }
+            }
+            // Each voice's board reads and forces: 6 dots and 3 axpys per stage.
+            flops += nb * 4 * (6 + 3) * 2;
+        }
+        flops as f64
+    }
+
+    /// Complex modes stored per voice for the largest key, and for the board.
+    pub fn bytes_per_voice(&self) -> usize {
+        self.voice(0)
+            .z
+            .iter()
+            .flatten()
+            .map(|m| m.re.len() * 16)
+            .sum::<usize>()
+            + std::mem::size_of::<Work>()
+    }
+}
+
+impl VoiceSet {
+    /// Every row each live voice reads from the step's start.
+    #[inline(always)]
+    fn begin<const FMA: bool>(&mut self, keys: &[KeyModes]) {
+        for &i in &self.live {
+            let v = &self.voices[i];
+            let km = &keys[v.key.expect("live voices have a key")];
+            let w = &mut self.work[i];
             w.start = [[[0.0; BLOCKS]; 3]; 4];
             for (s, blocks) in km.strings.iter().enumerate() {
                 for (d, b) in blocks.iter().enumerate() {
@@ -1076,25 +1334,36 @@ impl ExponentialInstrument {
                 }
             }
         }
-        self.board.read_start();
-        for (stage, &(which, terms)) in ETDRK4_STAGES.iter().enumerate() {
-            self.board.form_stage::<FMA>(which, &terms);
-            for &k in &self.live {
-                let v = &self.voices[k];
-                let km = &self.keys[v.key.expect("live voices have a key")];
-                let w = &mut self.work[k];
-                // The board at this voice's point, as every voice's earlier stages left it.
-                let board = read_point::<FMA>(&km.board_shape, &self.board.stage);
-                let force = voice_stage(km, v, w, stage, which, &terms, board, h);
-                drive_point::<FMA>(&mut self.board.force[stage], &km.board_shape, force);
-            }
+    }
+
+    /// One ETDRK4 stage of these voices against the board's stage state `board` (modal `q`,
+    /// `qdot`), adding their modal force on the board to `force`.
+    #[inline(always)]
+    fn stage<const FMA: bool>(
+        &mut self,
+        keys: &[KeyModes],
+        stage: usize,
+        &(which, terms): &StagePlan,
+        h: f64,
+        board: &[Vec<f64>; 2],
+        force: &mut [f64],
+    ) {
+        for &i in &self.live {
+            let v = &self.voices[i];
+            let km = &keys[v.key.expect("live voices have a key")];
+            let at = read_point::<FMA>(&km.board_shape, board);
+            let f = voice_stage(km, v, &mut self.work[i], stage, which, &terms, at, h);
+            drive_point::<FMA>(force, &km.board_shape, f);
         }
-        // The final update: hammers (classical RK4), strings, board.
-        self.board.advance::<FMA>();
-        for &k in &self.live {
-            let v = &mut self.voices[k];
-            let km = &self.keys[v.key.expect("live voices have a key")];
-            let w = &self.work[k];
+    }
+
+    /// The step's end for these voices: hammers (classical RK4), strings, fades.
+    #[inline(always)]
+    fn finish<const FMA: bool>(&mut self, keys: &[KeyModes], h: f64, fade_steps: u32) {
+        for &i in &self.live {
+            let v = &mut self.voices[i];
+            let km = &keys[v.key.expect("live voices have a key")];
+            let w = &self.work[i];
             let ah = w.hammer_acc;
             let felt = v.hammer_on;
             if felt {
@@ -1126,67 +1395,90 @@ impl ExponentialInstrument {
                 }
             }
         }
-    }
-
-    /// Move every stolen voice one step along its fade; at the end, give it its next key.
-    fn advance_fades(&mut self) {
-        for k in 0..self.voices.len() {
-            let left = self.voices[k].fade_left;
-            if left == 0 {
-                continue;
+        // Stolen voices fade out along a raised cosine (their next key is given between chunks).
+        for v in &mut self.voices {
+            if v.fade_left > 0 {
+                v.fade_left -= 1;
+                let x = f64::from(v.fade_left) / f64::from(fade_steps);
+                v.coupling = 0.5 - 0.5 * (PI * x).cos();
             }
-            let left = left - 1;
-            self.voices[k].fade_left = left;
-            let x = f64::from(left) / f64::from(self.fade_steps);
-            self.voices[k].coupling = 0.5 - 0.5 * (PI * x).cos();
-            if left == 0 {
-                if let Some((key, strike)) = self.voices[k].pending {
-                    let damper_down = self.voices[k].damper_down;
-                    self.assign(k, key);
-                    self.strike_voice(k, strike);
-                    self.set_damper_voice(k, damper_down);
-                }
+        }
+    }
+}
+
+impl Half {
+    /// `steps` steps of this half, meeting the other half (on another core) after every stage;
+    /// `out` (half 0) receives the board's volume velocity after each step.
+    #[allow(clippy::too_many_arguments)]
+    fn run_part(
+        &mut self,
+        keys: &[KeyModes],
+        ex: &Exchange,
+        half: usize,
+        (h, fade, fast): (f64, u32, bool),
+        steps: usize,
+        mut out: Option<&mut [f64]>,
+    ) {
+        for n in 0..steps {
+            #[cfg(target_arch = "x86_64")]
+            if fast {
+                // SAFETY: `fast` is the pool's `fast_path`, set only when the CPU reports AVX2
+                // and FMA.
+                unsafe { self.split_step_avx2(keys, ex, half, h, fade) };
+            } else {
+                self.split_step::<false>(keys, ex, half, h, fade);
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            self.split_step::<false>(keys, ex, half, h, fade);
+            if let Some(out) = out.as_deref_mut() {
+                out[n] = self.board.volume_velocity();
             }
         }
     }
 
-    /// Floating-point operations of one step in the current state, counted from the loops of
-    /// [`read3`], [`propagate`] and [`drive`]: 4 per mode for each row read (a complex
-    /// multiply-add, real part), 6 for the propagation, 4 per non-zero input and final weight.
-    pub fn flops_per_step(&self) -> f64 {
-        let nb = self.board.zr.len();
-        // The board once: start reads (3 × 6), stage forms (2 × 2 per term), the update (14).
-        let mut flops = nb * (18 + 16 + 14);
-        for v in &self.voices {
-            let (true, Some(key)) = (v.active, v.key) else {
-                continue;
-            };
-            let km = &self.keys[key];
-            for (s, blocks) in km.strings.iter().enumerate() {
-                for (d, b) in blocks.iter().enumerate() {
-                    let n = b.e_full[0].len();
-                    let struck = d == 0 && v.hammer_on && v.struck[s];
-                    let damped = d != 1 && v.damper_down;
-                    let ports = 2 + usize::from(struck) + usize::from(damped);
-                    let inputs = 1 + usize::from(struck) + usize::from(damped);
-                    flops += n * (ports * 3 * 4 + 6 + inputs * 3 * 4);
-                }
-            }
-            // Each voice's board reads and forces: 6 dots and 3 axpys per stage.
-            flops += nb * 4 * (6 + 3) * 2;
-        }
-        flops as f64
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn split_step_avx2(
+        &mut self,
+        keys: &[KeyModes],
+        ex: &Exchange,
+        half: usize,
+        h: f64,
+        fade: u32,
+    ) {
+        self.split_step::<true>(keys, ex, half, h, fade);
     }
 
-    /// Complex modes stored per voice for the largest key, and for the board.
-    pub fn bytes_per_voice(&self) -> usize {
-        self.voices[0]
-            .z
-            .iter()
-            .flatten()
-            .map(|m| m.re.len() * 16)
-            .sum::<usize>()
-            + std::mem::size_of::<Work>()
+    #[inline(always)]
+    fn split_step<const FMA: bool>(
+        &mut self,
+        keys: &[KeyModes],
+        ex: &Exchange,
+        half: usize,
+        h: f64,
+        fade: u32,
+    ) {
+        self.set.begin::<FMA>(keys);
+        let b = &mut self.board;
+        b.read_start();
+        for (stage, plan) in ETDRK4_STAGES.iter().enumerate() {
+            b.form_stage::<FMA>(plan.0, &plan.1);
+            self.set
+                .stage::<FMA>(keys, stage, plan, h, &b.stage, &mut b.force[stage]);
+            // Publish this half's force, wait for the other's, and sum them (the same sum, in
+            // either order, on both sides).
+            for (slot, f) in ex.slot(half, stage).iter().zip(&b.force[stage]) {
+                slot.store(f.to_bits(), Ordering::Relaxed);
+            }
+            ex.meet(half, 4 * self.steps + stage as u64 + 1);
+            let other = ex.slot(1 - half, stage);
+            for ((t, f), o) in b.total[stage].iter_mut().zip(&b.force[stage]).zip(other) {
+                *t = f + f64::from_bits(o.load(Ordering::Relaxed));
+            }
+        }
+        b.advance::<FMA>();
+        self.set.finish::<FMA>(keys, h, fade);
+        self.steps += 1;
     }
 }
 

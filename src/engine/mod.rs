@@ -42,6 +42,9 @@ pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
     fn n_voices(&self) -> usize;
     fn step_s(&self) -> f64;
     fn step(&mut self);
+    /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity after
+    /// each; an engine that can split its voices over two cores does so through `pair`.
+    fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn exponential::Pair>);
     fn is_active(&self, k: usize) -> bool;
     fn set_active(&mut self, k: usize, active: bool);
     fn is_fading(&self, k: usize) -> bool;
@@ -91,6 +94,9 @@ macro_rules! voice_pool {
             }
             fn step(&mut self) {
                 <$t>::step(self)
+            }
+            fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn exponential::Pair>) {
+                <$t>::run(self, volume_velocity, pair)
             }
             fn is_active(&self, k: usize) -> bool {
                 <$t>::is_active(self, k)

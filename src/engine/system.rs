@@ -725,6 +725,19 @@ impl Instrument {
         self.flags.damper_down[0]
     }
 
+    /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity (m^3/s)
+    /// after each (one core: RK4's many small stages are not worth splitting).
+    pub fn run(
+        &mut self,
+        volume_velocity: &mut [f64],
+        _pair: Option<&dyn super::exponential::Pair>,
+    ) {
+        for q in volume_velocity {
+            self.step();
+            *q = self.volume_velocity_m3_s();
+        }
+    }
+
     /// Advance one RK4 step; never allocates.
     pub fn step(&mut self) {
         self.live.clear();

@@ -87,22 +87,33 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
         &scaling,
         seconds,
         max_voices,
+        1,
         "RK4 at 96 kHz, the reference",
     )?;
     callback::<ExponentialInstrument>(
         &scaling,
         seconds,
         max_voices,
+        1,
         "ETDRK4 at 48 kHz, the live integrator",
+    )?;
+    callback::<ExponentialInstrument>(
+        &scaling,
+        seconds,
+        max_voices,
+        2,
+        "ETDRK4 at 48 kHz, the live integrator, voices split over two cores",
     )?;
     Ok(())
 }
 
-/// The audio callback on engine `E` with 1, 2, 4 … `max_voices` voices sounding, and memory.
+/// The audio callback on engine `E` (on `cores` cores: 1, or 2 with a helper thread) with 1, 2,
+/// 4 … `max_voices` voices sounding, and memory.
 fn callback<E: VoicePool>(
     scaling: &LoadedScaling,
     seconds: f64,
     max_voices: usize,
+    cores: usize,
     label: &str,
 ) -> Result<()> {
     let keys: Vec<usize> = (1..=KEYS).collect();
@@ -118,6 +129,9 @@ fn callback<E: VoicePool>(
     let mut voices = 1;
     loop {
         let (mut synth, _handle) = loaded_synth(&piano, settings, voices, BLOCK);
+        if cores == 2 {
+            synth.use_second_core()?;
+        }
         let probe = block_times_s(&mut synth, BLOCK, 5);
         let blocks = ((seconds / percentile(&probe, 0.5)) as usize).clamp(20, 5000);
         let t = block_times_s(&mut synth, BLOCK, blocks);

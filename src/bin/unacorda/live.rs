@@ -45,6 +45,10 @@ pub struct PlayArgs {
     /// paper's RK4 at 96 kHz, the reference (slower: see `unacorda bench`).
     #[arg(long, value_enum, default_value_t = IntegratorArg::Exponential)]
     pub integrator: IntegratorArg,
+    /// Cores for the audio callback, 1–2: with 2 a helper thread advances half of the live
+    /// integrator's voices (default: 2 where the machine has them).
+    #[arg(long, value_name = "N")]
+    pub cores: Option<usize>,
     /// Fault test: report the device as lost after this many callbacks, as cpal would on unplug.
     #[arg(long, value_name = "N", hide = true)]
     pub lose_device_after: Option<u64>,
@@ -129,6 +133,11 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         }
     }
     device::check_buffer(args.buffer)?;
+    let available = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let cores = args.cores.unwrap_or(available.min(2));
+    if !(1..=2).contains(&cores) {
+        bail!("--cores {cores}: expected 1 or 2");
+    }
     // Read the file first: a bad file should fail before the keys are built.
     let file_events = match &args.midi {
         Some(path) => Some(unacorda::midi::file::read_file(path)?),
@@ -139,15 +148,22 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     eprintln!("building {} keys on one soundboard…", keys.len());
     let piano = Piano::<E>::build(&scaling, &keys, args.voices)?;
     let settings = scaling.base.output_settings();
-    let (synth, handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
+    let (mut synth, handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
+    if cores == 2 {
+        synth.use_second_core()?;
+    }
     let clock = handle.clock.clone();
     let stats = handle.stats.clone();
     let callback_stats = Arc::new(CallbackStats::default());
     let mut output =
         open(synth, &args, settings.rate_hz as u32, &callback_stats).map_err(|(e, _)| e)?;
     eprintln!(
-        "playing on {} ({} ch, {} Hz, {} voices)",
-        output.device, output.channels, output.rate_hz, args.voices
+        "playing on {} ({} ch, {} Hz, {} voices, {cores} core{})",
+        output.device,
+        output.channels,
+        output.rate_hz,
+        args.voices,
+        if cores == 2 { "s" } else { "" }
     );
     let stop = Arc::new(AtomicBool::new(false));
     {
