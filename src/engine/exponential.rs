@@ -1270,9 +1270,9 @@ impl ExponentialInstrument {
     /// multiply-add, real part), 6 for the propagation, 4 per non-zero input and final weight.
     pub fn flops_per_step(&self) -> f64 {
         let nb = self.board().zr.len();
-        // The board once per half: start reads (3 × 6), stage forms (2 × 2 per term), the
-        // update (14).
-        let mut flops = 2 * nb * (18 + 16 + 14);
+        // The board (one replica on one core): start reads (3 × 6), stage forms (2 × 2 per
+        // term), the update (14).
+        let mut flops = nb * (18 + 16 + 14);
         for v in self.halves.iter().flat_map(|h| &h.set.voices) {
             let (true, Some(key)) = (v.active, v.key) else {
                 continue;
