@@ -465,6 +465,19 @@ impl Board {
         }
     }
 
+    /// The stage's total modal force: this replica's own plus `other` (the other half's). One
+    /// function for both ways of running the halves, so that they add alike bit for bit.
+    #[inline(always)]
+    fn sum_forces(&mut self, stage: usize, other: impl Iterator<Item = f64>) {
+        for ((t, f), o) in self.total[stage]
+            .iter_mut()
+            .zip(&self.force[stage])
+            .zip(other)
+        {
+            *t = f + o;
+        }
+    }
+
     /// The step's end: `z <- E² z + f1 gamma F0 + f2 gamma (F1 + F2) + f3 gamma F3`, and the
     /// modal forces cleared for the next step.
     #[inline(always)]
@@ -1202,9 +1215,7 @@ impl ExponentialInstrument {
                     .stage::<FMA>(keys, stage, plan, h, &b0.stage, &mut b0.force[stage]);
                 let mine = &mut h1.board.force[stage];
                 h1.set.stage::<FMA>(keys, stage, plan, h, &b0.stage, mine);
-                for ((t, f), o) in b0.total[stage].iter_mut().zip(&b0.force[stage]).zip(&*mine) {
-                    *t = f + o;
-                }
+                b0.sum_forces(stage, mine.iter().copied());
                 mine.fill(0.0);
             }
             h0.board.advance::<FMA>();
@@ -1471,10 +1482,11 @@ impl Half {
                 slot.store(f.to_bits(), Ordering::Relaxed);
             }
             ex.meet(half, 4 * self.steps + stage as u64 + 1);
-            let other = ex.slot(1 - half, stage);
-            for ((t, f), o) in b.total[stage].iter_mut().zip(&b.force[stage]).zip(other) {
-                *t = f + f64::from_bits(o.load(Ordering::Relaxed));
-            }
+            let other = ex.slot(1 - half, stage).iter();
+            b.sum_forces(
+                stage,
+                other.map(|o| f64::from_bits(o.load(Ordering::Relaxed))),
+            );
         }
         b.advance::<FMA>();
         self.set.finish::<FMA>(keys, h, fade);
