@@ -1,9 +1,10 @@
 //! Real-time factor of one paper-faithful c2 voice (2 strings × 205 modes, 130 board modes, dense
-//! duplex damping, RK4 at 96 kHz), and of the same voice in the paper's literal dense state-space
-//! form (`dense_baseline_1ms`, Eq. 10–11 with A of order 1082), and on the live integrator
-//! (`exponential_10ms`: ETDRK4 on complex modes at 48 kHz, `engine::exponential`). Throughput is reported in output
-//! samples (48 kHz) per second: the real-time factor is that figure divided by 48 000, and the
-//! ratio of two throughputs is the speed-up.
+//! duplex damping, RK4 at 96 kHz: `rk4_steps_10ms` in f64, `rk4_f32_steps_10ms` in f32), of the
+//! same voice in the paper's literal dense state-space form (`dense_baseline_1ms`, Eq. 10–11 with
+//! A of order 1082), and on the live integrator (`exponential_10ms`: ETDRK4 on complex modes at
+//! 48 kHz, `engine::exponential`). Throughput is reported in output samples (48 kHz) per second:
+//! the real-time factor is that figure divided by 48 000, and the ratio of two throughputs is the
+//! speed-up.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
@@ -47,6 +48,18 @@ fn c2_voice(c: &mut Criterion) {
                 instrument.step();
             }
             black_box(instrument.observe())
+        })
+    });
+
+    // The same RK4 steps in f32 (tests/precision.rs bounds its drift from f64).
+    let mut single = Instrument::<f32>::unison(&spec).expect("c2 builds");
+    single.strike(strike);
+    group.bench_function("rk4_f32_steps_10ms", |b| {
+        b.iter(|| {
+            for _ in 0..steps {
+                single.step();
+            }
+            black_box(single.observe())
         })
     });
 

@@ -4,6 +4,7 @@
 
 use crate::audio::synth::{OutputSettings, Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use crate::engine::exponential::ExponentialUnison;
+use crate::engine::simd::Real;
 use crate::engine::statespace::DenseUnison;
 use crate::engine::{Instrument, Strike, UnisonSpec, VoicePool};
 use crate::midi::{Event, Pedal};
@@ -68,9 +69,9 @@ pub struct VoiceSpeed {
     pub flops_per_s: f64,
 }
 
-/// Run `spec` struck normally for `seconds` of sound (RK4 steps only) and time it.
-pub fn voice_speed(spec: &UnisonSpec, seconds: f64) -> VoiceSpeed {
-    let mut inst = Instrument::new(spec).expect("the preset builds");
+/// Run `spec` struck normally for `seconds` of sound (RK4 steps only, in precision `T`) and time it.
+pub fn voice_speed<T: Real>(spec: &UnisonSpec, seconds: f64) -> VoiceSpeed {
+    let mut inst = Instrument::<T>::unison(spec).expect("the preset builds");
     inst.strike(Strike {
         velocity_m_s: 2.5,
         una_corda: false,
@@ -167,7 +168,7 @@ pub fn dense_real_time_factor(spec: &UnisonSpec, steps: usize) -> f64 {
 
 /// This core's nominal f64 peak (FLOP/s): FMA units × lanes × 2 × clock, from `/proc/cpuinfo`
 /// (2 × 4 × 2 = 16 FLOP per cycle with AVX2 + FMA, 8 with SSE2 only). `None` where the clock is
-/// not listed.
+/// not listed. The f32 peak is twice it (eight lanes per register).
 pub fn nominal_f64_peak() -> Option<(f64, f64)> {
     let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
     let mhz: f64 = info

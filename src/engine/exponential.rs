@@ -28,7 +28,8 @@
 
 use super::duplex::duplex_damping_matrix;
 use super::hammer::HammerParams;
-use super::system::{dot, BuildError, Observation, Strike, UnisonSpec, LANES, STEAL_FADE_S};
+use super::simd::{has_avx2_fma, Real, LANES};
+use super::system::{BuildError, Observation, Strike, UnisonSpec, STEAL_FADE_S};
 use super::MAX_STRINGS;
 use faer::linalg::solvers::{PartialPivLu, Solve};
 use faer::{c64, Mat};
@@ -260,7 +261,7 @@ fn read_rows<const FMA: bool, const R: usize>(
     }
     rows.map(|r| {
         r.each_ref()
-            .map(|[re, im]| dot::<FMA>(re, zr) - dot::<FMA>(im, zi))
+            .map(|[re, im]| f64::dot::<FMA>(re, zr) - f64::dot::<FMA>(im, zi))
     })
 }
 
@@ -910,7 +911,7 @@ impl ExponentialInstrument {
             n_voices: voices,
             h,
             fade_steps: ((STEAL_FADE_S / h).round() as u32).max(1),
-            fast_path: super::system::has_avx2_fma(),
+            fast_path: has_avx2_fma(),
         })
     }
 
@@ -1673,7 +1674,12 @@ fn read_point<const FMA: bool>(phi: &[Vec<f64>; 3], qv: &[Vec<f64>; 2]) -> [[f64
         // SAFETY: `FMA` is true only inside `step_avx2`, entered after detecting AVX2 and FMA.
         return unsafe { read_point_avx2(phi, qv) };
     }
-    std::array::from_fn(|d| [dot::<FMA>(&phi[d], &qv[0]), dot::<FMA>(&phi[d], &qv[1])])
+    std::array::from_fn(|d| {
+        [
+            f64::dot::<FMA>(&phi[d], &qv[0]),
+            f64::dot::<FMA>(&phi[d], &qv[1]),
+        ]
+    })
 }
 
 /// [`read_point`] with explicit AVX2 + FMA.

@@ -9,6 +9,7 @@
 //! - [`hammer`]: the nonlinear felt hammer (Eq. 8–9),
 //! - [`damper`]: the felt that silences a released key,
 //! - [`system`]: the state-space assembly (Eq. 10–19) advanced with classical RK4,
+//! - [`simd`]: its kernels (dot products, projections) in `f64` and `f32`, portable and AVX2,
 //! - [`statespace`]: the same system in the paper's literal dense form, the baseline it is checked
 //!   and measured against,
 //! - [`tuning`]: the coupled first partial, from the undamped linear system.
@@ -19,6 +20,7 @@ pub mod duplex;
 pub mod exponential;
 pub mod hammer;
 pub mod plate;
+pub mod simd;
 pub mod soundboard;
 pub mod statespace;
 pub mod string;

@@ -16,6 +16,7 @@ use super::contact::Contact;
 use super::damper::DamperParams;
 use super::duplex::{duplex_damping_matrix, low_rank_factor};
 use super::hammer::HammerParams;
+use super::simd::{has_avx2_fma, Real};
 use super::soundboard::SoundboardModes;
 use super::string::{ModeSet, StringParams};
 use super::MAX_STRINGS;
@@ -107,23 +108,23 @@ impl Energy {
 /// Coefficients of one key: its strings' modes (laid out from 0), hammer, damper and bridge point.
 /// Built once; a voice playing the key copies the per-mode arrays into its own slot.
 #[derive(Debug, Clone)]
-struct KeyModel {
+struct KeyModel<T> {
     n_strings: usize,
     /// `ranges[s][d]`: modes of string `s` in direction `d` (T, L, P), from the key's first mode.
     ranges: [[Range<usize>; 3]; MAX_STRINGS],
     n_modes: usize,
-    omega2: Vec<f64>,
-    damp: Vec<f64>,
-    bridge_shape: Vec<f64>,
+    omega2: Vec<T>,
+    damp: Vec<T>,
+    bridge_shape: Vec<T>,
     /// Board modes: `phi_T`, `phi_L`, `phi_P` at this key's bridge point (Eq. 5).
-    board_shape: [Vec<f64>; 3],
+    board_shape: [Vec<T>; 3],
     /// `psi_n(L_e)` of the T modes (identical for every string: same length).
-    hammer_shape: Vec<f64>,
+    hammer_shape: Vec<T>,
     /// `psi_n(x_d)` of the transverse modes, and the felt's coefficient (N s/m); empty without damper.
-    damper_shape: Vec<f64>,
+    damper_shape: Vec<T>,
     damper_n_s_m: f64,
     /// The duplex matrix (Eq. 13) as `C_d = Wᵀ W`: `W` is `duplex_rank × duplex_n`, row-major.
-    duplex_w: Vec<f64>,
+    duplex_w: Vec<T>,
     duplex_n: usize,
     duplex_rank: usize,
     hammer: HammerParams,
@@ -143,16 +144,16 @@ struct Voice {
 
 /// Coefficients of the system: the key bank, where each voice sits and what it plays, the board.
 #[derive(Debug, Clone)]
-struct Model {
-    keys: Vec<KeyModel>,
+struct Model<T> {
+    keys: Vec<KeyModel<T>>,
     voices: Vec<Voice>,
     board: Range<usize>,
-    omega2: Vec<f64>,
+    omega2: Vec<T>,
     /// `2 zeta omega` per mode (1/s).
-    damp: Vec<f64>,
+    damp: Vec<T>,
     /// String modes: `psi_n(L_s)` in the mode's own direction; zero over the board block.
-    bridge_shape: Vec<f64>,
-    board_volume: Vec<f64>,
+    bridge_shape: Vec<T>,
+    board_volume: Vec<T>,
     h: f64,
 }
 
@@ -181,11 +182,14 @@ struct VoiceFlags {
 /// sounding voice off the board before handing it to another key. Built for one key with
 /// [`Instrument::new`] (the paper's system), one voice per key with [`Instrument::with_keys`], or
 /// with a pool of any size with [`Instrument::with_pool`]. Only active voices are simulated.
+///
+/// Modes are held and advanced in `T`: `f64`, the reference, or `f32` (twice the SIMD lanes;
+/// [`Instrument::pool`] builds either); hammers, forces and energies are computed in `f64`.
 #[derive(Debug, Clone)]
-pub struct Instrument {
-    model: Model,
-    q: Vec<f64>,
-    v: Vec<f64>,
+pub struct Instrument<T: Real = f64> {
+    model: Model<T>,
+    q: Vec<T>,
+    v: Vec<T>,
     hammer_y: Vec<f64>,
     hammer_v: Vec<f64>,
     flags: VoiceFlags,
@@ -193,14 +197,14 @@ pub struct Instrument {
     /// Mode ranges simulated in this step: the active voices' and the board's.
     live: Vec<Range<usize>>,
     /// `W v` of the duplex product for up to six blocks (T and P of three strings).
-    duplex_z: Vec<f64>,
+    duplex_z: Vec<T>,
     fade_steps: u32,
     // RK4 scratch, sized once.
-    qs: Vec<f64>,
-    vs: Vec<f64>,
-    acc: Vec<f64>,
-    sum_q: Vec<f64>,
-    sum_v: Vec<f64>,
+    qs: Vec<T>,
+    vs: Vec<T>,
+    acc: Vec<T>,
+    sum_q: Vec<T>,
+    sum_v: Vec<T>,
     hy_s: Vec<f64>,
     hv_s: Vec<f64>,
     sum_hy: Vec<f64>,
@@ -242,7 +246,7 @@ pub enum BuildError {
 pub const STEAL_FADE_S: f64 = 0.005;
 
 /// One key's coefficients, its modes laid out from 0.
-fn build_key(spec: &UnisonSpec) -> Result<KeyModel, BuildError> {
+fn build_key<T: Real>(spec: &UnisonSpec) -> Result<KeyModel<T>, BuildError> {
     let ns = spec.strings.len();
     if ns == 0 || ns > MAX_STRINGS {
         return Err(BuildError::StringCount(ns));
@@ -333,14 +337,16 @@ fn build_key(spec: &UnisonSpec) -> Result<KeyModel, BuildError> {
         n_strings: ns,
         ranges,
         n_modes,
-        omega2,
-        damp,
-        bridge_shape,
-        board_shape: point.shape.clone(),
-        hammer_shape: (1..=nt).map(|k| s0.mode_shape(k, strike_x)).collect(),
-        damper_shape,
+        omega2: cast(&omega2),
+        damp: cast(&damp),
+        bridge_shape: cast(&bridge_shape),
+        board_shape: point.shape.each_ref().map(|phi| cast(phi)),
+        hammer_shape: (1..=nt)
+            .map(|k| T::from_f64(s0.mode_shape(k, strike_x)))
+            .collect(),
+        damper_shape: cast(&damper_shape),
         damper_n_s_m,
-        duplex_w,
+        duplex_w: cast(&duplex_w),
         duplex_n,
         duplex_rank,
         hammer: spec.hammer,
@@ -348,28 +354,46 @@ fn build_key(spec: &UnisonSpec) -> Result<KeyModel, BuildError> {
     })
 }
 
+/// `f64` coefficients in the engine's precision.
+fn cast<T: Real>(x: &[f64]) -> Vec<T> {
+    x.iter().map(|&v| T::from_f64(v)).collect()
+}
+
 impl Instrument {
     /// One unison on its bridge point (the paper's system), active from the start; precomputes
     /// every coefficient and allocates all state and scratch.
     pub fn new(spec: &UnisonSpec) -> Result<Instrument, BuildError> {
-        let mut u = Self::with_keys(std::slice::from_ref(spec))?;
-        u.flags.active[0] = true;
-        Ok(u)
+        Self::unison(spec)
     }
 
     /// Several keys on one shared soundboard, one voice each: voice `k` plays `specs[k]` at its
     /// own bridge point. A voice is simulated once struck or its damper lifted.
     pub fn with_keys(specs: &[UnisonSpec]) -> Result<Instrument, BuildError> {
-        let mut u = Self::with_pool(specs, specs.len())?;
+        let mut u = Self::pool(specs, specs.len())?;
         for k in 0..specs.len() {
             u.assign(k, k);
         }
         Ok(u)
     }
 
-    /// A bank of keys (`specs`, all on the same board and internal rate) and a pool of `voices`
-    /// voices, each large enough for any key; no voice plays a key yet.
+    /// A bank of keys and a pool of voices (see [`Instrument::pool`]), in `f64`.
     pub fn with_pool(specs: &[UnisonSpec], voices: usize) -> Result<Instrument, BuildError> {
+        Self::pool(specs, voices)
+    }
+}
+
+impl<T: Real> Instrument<T> {
+    /// [`Instrument::new`] in precision `T`.
+    pub fn unison(spec: &UnisonSpec) -> Result<Self, BuildError> {
+        let mut u = Self::pool(std::slice::from_ref(spec), 1)?;
+        u.assign(0, 0);
+        u.flags.active[0] = true;
+        Ok(u)
+    }
+
+    /// A bank of keys (`specs`, all on the same board and internal rate) and a pool of `voices`
+    /// voices in precision `T`, each large enough for any key; no voice plays a key yet.
+    pub fn pool(specs: &[UnisonSpec], voices: usize) -> Result<Self, BuildError> {
         let first = specs.first().ok_or(BuildError::NoVoice)?;
         if voices == 0 {
             return Err(BuildError::NoVoice);
@@ -393,16 +417,16 @@ impl Instrument {
             .collect();
         let strings_end = voices * capacity;
         let (mut omega2, mut damp, mut bridge_shape) = (
-            vec![0.0; strings_end],
-            vec![0.0; strings_end],
-            vec![0.0; strings_end],
+            vec![T::ZERO; strings_end],
+            vec![T::ZERO; strings_end],
+            vec![T::ZERO; strings_end],
         );
         let board = strings_end..strings_end + first.board.len();
         for k in 0..first.board.len() {
             let w = 2.0 * PI * first.board.freq_hz[k];
-            omega2.push(w * w);
-            damp.push(2.0 * first.board.damping_ratio[k] * w);
-            bridge_shape.push(0.0);
+            omega2.push(T::from_f64(w * w));
+            damp.push(T::from_f64(2.0 * first.board.damping_ratio[k] * w));
+            bridge_shape.push(T::ZERO);
         }
         let n = omega2.len();
         let h = 1.0 / first.sample_rate_hz;
@@ -413,18 +437,18 @@ impl Instrument {
             omega2,
             damp,
             bridge_shape,
-            board_volume: first.board.volume_m2_per_sqrt_kg.clone(),
+            board_volume: cast(&first.board.volume_m2_per_sqrt_kg),
             h,
         };
         let max_rank = model.keys.iter().map(|k| k.duplex_rank).max().unwrap_or(0);
         Ok(Instrument {
-            duplex_z: vec![0.0; 2 * MAX_STRINGS * max_rank],
+            duplex_z: vec![T::ZERO; 2 * MAX_STRINGS * max_rank],
             voice_of_key: vec![None; specs.len()],
             live: Vec::with_capacity(voices + 1),
             fade_steps: (STEAL_FADE_S / h).round().max(1.0) as u32,
             model,
-            q: vec![0.0; n],
-            v: vec![0.0; n],
+            q: vec![T::ZERO; n],
+            v: vec![T::ZERO; n],
             hammer_y: vec![0.0; voices],
             hammer_v: vec![0.0; voices],
             flags: VoiceFlags {
@@ -436,11 +460,11 @@ impl Instrument {
                 fade_left: vec![0; voices],
                 pending: vec![None; voices],
             },
-            qs: vec![0.0; n],
-            vs: vec![0.0; n],
-            acc: vec![0.0; n],
-            sum_q: vec![0.0; n],
-            sum_v: vec![0.0; n],
+            qs: vec![T::ZERO; n],
+            vs: vec![T::ZERO; n],
+            acc: vec![T::ZERO; n],
+            sum_q: vec![T::ZERO; n],
+            sum_v: vec![T::ZERO; n],
             hy_s: vec![0.0; voices],
             hv_s: vec![0.0; voices],
             sum_hy: vec![0.0; voices],
@@ -492,12 +516,12 @@ impl Instrument {
     }
 
     /// Modal displacements and velocities, for setting initial conditions.
-    pub fn state_mut(&mut self) -> (&mut [f64], &mut [f64]) {
+    pub fn state_mut(&mut self) -> (&mut [T], &mut [T]) {
         (&mut self.q, &mut self.v)
     }
 
     /// Modal displacements and velocities.
-    pub fn state(&self) -> (&[f64], &[f64]) {
+    pub fn state(&self) -> (&[T], &[T]) {
         (&self.q, &self.v)
     }
 
@@ -544,8 +568,8 @@ impl Instrument {
         self.model.omega2[base..capacity_end].copy_from_slice(&km.omega2);
         self.model.damp[base..capacity_end].copy_from_slice(&km.damp);
         self.model.bridge_shape[base..capacity_end].copy_from_slice(&km.bridge_shape);
-        self.q[base..slot_end].fill(0.0);
-        self.v[base..slot_end].fill(0.0);
+        self.q[base..slot_end].fill(T::ZERO);
+        self.v[base..slot_end].fill(T::ZERO);
         self.voice_of_key[key] = Some(k);
         let f = &mut self.flags;
         (f.active[k], f.hammer_on[k], f.damper_down[k]) = (false, false, false);
@@ -587,8 +611,15 @@ impl Instrument {
 
     /// Kinetic and potential energy of the uncoupled modes `r` (J).
     fn modal_energy_j(&self, r: Range<usize>) -> f64 {
-        r.map(|i| 0.5 * (self.v[i] * self.v[i] + self.model.omega2[i] * self.q[i] * self.q[i]))
-            .sum()
+        r.map(|i| {
+            let (q, v, w2) = (
+                self.q[i].to_f64(),
+                self.v[i].to_f64(),
+                self.model.omega2[i].to_f64(),
+            );
+            0.5 * (v * v + w2 * q * q)
+        })
+        .sum()
     }
 
     /// Flat-array range of voice `k`'s modes.
@@ -599,8 +630,8 @@ impl Instrument {
 
     /// Set the modes `r` at rest.
     fn rest(&mut self, r: Range<usize>) {
-        self.q[r.clone()].fill(0.0);
-        self.v[r].fill(0.0);
+        self.q[r.clone()].fill(T::ZERO);
+        self.v[r].fill(T::ZERO);
     }
 
     /// Mechanical energy in voice `k`'s strings (J): the measure of how loud it still is.
@@ -681,7 +712,7 @@ impl Instrument {
         for s in 0..n_struck {
             struck[s] = true;
             let r = voice.ranges[s][0].clone();
-            contact_y = contact_y.max(dot::<false>(&km.hammer_shape, &self.q[r]));
+            contact_y = contact_y.max(T::dot_wide::<false>(&km.hammer_shape, &self.q[r]));
         }
         self.flags.struck[k] = struck;
         self.hammer_y[k] = contact_y;
@@ -784,12 +815,13 @@ impl Instrument {
             &mut self.ah,
         );
         let hammers = 0..hy0.len();
+        let ch = |c: f64| T::from_f64(c * h);
         // Stage 1 at the current state.
-        evaluate::<SIMD>(m, flags, live, q0, v0, hy0, acc, ah, z);
+        evaluate::<T, SIMD>(m, flags, live, q0, v0, hy0, acc, ah, z);
         for r in live {
-            stage::<true>(0.5 * h, r.clone(), q0, v0, acc, qs, vs, sum_q, sum_v);
+            stage::<T, true>(ch(0.5), r.clone(), q0, v0, acc, qs, vs, sum_q, sum_v);
         }
-        stage::<true>(
+        stage::<f64, true>(
             0.5 * h,
             hammers.clone(),
             hy0,
@@ -802,11 +834,11 @@ impl Instrument {
         );
         // Stages 2 and 3: weights 2, next stage at h/2 then h.
         for c in [0.5, 1.0] {
-            evaluate::<SIMD>(m, flags, live, qs, vs, hy_s, acc, ah, z);
+            evaluate::<T, SIMD>(m, flags, live, qs, vs, hy_s, acc, ah, z);
             for r in live {
-                stage::<false>(c * h, r.clone(), q0, v0, acc, qs, vs, sum_q, sum_v);
+                stage::<T, false>(ch(c), r.clone(), q0, v0, acc, qs, vs, sum_q, sum_v);
             }
-            stage::<false>(
+            stage::<f64, false>(
                 c * h,
                 hammers.clone(),
                 hy0,
@@ -819,8 +851,8 @@ impl Instrument {
             );
         }
         // Stage 4 and the combination.
-        evaluate::<SIMD>(m, flags, live, qs, vs, hy_s, acc, ah, z);
-        let w = h / 6.0;
+        evaluate::<T, SIMD>(m, flags, live, qs, vs, hy_s, acc, ah, z);
+        let w = T::from_f64(h / 6.0);
         let (q, v) = (&mut self.q, &mut self.v);
         for r in live {
             let n = r.len();
@@ -832,6 +864,7 @@ impl Instrument {
                 v[i] += w * (sv[i] + acc[i]);
             }
         }
+        let w = h / 6.0;
         for k in 0..self.hammer_y.len() {
             if self.flags.hammer_on[k] {
                 self.hammer_y[k] += w * (sum_hy[k] + hv_s[k]);
@@ -880,7 +913,8 @@ impl Instrument {
         let km = &self.model.keys[key];
         for s in 0..voice.n_strings {
             if self.flags.struck[k][s] {
-                let ye = dot::<false>(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
+                let ye =
+                    T::dot_wide::<false>(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
                 if ye - self.hammer_y[k] < km.hammer.release_gap_m {
                     return;
                 }
@@ -912,12 +946,17 @@ impl Instrument {
         let vb = &v[m.board.clone()];
         let mut rb = [0.0; 3];
         for d in 0..3 {
-            (rb[d], obs.bridge_velocity_m_s[d]) = dot2::<false>(&km.board_shape[d], qb, vb);
+            rb[d] = T::dot_wide::<false>(&km.board_shape[d], qb);
+            obs.bridge_velocity_m_s[d] = T::dot_wide::<false>(&km.board_shape[d], vb);
         }
         for s in 0..voice.n_strings {
             for d in 0..3 {
                 let r = voice.ranges[s][d].clone();
-                let (rs, rs_dot) = dot2::<false>(&m.bridge_shape[r.clone()], &q[r.clone()], &v[r]);
+                let shape = &m.bridge_shape[r.clone()];
+                let (rs, rs_dot) = (
+                    T::dot_wide::<false>(shape, &q[r.clone()]),
+                    T::dot_wide::<false>(shape, &v[r]),
+                );
                 let f = gain
                     * (km.contact.stiffness_n_m[d] * (rs - rb[d])
                         + km.contact.damping_n_s_m[d] * (rs_dot - obs.bridge_velocity_m_s[d]));
@@ -925,7 +964,7 @@ impl Instrument {
                 obs.total_force_n[d] += f;
             }
             if self.flags.hammer_on[k] && self.flags.struck[k][s] {
-                let ye = dot::<false>(&km.hammer_shape, &q[voice.ranges[s][0].clone()]);
+                let ye = T::dot_wide::<false>(&km.hammer_shape, &q[voice.ranges[s][0].clone()]);
                 obs.hammer_force_n[s] = km.hammer.felt_force_n(self.hammer_y[k] - ye);
             }
         }
@@ -934,7 +973,7 @@ impl Instrument {
 
     /// Net volume velocity of the board (m^3/s), the source of the radiated sound.
     pub fn volume_velocity_m3_s(&self) -> f64 {
-        dot::<false>(&self.model.board_volume, &self.v[self.model.board.clone()])
+        T::dot_wide::<false>(&self.model.board_volume, &self.v[self.model.board.clone()])
     }
 
     /// Floating-point operations of one RK4 step in the current state (active voices, hammers,
@@ -970,12 +1009,12 @@ impl Instrument {
         (4 * eval + 26 * live) as f64
     }
 
-    /// Bytes of state and coefficients per voice slot (f64 arrays over its modes).
+    /// Bytes of state and coefficients per voice slot (arrays of `T` over its modes).
     pub fn bytes_per_voice(&self) -> usize {
         let capacity = self.model.board.start / self.n_voices().max(1);
         // q and v, the RK4 stage state and acceleration (3), the stage sums (2), and the
         // coefficients omega^2, damping, bridge shape (3).
-        capacity * 8 * 10
+        capacity * std::mem::size_of::<T>() * 10
     }
 
     /// Mechanical energy of strings, board, contact springs and hammers (J).
@@ -993,8 +1032,8 @@ impl Instrument {
             for s in 0..voice.n_strings {
                 for d in 0..3 {
                     let r = voice.ranges[s][d].clone();
-                    let rs = dot::<false>(&m.bridge_shape[r.clone()], &self.q[r]);
-                    let rb = dot::<false>(&km.board_shape[d], qb);
+                    let rs = T::dot_wide::<false>(&m.bridge_shape[r.clone()], &self.q[r]);
+                    let rb = T::dot_wide::<false>(&km.board_shape[d], qb);
                     contact_j += 0.5
                         * self.flags.coupling[k]
                         * km.contact.stiffness_n_m[d]
@@ -1005,8 +1044,10 @@ impl Instrument {
                 hammer_j += 0.5 * km.hammer.mass_kg * self.hammer_v[k].powi(2);
                 for s in 0..voice.n_strings {
                     if self.flags.struck[k][s] {
-                        let ye =
-                            dot::<false>(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
+                        let ye = T::dot_wide::<false>(
+                            &km.hammer_shape,
+                            &self.q[voice.ranges[s][0].clone()],
+                        );
                         hammer_j += km.hammer.felt_energy_j(self.hammer_y[k] - ye);
                     }
                 }
@@ -1027,17 +1068,18 @@ impl Instrument {
 /// `(q0, v0) + ch (dq, acc)`. Sliced to equal lengths first, so the loop vectorises.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn stage<const FIRST: bool>(
-    ch: f64,
+fn stage<T: Real, const FIRST: bool>(
+    ch: T,
     r: Range<usize>,
-    q0: &[f64],
-    v0: &[f64],
-    acc: &[f64],
-    qs: &mut [f64],
-    vs: &mut [f64],
-    sum_q: &mut [f64],
-    sum_v: &mut [f64],
+    q0: &[T],
+    v0: &[T],
+    acc: &[T],
+    qs: &mut [T],
+    vs: &mut [T],
+    sum_q: &mut [T],
+    sum_v: &mut [T],
 ) {
+    let two = T::from_f64(2.0);
     let n = r.len();
     let (q0, v0, acc) = (&q0[r.clone()], &v0[r.clone()][..n], &acc[r.clone()][..n]);
     let (qs, vs) = (&mut qs[r.clone()][..n], &mut vs[r.clone()][..n]);
@@ -1048,8 +1090,8 @@ fn stage<const FIRST: bool>(
             sum_q[i] = dq;
             sum_v[i] = acc[i];
         } else {
-            sum_q[i] += 2.0 * dq;
-            sum_v[i] += 2.0 * acc[i];
+            sum_q[i] += two * dq;
+            sum_v[i] += two * acc[i];
         }
         qs[i] = q0[i] + ch * dq;
         vs[i] = v0[i] + ch * acc[i];
@@ -1060,16 +1102,16 @@ fn stage<const FIRST: bool>(
 /// hammer's into `ah`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn evaluate<const SIMD: bool>(
-    m: &Model,
+fn evaluate<T: Real, const SIMD: bool>(
+    m: &Model<T>,
     flags: &VoiceFlags,
     live: &[Range<usize>],
-    q: &[f64],
-    v: &[f64],
+    q: &[T],
+    v: &[T],
     hammer_y: &[f64],
-    acc: &mut [f64],
+    acc: &mut [T],
     ah: &mut [f64],
-    duplex_z: &mut [f64],
+    duplex_z: &mut [T],
 ) {
     // Uncoupled modal oscillators: -Omega^2 q - C qdot (diagonal blocks of Eq. 11).
     for r in live {
@@ -1097,7 +1139,8 @@ fn evaluate<const SIMD: bool>(
         let mut rb = [0.0; 3];
         let mut rb_dot = [0.0; 3];
         for d in 0..3 {
-            (rb[d], rb_dot[d]) = dot2::<SIMD>(&km.board_shape[d], qb, vb);
+            rb[d] = T::dot_wide::<SIMD>(&km.board_shape[d], qb);
+            rb_dot[d] = T::dot::<SIMD>(&km.board_shape[d], vb).to_f64();
         }
         // Contact forces (Eq. 6) and their modal projections on each string (Eq. 17).
         let mut total = [0.0; 3];
@@ -1105,16 +1148,17 @@ fn evaluate<const SIMD: bool>(
             for d in 0..3 {
                 let r = voice.ranges[s][d].clone();
                 let shape = &m.bridge_shape[r.clone()];
-                let (rs, rs_dot) = dot2::<SIMD>(shape, &q[r.clone()], &v[r.clone()]);
+                let rs = T::dot_wide::<SIMD>(shape, &q[r.clone()]);
+                let rs_dot = T::dot::<SIMD>(shape, &v[r.clone()]).to_f64();
                 let f = gain
                     * (km.contact.stiffness_n_m[d] * (rs - rb[d])
                         + km.contact.damping_n_s_m[d] * (rs_dot - rb_dot[d]));
                 total[d] += f;
-                axpy::<SIMD>(&mut acc[r], shape, -f);
+                T::axpy::<SIMD>(&mut acc[r], shape, T::from_f64(-f));
             }
         }
         // Duplex damping on both transverse polarisations of every string (Eq. 13).
-        duplex_damping::<SIMD>(km, &voice.ranges, v, acc, duplex_z);
+        duplex_damping::<T, SIMD>(km, &voice.ranges, v, acc, duplex_z);
         // The damper felt, while it is down: a point damper on T and P of every string. The flag
         // may belong to the key that follows a fading voice, so the key's own damper decides.
         if flags.damper_down[k] && !km.damper_shape.is_empty() {
@@ -1122,15 +1166,15 @@ fn evaluate<const SIMD: bool>(
                 for d in [0, 2] {
                     let r = voice.ranges[s][d].clone();
                     let shape = &km.damper_shape[..r.len()];
-                    let f = km.damper_n_s_m * dot::<SIMD>(shape, &v[r.clone()]);
-                    axpy::<SIMD>(&mut acc[r], shape, -f);
+                    let f = km.damper_n_s_m * T::dot::<SIMD>(shape, &v[r.clone()]).to_f64();
+                    T::axpy::<SIMD>(&mut acc[r], shape, T::from_f64(-f));
                 }
             }
         }
         // The board receives the sum of the strings' forces at this voice's point (Eq. 17).
         let ab = &mut acc[m.board.clone()];
         for d in 0..3 {
-            axpy::<SIMD>(ab, &km.board_shape[d], total[d]);
+            T::axpy::<SIMD>(ab, &km.board_shape[d], T::from_f64(total[d]));
         }
         // Hammer (Eq. 8, 14): felt force on each struck string, reaction on the hammer mass.
         if flags.hammer_on[k] {
@@ -1138,10 +1182,10 @@ fn evaluate<const SIMD: bool>(
             for s in 0..voice.n_strings {
                 if flags.struck[k][s] {
                     let r = voice.ranges[s][0].clone();
-                    let ye = dot::<SIMD>(&km.hammer_shape, &q[r.clone()]);
+                    let ye = T::dot::<SIMD>(&km.hammer_shape, &q[r.clone()]).to_f64();
                     let f = km.hammer.felt_force_n(hammer_y[k] - ye);
                     felt_total += f;
-                    axpy::<SIMD>(&mut acc[r], &km.hammer_shape, f);
+                    T::axpy::<SIMD>(&mut acc[r], &km.hammer_shape, T::from_f64(f));
                 }
             }
             ah[k] = -felt_total / km.hammer.mass_kg;
@@ -1149,354 +1193,33 @@ fn evaluate<const SIMD: bool>(
     }
 }
 
-/// Whether this CPU can run the AVX2 + FMA build of the step.
-pub(super) fn has_avx2_fma() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
-pub(super) const LANES: usize = 4;
-
-/// Dot product: the AVX2 + FMA kernel when `SIMD`, else independent lane accumulators (so that
-/// it vectorises without reassociation).
-#[inline(always)]
-pub(super) fn dot<const SIMD: bool>(a: &[f64], b: &[f64]) -> f64 {
-    #[cfg(target_arch = "x86_64")]
-    if SIMD {
-        // SAFETY: `SIMD` is true only inside `step_avx2`, entered after detecting AVX2 and FMA.
-        return unsafe { dot_avx2(a, b) };
-    }
-    let n = a.len().min(b.len());
-    let (a, b) = (&a[..n], &b[..n]);
-    let mut lanes = [0.0; LANES];
-    let split = n - n % LANES;
-    for (ca, cb) in a[..split]
-        .chunks_exact(LANES)
-        .zip(b[..split].chunks_exact(LANES))
-    {
-        for l in 0..LANES {
-            lanes[l] += ca[l] * cb[l];
-        }
-    }
-    let mut sum = (lanes[0] + lanes[2]) + (lanes[1] + lanes[3]);
-    for i in split..n {
-        sum += a[i] * b[i];
-    }
-    sum
-}
-
-/// Two dot products sharing the left operand: `(a·b, a·c)`.
-#[inline(always)]
-fn dot2<const SIMD: bool>(a: &[f64], b: &[f64], c: &[f64]) -> (f64, f64) {
-    (dot::<SIMD>(a, b), dot::<SIMD>(a, c))
-}
-
-/// `y += alpha x`.
-#[inline(always)]
-fn axpy<const SIMD: bool>(y: &mut [f64], x: &[f64], alpha: f64) {
-    #[cfg(target_arch = "x86_64")]
-    if SIMD {
-        // SAFETY: as in `dot`.
-        unsafe { axpy_avx2(y, x, alpha) };
-        return;
-    }
-    for (yi, xi) in y.iter_mut().zip(x) {
-        *yi += alpha * xi;
-    }
-}
-
-/// `a·b` over the shorter length, eight lanes in two FMA chains.
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-unsafe fn dot_avx2(a: &[f64], b: &[f64]) -> f64 {
-    use std::arch::x86_64::*;
-    let n = a.len().min(b.len());
-    let (pa, pb) = (a.as_ptr(), b.as_ptr());
-    let (mut s0, mut s1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
-    let mut i = 0;
-    // SAFETY (loads): every index read is below `n`, within both slices.
-    while i + 8 <= n {
-        s0 = _mm256_fmadd_pd(_mm256_loadu_pd(pa.add(i)), _mm256_loadu_pd(pb.add(i)), s0);
-        s1 = _mm256_fmadd_pd(
-            _mm256_loadu_pd(pa.add(i + 4)),
-            _mm256_loadu_pd(pb.add(i + 4)),
-            s1,
-        );
-        i += 8;
-    }
-    if i + 4 <= n {
-        s0 = _mm256_fmadd_pd(_mm256_loadu_pd(pa.add(i)), _mm256_loadu_pd(pb.add(i)), s0);
-        i += 4;
-    }
-    let s = _mm256_add_pd(s0, s1);
-    let h = _mm_add_pd(_mm256_castpd256_pd128(s), _mm256_extractf128_pd(s, 1));
-    let mut sum = _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
-    while i < n {
-        sum += a[i] * b[i];
-        i += 1;
-    }
-    sum
-}
-
-/// `y += alpha x` over the shorter length with FMA.
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-unsafe fn axpy_avx2(y: &mut [f64], x: &[f64], alpha: f64) {
-    use std::arch::x86_64::*;
-    let n = y.len().min(x.len());
-    let (py, px) = (y.as_mut_ptr(), x.as_ptr());
-    let a = _mm256_set1_pd(alpha);
-    let mut i = 0;
-    // SAFETY (loads and stores): every index touched is below `n`, within both slices.
-    while i + 4 <= n {
-        let r = _mm256_fmadd_pd(a, _mm256_loadu_pd(px.add(i)), _mm256_loadu_pd(py.add(i)));
-        _mm256_storeu_pd(py.add(i), r);
-        i += 4;
-    }
-    while i < n {
-        y[i] += alpha * x[i];
-        i += 1;
-    }
-}
-
 /// `acc -= C_d v` on the T and P blocks of every string (Eq. 13), through `C_d = Wᵀ W`: first
 /// `z = W v` for every block, then `acc -= Wᵀ z`. All blocks share `W`, so each of its rows is
-/// loaded once for all of them.
+/// loaded once for all of them (when they have one length).
 #[inline(always)]
-fn duplex_damping<const SIMD: bool>(
-    m: &KeyModel,
+fn duplex_damping<T: Real, const SIMD: bool>(
+    m: &KeyModel<T>,
     ranges: &[[Range<usize>; 3]; MAX_STRINGS],
-    v: &[f64],
-    acc: &mut [f64],
-    z: &mut [f64],
+    v: &[T],
+    acc: &mut [T],
+    z: &mut [T],
 ) {
     let (n, rank) = (m.duplex_n, m.duplex_rank);
     let blocks = (0..m.n_strings).flat_map(|s| [ranges[s][0].clone(), ranges[s][2].clone()]);
     let (nt, np) = (ranges[0][0].len(), ranges[0][2].len());
-    // z = W v: all blocks at once through the AVX2 kernel when they have one length.
-    #[cfg(target_arch = "x86_64")]
-    let projected = SIMD && nt == np && {
-        let mut offsets = [0; 2 * MAX_STRINGS];
-        for (o, r) in offsets.iter_mut().zip(blocks.clone()) {
-            *o = r.start;
-        }
-        let w = &m.duplex_w;
-        // SAFETY: `SIMD` is true only inside `step_avx2`, entered after detecting AVX2 and FMA.
-        unsafe {
-            match m.n_strings {
-                1 => project_avx2::<2>(w, n, rank, nt, v, &offsets, z),
-                2 => project_avx2::<4>(w, n, rank, nt, v, &offsets, z),
-                _ => project_avx2::<6>(w, n, rank, nt, v, &offsets, z),
-            }
-        }
-        true
-    };
-    #[cfg(not(target_arch = "x86_64"))]
-    let projected = false;
-    if !projected {
-        for (b, r) in blocks.clone().enumerate() {
-            let zb = &mut z[b * rank..(b + 1) * rank];
-            for (j, zj) in zb.iter_mut().enumerate() {
-                *zj = dot::<SIMD>(&m.duplex_w[j * n..j * n + r.len()], &v[r.clone()]);
-            }
-        }
+    let mut offsets = [0; 2 * MAX_STRINGS];
+    for (o, r) in offsets.iter_mut().zip(blocks.clone()) {
+        *o = r.start;
+    }
+    let k = 2 * m.n_strings;
+    if nt == np {
+        T::project::<SIMD>(&m.duplex_w, n, rank, nt, v, &offsets[..k], z);
+        T::project_back::<SIMD>(&m.duplex_w, n, rank, nt, z, &offsets[..k], acc);
+        return;
     }
     for (b, r) in blocks.enumerate() {
-        let zb = &z[b * rank..(b + 1) * rank];
-        #[cfg(target_arch = "x86_64")]
-        if SIMD {
-            // SAFETY: `SIMD` is true only inside `step_avx2`, entered after detecting AVX2 and FMA.
-            unsafe { project_back_avx2(&m.duplex_w, n, zb, &mut acc[r]) };
-            continue;
-        }
-        for (j, &zj) in zb.iter().enumerate() {
-            axpy::<SIMD>(
-                &mut acc[r.clone()],
-                &m.duplex_w[j * n..j * n + r.len()],
-                -zj,
-            );
-        }
-    }
-}
-
-/// `z[b][j] = W[j, ..len] · v[offsets[b]..][..len]` for `K` blocks: each chunk of a row of `W` is
-/// loaded once for all blocks.
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-unsafe fn project_avx2<const K: usize>(
-    w: &[f64],
-    n: usize,
-    rank: usize,
-    len: usize,
-    v: &[f64],
-    offsets: &[usize; 2 * MAX_STRINGS],
-    z: &mut [f64],
-) {
-    use std::arch::x86_64::*;
-    assert!(len <= n && (rank == 0 || (rank - 1) * n + len <= w.len()) && z.len() >= K * rank);
-    for &o in &offsets[..K] {
-        assert!(o + len <= v.len());
-    }
-    let (pw, pv) = (w.as_ptr(), v.as_ptr());
-    let split = len - len % 4;
-    for j in 0..rank {
-        let row = pw.add(j * n);
-        let mut s = [_mm256_setzero_pd(); K];
-        let mut i = 0;
-        // SAFETY (loads): columns below `len` of rows below `rank` lie inside `w`, and
-        // `offsets[b] + i < v.len()` (asserted).
-        while i < split {
-            let c = _mm256_loadu_pd(row.add(i));
-            for b in 0..K {
-                s[b] = _mm256_fmadd_pd(c, _mm256_loadu_pd(pv.add(offsets[b] + i)), s[b]);
-            }
-            i += 4;
-        }
-        for b in 0..K {
-            let h = _mm_add_pd(_mm256_castpd256_pd128(s[b]), _mm256_extractf128_pd(s[b], 1));
-            let mut sum = _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
-            for t in split..len {
-                sum += w[j * n + t] * v[offsets[b] + t];
-            }
-            z[b * rank + j] = sum;
-        }
-    }
-}
-
-/// `acc -= W[:, ..len]ᵀ z` for `W` row-major with `n` columns, `len = acc.len()`: each four-wide
-/// chunk of `acc` stays in a register while the `z.len()` rows are folded into it, so `acc` is
-/// loaded and stored once rather than once per row.
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-unsafe fn project_back_avx2(w: &[f64], n: usize, z: &[f64], acc: &mut [f64]) {
-    use std::arch::x86_64::*;
-    let (len, rank) = (acc.len(), z.len());
-    assert!(len <= n && (rank == 0 || (rank - 1) * n + len <= w.len()));
-    let (pw, pa) = (w.as_ptr(), acc.as_mut_ptr());
-    let mut i = 0;
-    // SAFETY (loads and stores): rows j < rank and columns below `len` lie inside `w` (asserted),
-    // and indices below `len` inside `acc`.
-    while i + 4 <= len {
-        let mut a = _mm256_loadu_pd(pa.add(i));
-        for (j, &zj) in z.iter().enumerate() {
-            a = _mm256_fnmadd_pd(_mm256_loadu_pd(pw.add(j * n + i)), _mm256_set1_pd(zj), a);
-        }
-        _mm256_storeu_pd(pa.add(i), a);
-        i += 4;
-    }
-    while i < len {
-        for (j, &zj) in z.iter().enumerate() {
-            acc[i] -= w[j * n + i] * zj;
-        }
-        i += 1;
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn avx2_projection_agrees_with_the_portable_one() {
-        if !has_avx2_fma() {
-            return;
-        }
-        let (n, rank) = (103, 16);
-        let w: Vec<f64> = (0..n * rank)
-            .map(|k| ((k * 7919) % 1000) as f64 / 1000.0 - 0.5)
-            .collect();
-        let v: Vec<f64> = (0..4 * n + 9)
-            .map(|k| ((k * 104_729) % 997) as f64 / 997.0 - 0.5)
-            .collect();
-        let offsets = [0, n, 2 * n + 3, 3 * n + 9, 0, 0];
-        for len in [0, 1, 5, 100, 103] {
-            let mut fast = vec![0.0; 4 * rank];
-            // SAFETY: the CPU supports AVX2 and FMA (checked above).
-            unsafe { project_avx2::<4>(&w, n, rank, len, &v, &offsets, &mut fast) };
-            for b in 0..4 {
-                for j in 0..rank {
-                    let reference =
-                        dot::<false>(&w[j * n..j * n + len], &v[offsets[b]..offsets[b] + len]);
-                    let d = (reference - fast[b * rank + j]).abs();
-                    assert!(d < 1e-13, "len {len}, block {b}, row {j}: {d}");
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn avx2_back_projection_agrees_with_the_portable_one() {
-        if !has_avx2_fma() {
-            return;
-        }
-        let (n, rank) = (103, 16);
-        let w: Vec<f64> = (0..n * rank)
-            .map(|k| ((k * 7919) % 1000) as f64 / 1000.0 - 0.5)
-            .collect();
-        let z: Vec<f64> = (0..rank).map(|k| k as f64 / 7.0 - 1.0).collect();
-        for len in [0, 1, 5, 100, 103] {
-            let mut reference = vec![0.25; len];
-            for (j, &zj) in z.iter().enumerate() {
-                axpy::<false>(&mut reference, &w[j * n..j * n + len], -zj);
-            }
-            let mut fast = vec![0.25; len];
-            // SAFETY: the CPU supports AVX2 and FMA (checked above).
-            unsafe { project_back_avx2(&w, n, &z, &mut fast) };
-            let worst = reference
-                .iter()
-                .zip(&fast)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
-            assert!(worst < 1e-13, "len {len}: {worst}");
-        }
-    }
-
-    #[test]
-    fn avx2_kernels_agree_with_the_portable_ones() {
-        if !has_avx2_fma() {
-            return;
-        }
-        let x: Vec<f64> = (0..203)
-            .map(|k| ((k * 7919) % 997) as f64 / 997.0 - 0.5)
-            .collect();
-        let y: Vec<f64> = (0..203)
-            .map(|k| ((k * 104_729) % 991) as f64 / 991.0 - 0.5)
-            .collect();
-        for n in [0, 1, 3, 4, 7, 8, 9, 100, 203] {
-            let (a, b) = (&x[..n], &y[..n]);
-            // SAFETY: the CPU supports AVX2 and FMA (checked above).
-            let fast = unsafe { dot_avx2(a, b) };
-            assert!((fast - dot::<false>(a, b)).abs() < 1e-13, "dot, n = {n}");
-            let (mut y1, mut y2) = (b.to_vec(), b.to_vec());
-            axpy::<false>(&mut y1, a, 0.37);
-            // SAFETY: as above.
-            unsafe { axpy_avx2(&mut y2, a, 0.37) };
-            assert!(
-                y1.iter().zip(&y2).all(|(p, q)| (p - q).abs() < 1e-15),
-                "axpy, n = {n}"
-            );
-        }
+        let (o, len, zb) = (&[r.start], r.len(), &mut z[b * rank..(b + 1) * rank]);
+        T::project::<SIMD>(&m.duplex_w, n, rank, len, v, o, zb);
+        T::project_back::<SIMD>(&m.duplex_w, n, rank, len, zb, o, acc);
     }
 }

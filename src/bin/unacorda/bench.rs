@@ -24,7 +24,7 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
     }
     let c2 = Preset::resolve("c2")?;
     let spec = c2.unison_spec();
-    let fast = voice_speed(&spec, seconds);
+    let fast = voice_speed::<f64>(&spec, seconds);
     println!(
         "c2 voice, paper-faithful ({} × {} string modes, {} board modes, duplex damping (Eq. 13, applied through its exact rank-16 factor), RK4 in f64 at {:.0} kHz):",
         spec.strings.len(),
@@ -46,6 +46,18 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
         ),
         None => println!("  {:.1} GFLOP/s", fast.flops_per_s / 1e9),
     }
+    let single = voice_speed::<f32>(&spec, seconds);
+    println!(
+        "same voice, RK4 in f32 (bridge forces within 1e-4 of f64 over 4 s: tests/precision.rs):\n  real-time factor {:.2} ({:.2} × f64), {:.1} GFLOP/s{}",
+        single.real_time_factor,
+        single.real_time_factor / fast.real_time_factor,
+        single.flops_per_s / 1e9,
+        nominal_f64_peak().map_or(String::new(), |(peak, _)| format!(
+            " = {:.0} % of this core's nominal f32 peak ({:.1} GFLOP/s)",
+            100.0 * single.flops_per_s / (2.0 * peak),
+            2.0 * peak / 1e9
+        ))
+    );
     let rate = c2.output_rate_hz();
     let live = exponential_speed(&spec, rate, seconds);
     println!(
