@@ -3,8 +3,9 @@
 //! at a time; and the two-core callback never allocates.
 
 use assert_no_alloc::{assert_no_alloc, reset_violation_count, violation_count, AllocDisabler};
+use std::sync::atomic::Ordering;
 use unacorda::audio::synth::{OutputSettings, Scheduled, Synth, EVENT_QUEUE};
-use unacorda::engine::exponential::ExponentialInstrument;
+use unacorda::engine::exponential::{ExponentialInstrument, Pair};
 use unacorda::engine::{Instrument, VoicePool};
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Piano;
@@ -77,7 +78,7 @@ fn compare(label: &str, a: &[f32], b: &[f32]) {
         .count();
     let peak = a.iter().fold(0f32, |m, x| m.max(x.abs()));
     println!(
-        "{label}: {} frames, peak {peak:.3} of full scale, {differ} frames differ",
+        "{label}: {} frames, peak {peak:.3}, {differ} frames differ",
         a.len()
     );
     assert!(peak > 0.01, "{label}: the script is heard");
@@ -94,15 +95,27 @@ fn two_cores_sound_exactly_like_one() {
     let two = {
         let (mut synth, handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
         synth.use_second_core().unwrap();
-        play(synth, handle, 200, 64, false)
+        let stats = handle.stats.clone();
+        let out = play(synth, handle, 200, 64, false);
+        let (split, late) = (
+            stats.two_core_runs.load(Ordering::Relaxed),
+            stats.helper_late.load(Ordering::Relaxed),
+        );
+        println!("engine runs on two cores {split}, on one with the helper late {late}");
+        assert!(split > 0, "the helper thread never took a run");
+        out
     };
-    compare("live pool, two cores vs one", &one, &two);
+    compare(
+        "live pool, two cores vs one (output, of full scale)",
+        &one,
+        &two,
+    );
     let framewise = {
         let (synth, handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
         play(synth, handle, 200, 64, true)
     };
     compare(
-        "live pool, event to event vs frame by frame",
+        "live pool, event to event vs frame by frame (output, of full scale)",
         &one,
         &framewise,
     );
@@ -116,7 +129,7 @@ fn the_reference_runs_alike_from_event_to_event() {
         play(synth, handle, 40, 256, framewise)
     });
     compare(
-        "RK4 pool, event to event vs frame by frame",
+        "RK4 pool, event to event vs frame by frame (output, of full scale)",
         &runs[0],
         &runs[1],
     );
@@ -140,4 +153,38 @@ fn the_callback_on_two_cores_never_allocates() {
         violation_count()
     );
     assert_eq!(violation_count(), 0);
+}
+
+/// A second core that never starts: every split is declined.
+struct Declines;
+
+impl Pair for Declines {
+    fn join(&self, _there: &mut (dyn FnMut() + Send), _here: &mut dyn FnMut()) -> bool {
+        false
+    }
+}
+
+#[test]
+fn a_second_core_that_does_not_start_costs_nothing_but_time() {
+    let (piano, _) = piano::<ExponentialInstrument>(5);
+    let runs = [false, true].map(|declined| {
+        let mut piano = piano.clone();
+        let mut out = vec![0.0; 64];
+        let mut all = Vec::new();
+        let mut script = script().into_iter().peekable();
+        for block in 0..100u64 {
+            while let Some((_, event)) = script.next_if(|(f, _)| *f < (block + 1) * 64) {
+                piano.apply(event);
+            }
+            let pair = declined.then_some(&Declines as &dyn Pair);
+            piano.instrument.run(&mut out, pair);
+            all.extend(out.iter().map(|&x| x as f32));
+        }
+        all
+    });
+    compare(
+        "live pool, every split declined vs one core (volume velocity, m^3/s)",
+        &runs[0],
+        &runs[1],
+    );
 }

@@ -5,10 +5,13 @@
 //! closure) is handed over through an atomic state word, the caller wakes the helper with
 //! `unpark` (a futex wake that never blocks the caller) and spins until the helper reports done.
 //! After each job the helper spins for [`SPIN`] so that the next block finds it awake, then parks.
+//! A helper that has not taken the job within [`CLAIM`] (descheduled, or slow to wake) loses it:
+//! the caller takes it back and [`Pair::join`] says so, so the engine runs the block on one core
+//! instead of waiting for a thread it does not control.
 
 use crate::engine::exponential::Pair;
 use std::cell::UnsafeCell;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -16,21 +19,30 @@ use std::time::{Duration, Instant};
 /// How long the helper stays awake after a job (a little over one 64-frame block at 48 kHz).
 pub const SPIN: Duration = Duration::from_millis(2);
 
+/// How long the caller waits for the helper to take a job before taking it back (under 4 % of a
+/// 64-frame block at 48 kHz; a spinning helper takes it within a microsecond).
+pub const CLAIM: Duration = Duration::from_micros(50);
+
 const IDLE: u32 = 0;
 const POSTED: u32 = 1;
 const DONE: u32 = 2;
 const QUIT: u32 = 3;
+const TAKEN: u32 = 4;
 
 /// The job slot and the state word that says who owns it.
 struct Shared {
     state: AtomicU32,
+    /// Jobs run on both cores, and jobs the helper did not take in time.
+    joined: AtomicU64,
+    late: AtomicU64,
     /// Written by the caller before `POSTED`, taken by the helper after it sees `POSTED`.
     job: UnsafeCell<Option<*mut (dyn FnMut() + Send)>>,
 }
 
 // SAFETY: `job` is touched only by the side that the `state` protocol makes its owner (the caller
-// before it publishes `POSTED`, the helper between `POSTED` and `DONE`), with release/acquire
-// ordering on `state`; the closure it points to is `Send`.
+// before it publishes `POSTED` and after it takes a `POSTED` job back, the helper once it has
+// moved `POSTED` to `TAKEN` and until `DONE`), with release/acquire ordering on `state` and a
+// compare-exchange deciding who gets a posted job; the closure it points to is `Send`.
 unsafe impl Sync for Shared {}
 // SAFETY: as above.
 unsafe impl Send for Shared {}
@@ -52,6 +64,8 @@ impl Helper {
     pub fn spawn() -> std::io::Result<Helper> {
         let shared = Arc::new(Shared {
             state: AtomicU32::new(IDLE),
+            joined: AtomicU64::new(0),
+            late: AtomicU64::new(0),
             job: UnsafeCell::new(None),
         });
         let theirs = shared.clone();
@@ -63,6 +77,16 @@ impl Helper {
             thread: Some(thread),
         })
     }
+
+    /// Jobs the helper did not take within [`CLAIM`] (each ran on the caller's core alone).
+    pub fn late_jobs(&self) -> u64 {
+        self.shared.late.load(Ordering::Relaxed)
+    }
+
+    /// Jobs run on both cores.
+    pub fn joined_jobs(&self) -> u64 {
+        self.shared.joined.load(Ordering::Relaxed)
+    }
 }
 
 /// The helper's loop: wait (spinning, then parked) for a job, run it, report it done.
@@ -72,7 +96,17 @@ fn work(shared: &Shared) {
         match shared.state.load(Ordering::Acquire) {
             QUIT => return,
             POSTED => {
-                // SAFETY: `POSTED` hands the slot to this thread (see `Shared`).
+                let claim = shared.state.compare_exchange(
+                    POSTED,
+                    TAKEN,
+                    Ordering::Acquire,
+                    Ordering::Relaxed,
+                );
+                if claim.is_err() {
+                    // The caller took the job back.
+                    continue;
+                }
+                // SAFETY: `TAKEN` hands the slot to this thread (see `Shared`).
                 let job = unsafe { (*shared.job.get()).take() };
                 if let Some(job) = job {
                     // SAFETY: the caller of `join` keeps the closure alive and untouched until it
@@ -86,17 +120,20 @@ fn work(shared: &Shared) {
                 awake_since = Instant::now();
             }
             _ if awake_since.elapsed() < SPIN => std::hint::spin_loop(),
-            _ => std::thread::park(),
+            _ => {
+                std::thread::park();
+                // Woken for a job, or spuriously: stay awake for the next one either way (a
+                // job taken back while this thread woke is posted again a block later).
+                awake_since = Instant::now();
+            }
         }
     }
 }
 
 impl Pair for Helper {
-    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut()) {
+    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut()) -> bool {
         let Some(thread) = &self.thread else {
-            there();
-            here();
-            return;
+            return false;
         };
         let job: *mut (dyn FnMut() + Send + '_) = there;
         // SAFETY: only the lifetime is erased; this function does not return (or unwind) before
@@ -106,14 +143,36 @@ impl Pair for Helper {
         unsafe { *self.shared.job.get() = Some(job) };
         self.shared.state.store(POSTED, Ordering::Release);
         thread.thread().unpark();
+        // `here` may wait for `there`: start it only once the helper has taken the job.
+        let posted = Instant::now();
+        while self.shared.state.load(Ordering::Acquire) == POSTED {
+            if posted.elapsed() > CLAIM {
+                let back = self.shared.state.compare_exchange(
+                    POSTED,
+                    IDLE,
+                    Ordering::Acquire,
+                    Ordering::Relaxed,
+                );
+                if back.is_ok() {
+                    // SAFETY: the job was taken back before the helper claimed it: the slot is
+                    // this thread's again, and the helper never saw the closure.
+                    unsafe { *self.shared.job.get() = None };
+                    self.shared.late.fetch_add(1, Ordering::Relaxed);
+                    return false;
+                }
+            }
+            std::hint::spin_loop();
+        }
         let mine = std::panic::catch_unwind(std::panic::AssertUnwindSafe(here));
         while self.shared.state.load(Ordering::Acquire) != DONE {
             std::hint::spin_loop();
         }
         self.shared.state.store(IDLE, Ordering::Relaxed);
+        self.shared.joined.fetch_add(1, Ordering::Relaxed);
         if let Err(e) = mine {
             std::panic::resume_unwind(e);
         }
+        true
     }
 }
 
@@ -135,20 +194,47 @@ mod tests {
     fn both_jobs_run_and_the_borrow_is_released() {
         let helper = Helper::spawn().unwrap();
         let (mut a, mut b) = (0u64, 0u64);
+        let mut joined = 0;
         for round in 1..=1000 {
-            helper.join(&mut || a += 1, &mut || b += 2);
-            assert_eq!((a, b), (round, 2 * round));
+            if helper.join(&mut || a += 1, &mut || b += 2) {
+                joined += 1;
+            }
+            // Both ran, or (the helper late) neither.
+            assert_eq!((a, b), (joined, 2 * joined), "round {round}");
         }
+        assert_eq!(joined, helper.joined_jobs());
+        assert_eq!(joined + helper.late_jobs(), 1000);
+        assert!(joined > 0);
+    }
+
+    #[test]
+    fn a_helper_that_never_starts_loses_the_job() {
+        let helper = Helper::spawn().unwrap();
+        // Stop the helper thread, then post as if it were there: nobody takes the job.
+        helper.shared.state.store(QUIT, Ordering::Release);
+        let thread = helper.thread.as_ref().unwrap();
+        thread.thread().unpark();
+        while !thread.is_finished() {
+            std::thread::yield_now();
+        }
+        helper.shared.state.store(IDLE, Ordering::Release);
+        let (mut a, mut b) = (0, 0);
+        let t = Instant::now();
+        assert!(!helper.join(&mut || a += 1, &mut || b += 1));
+        assert!(t.elapsed() >= CLAIM);
+        assert_eq!((a, b), (0, 0), "neither job runs when the helper is late");
+        assert_eq!(helper.late_jobs(), 1);
     }
 
     #[test]
     fn a_panic_on_the_helper_does_not_hang_the_caller() {
         let helper = Helper::spawn().unwrap();
         let mut ran = false;
-        helper.join(&mut || panic!("helper job"), &mut || ran = true);
+        // (A helper still starting loses the job: ask again.)
+        while !helper.join(&mut || panic!("helper job"), &mut || ran = true) {}
         assert!(ran);
         let mut after = 0;
-        helper.join(&mut || after += 1, &mut || {});
+        while !helper.join(&mut || after += 1, &mut || {}) {}
         assert_eq!(after, 1);
     }
 }

@@ -84,6 +84,10 @@ pub struct Stats {
     pub peak_voices: AtomicU64,
     /// Voices (or the board) reset because a value became non-finite or the energy ran away.
     pub resets: AtomicU64,
+    /// Engine runs split over two cores, and runs done on one because the helper thread did not
+    /// start in time ([`Synth::use_second_core`]).
+    pub two_core_runs: AtomicU64,
+    pub helper_late: AtomicU64,
 }
 
 /// The engine's frame clock as last published by the audio thread, so that other threads can
@@ -362,6 +366,12 @@ impl<E: VoicePool> Synth<E> {
             .frames
             .fetch_add(self.frame - block_start, Ordering::Relaxed);
         self.stats.blocks.fetch_add(1, Ordering::Relaxed);
+        if let Some(helper) = &self.helper {
+            let s = &self.stats;
+            s.two_core_runs
+                .store(helper.joined_jobs(), Ordering::Relaxed);
+            s.helper_late.store(helper.late_jobs(), Ordering::Relaxed);
+        }
     }
 
     /// Reset whatever has blown up, and the output stage's memory with it if anything did.

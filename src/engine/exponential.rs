@@ -802,8 +802,11 @@ impl Clone for Exchange {
 /// Runs two jobs at once, one on another core. The real-time shell implements it with a helper
 /// thread (the engine holds no threads); the live pool uses it to split its voices over two cores.
 pub trait Pair {
-    /// Run `there` on the other core and `here` on this one; return when both have finished.
-    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut());
+    /// Run `there` on the other core and `here` on this one, the two started together (they may
+    /// wait for each other), and return `true` when both have finished. When the other core
+    /// cannot start `there` promptly, run neither and return `false`: the caller then does the
+    /// work alone, so a late core costs one core's time, not a wait of unknown length.
+    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut()) -> bool;
 }
 
 /// Strings of up to 88 keys on one shared soundboard, advanced by ETDRK4 at the output rate: a
@@ -1173,7 +1176,9 @@ impl ExponentialInstrument {
             let out = &mut volume_velocity[done..done + n];
             match pair {
                 Some(pair) if self.halves.iter().all(|h| !h.set.live.is_empty()) => {
-                    self.run_split(out, pair)
+                    if !self.run_split(out, pair) {
+                        self.run_alone(out);
+                    }
                 }
                 _ => self.run_alone(out),
             }
@@ -1228,8 +1233,9 @@ impl ExponentialInstrument {
         }
     }
 
-    /// Half 1 on the other core through `pair`, half 0 here, meeting after every stage.
-    fn run_split(&mut self, out: &mut [f64], pair: &dyn Pair) {
+    /// Half 1 on the other core through `pair`, half 0 here, meeting after every stage; `false`
+    /// (nothing advanced) when the other core did not start.
+    fn run_split(&mut self, out: &mut [f64], pair: &dyn Pair) -> bool {
         let (keys, ex) = (&self.keys, &self.exchange);
         let timing = (self.h, self.fade_steps, self.fast_path);
         let [h0, h1] = &mut self.halves;
@@ -1255,10 +1261,11 @@ impl ExponentialInstrument {
                 *p0 = Some(e);
             }
         };
-        pair.join(&mut there, &mut here);
+        let joined = pair.join(&mut there, &mut here);
         if let Some(e) = panic.into_iter().flatten().next() {
             std::panic::resume_unwind(e);
         }
+        joined
     }
 
     /// At the end of a chunk, give every voice whose fade has ended its next key.

@@ -2,6 +2,7 @@
 //! within the deadline, FLOP rate against the core's peak, memory).
 
 use anyhow::{bail, Result};
+use std::sync::atomic::Ordering;
 use unacorda::engine::exponential::ExponentialInstrument;
 use unacorda::engine::{Instrument, VoicePool};
 use unacorda::measure::{
@@ -140,7 +141,7 @@ fn callback<E: VoicePool>(
     let mut within = 0;
     let mut voices = 1;
     loop {
-        let (mut synth, _handle) = loaded_synth(&piano, settings, voices, BLOCK);
+        let (mut synth, handle) = loaded_synth(&piano, settings, voices, BLOCK);
         if cores == 2 {
             synth.use_second_core()?;
         }
@@ -149,12 +150,19 @@ fn callback<E: VoicePool>(
         let t = block_times_s(&mut synth, BLOCK, blocks);
         let (median, p999) = (percentile(&t, 0.5), percentile(&t, 0.999));
         let misses = t.iter().filter(|&&x| x > deadline).count();
+        let late = handle.stats.helper_late.load(Ordering::Relaxed);
+        let split = handle.stats.two_core_runs.load(Ordering::Relaxed);
         println!(
-            "  {voices:>3} voices: median {:7.3} ms ({:6.2} × deadline), p99.9 {:7.3} ms ({:6.2} ×), deadline misses (xruns) {misses} of {blocks} blocks",
+            "  {voices:>3} voices: median {:7.3} ms ({:6.2} × deadline), p99.9 {:7.3} ms ({:6.2} ×), deadline misses (xruns) {misses} of {blocks} blocks{}",
             median * 1e3,
             median / deadline,
             p999 * 1e3,
-            p999 / deadline
+            p999 / deadline,
+            if cores == 2 {
+                format!("; helper late (run on one core) {late} of {} runs", late + split)
+            } else {
+                String::new()
+            }
         );
         if p999 < 0.5 * deadline {
             within = voices;

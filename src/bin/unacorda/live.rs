@@ -238,7 +238,7 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     let block = s.max_frames.load(Ordering::Relaxed);
     let deadline_ms = block as f64 / settings.rate_hz * 1e3;
     eprintln!(
-        "{} callbacks ({} frames) of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {xruns} xruns reported by the device; device reopened {reopened} times; {} late events; {} voices reset; at most {} voices sounding",
+        "{} callbacks ({} frames) of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {xruns} xruns reported by the device; device reopened {reopened} times; {} late events; {} voices reset; at most {} voices sounding; {} engine runs on two cores, {} on one because the helper thread was late",
         s.callbacks.load(Ordering::Relaxed),
         stats.frames.load(Ordering::Relaxed),
         s.busy_ns.load(Ordering::Relaxed) as f64 / callbacks as f64 * 1e-6,
@@ -247,6 +247,8 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         stats.late_events.load(Ordering::Relaxed),
         stats.resets.load(Ordering::Relaxed),
         stats.peak_voices.load(Ordering::Relaxed),
+        stats.two_core_runs.load(Ordering::Relaxed),
+        stats.helper_late.load(Ordering::Relaxed),
     );
     Ok(())
 }
