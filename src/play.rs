@@ -189,22 +189,30 @@ pub const MAX_VOICES: usize = 256;
 
 impl<E: VoicePool> Piano<E> {
     /// The `keys` (1–88) of `scaling` on one soundboard with a pool of `voices` voices. Keys are
-    /// built (and tuned) on all cores.
+    /// built (tuned, and prepared for the engine) on all cores.
     pub fn build(
         scaling: &crate::scaling::LoadedScaling,
         keys: &[usize],
         voices: usize,
     ) -> Result<Piano<E>, crate::render::RenderError> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let chunk = keys.len().div_ceil(threads).max(1);
-        let specs = std::thread::scope(|scope| {
-            let handles: Vec<_> = keys
-                .chunks(chunk)
-                .map(|part| {
+        let threads = threads.min(keys.len()).max(1);
+        let rate_hz = scaling.base.output_rate_hz();
+        // Thread `t` takes keys `t`, `t + threads`, …: bass and treble keys (many modes and few)
+        // spread evenly.
+        let built = std::thread::scope(|scope| {
+            let handles: Vec<_> = (0..threads)
+                .map(|t| {
                     scope.spawn(move || {
-                        part.iter()
-                            .map(|&k| Ok(scaling.key_preset(k)?.unison_spec()))
-                            .collect::<Result<Vec<_>, crate::preset::PresetError>>()
+                        keys.iter()
+                            .skip(t)
+                            .step_by(threads)
+                            .map(|&k| {
+                                let spec = scaling.key_preset(k)?.unison_spec();
+                                let key = E::prepare_key(&spec, rate_hz)?;
+                                Ok((spec, key))
+                            })
+                            .collect::<Result<Vec<_>, crate::render::RenderError>>()
                     })
                 })
                 .collect();
@@ -213,9 +221,12 @@ impl<E: VoicePool> Piano<E> {
                 .map(|h| h.join().expect("key builder thread panicked"))
                 .collect::<Result<Vec<_>, _>>()
         })?;
-        let specs: Vec<_> = specs.into_iter().flatten().collect();
+        let mut parts: Vec<_> = built.into_iter().map(|part| part.into_iter()).collect();
+        let (specs, prepared): (Vec<_>, Vec<_>) = (0..keys.len())
+            .map(|i| parts[i % threads].next().expect("one result per key"))
+            .unzip();
         Ok(Piano {
-            instrument: E::build_pool(&specs, voices, scaling.base.output_rate_hz())?,
+            instrument: E::from_keys(&specs, prepared, voices, rate_hz)?,
             player: Player::new(keys),
             keys: keys.to_vec(),
         })

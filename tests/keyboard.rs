@@ -113,3 +113,48 @@ fn keys_sound_near_their_pitch() {
         assert!(cents.abs() < 5.0);
     }
 }
+
+/// `Piano::build` prepares keys on several threads, interleaved; the pool must hold them in the
+/// order asked for, exactly as built one after another.
+#[test]
+fn keys_prepared_on_several_threads_land_in_order() {
+    use unacorda::engine::exponential::ExponentialInstrument;
+    use unacorda::engine::system::BuildError;
+    use unacorda::engine::VoicePool;
+    use unacorda::play::Piano;
+    let keyboard = Scaling::resolve("grand").unwrap();
+    let keys = [1, 16, 40, 52, 64, 88, 30];
+    let rate = keyboard.base.output_rate_hz();
+    let specs: Vec<_> = keys
+        .iter()
+        .map(|&k| keyboard.key_preset(k).unwrap().unison_spec())
+        .collect();
+    let mut sequential = ExponentialInstrument::build_pool(&specs, 2, rate).unwrap();
+    let mut threaded = Piano::<ExponentialInstrument>::build(&keyboard, &keys, 2)
+        .unwrap()
+        .instrument;
+    let strike = Strike {
+        velocity_m_s: 2.0,
+        una_corda: false,
+    };
+    for (bank, key) in keys.iter().enumerate() {
+        for pool in [&mut sequential, &mut threaded] {
+            VoicePool::assign(pool, 0, bank);
+            VoicePool::strike_voice(pool, 0, strike);
+        }
+        let (mut a, mut b) = (vec![0.0; 200], vec![0.0; 200]);
+        VoicePool::run(&mut sequential, &mut a, None);
+        VoicePool::run(&mut threaded, &mut b, None);
+        assert!(a.iter().any(|&x| x != 0.0), "key {key} sounds");
+        assert_eq!(a, b, "key {key} (bank index {bank})");
+    }
+    println!(
+        "{} keys, threaded and sequential builds: identical",
+        keys.len()
+    );
+    // Prepared keys and their specs must pair up.
+    let one = vec![Instrument::prepare_key(&specs[0]).unwrap()];
+    let err = Instrument::<f64>::from_keys(&specs[..2], one, 1).unwrap_err();
+    println!("{err}");
+    assert_eq!(err, BuildError::PreparedKeys { specs: 2, keys: 1 });
+}

@@ -599,6 +599,11 @@ impl KeyModes {
     }
 }
 
+/// One key's string blocks, prepared ([`ExponentialInstrument::prepare_key`]) and waiting to be
+/// placed on the board.
+#[derive(Debug, Clone)]
+pub struct PreparedKey(Vec<[Block; 3]>);
+
 /// Build one key's string blocks (the board's rows and inputs are added by the instrument).
 fn key_strings(spec: &UnisonSpec, h: f64) -> Result<Vec<[Block; 3]>, BuildError> {
     let ns = spec.strings.len();
@@ -828,9 +833,29 @@ pub struct ExponentialInstrument {
 
 impl ExponentialInstrument {
     /// Several keys on one shared soundboard and a pool of `voices` voices, stepping at each
-    /// spec's `sample_rate_hz` (the output rate); keys are diagonalised on all cores.
+    /// spec's `sample_rate_hz` (the output rate).
     pub fn with_pool(
         specs: &[UnisonSpec],
+        voices: usize,
+    ) -> Result<ExponentialInstrument, BuildError> {
+        let strings = specs
+            .iter()
+            .map(Self::prepare_key)
+            .collect::<Result<_, _>>()?;
+        Self::from_keys(specs, strings, voices)
+    }
+
+    /// One key's strings diagonalised and their propagators formed at `spec.sample_rate_hz`: the
+    /// costly part of building, independent from key to key (a caller may prepare keys on
+    /// several threads, then call [`ExponentialInstrument::from_keys`]).
+    pub fn prepare_key(spec: &UnisonSpec) -> Result<PreparedKey, BuildError> {
+        key_strings(spec, 1.0 / spec.sample_rate_hz).map(PreparedKey)
+    }
+
+    /// The pool of [`ExponentialInstrument::with_pool`] from keys already prepared, one per spec.
+    pub fn from_keys(
+        specs: &[UnisonSpec],
+        strings: Vec<PreparedKey>,
         voices: usize,
     ) -> Result<ExponentialInstrument, BuildError> {
         let first = specs.first().ok_or(BuildError::NoVoice)?;
@@ -843,29 +868,16 @@ impl ExponentialInstrument {
         {
             return Err(BuildError::SharedBoard);
         }
+        if strings.len() != specs.len() {
+            return Err(BuildError::PreparedKeys {
+                specs: specs.len(),
+                keys: strings.len(),
+            });
+        }
         let h = 1.0 / first.sample_rate_hz;
         let board = &first.board;
-        // The strings of every key, on all cores.
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let chunk = specs.len().div_ceil(threads).max(1);
-        let strings = std::thread::scope(|scope| {
-            let handles: Vec<_> = specs
-                .chunks(chunk)
-                .map(|part| {
-                    scope.spawn(move || {
-                        part.iter()
-                            .map(|s| key_strings(s, h))
-                            .collect::<Result<Vec<_>, _>>()
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|t| t.join().expect("key builder thread panicked"))
-                .collect::<Result<Vec<_>, _>>()
-        })?;
         let mut keys = Vec::with_capacity(specs.len());
-        for (spec, strings) in specs.iter().zip(strings.into_iter().flatten()) {
+        for (spec, PreparedKey(strings)) in specs.iter().zip(strings) {
             let point = board
                 .points
                 .get(spec.bridge_point)

@@ -34,13 +34,32 @@ pub use system::{Instrument, Observation, Strike, UnisonSpec};
 /// ([`exponential::ExponentialInstrument`], the live integrator). See [`Instrument`] for what each
 /// method does; both behave alike.
 pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
-    /// Build the pool for `specs` (one per key) with `voices` voices; an engine that steps at the
-    /// output rate runs at `output_rate_hz` instead of the specs' internal rate.
+    /// One key's coefficients, prepared before the pool is built.
+    type Key: Send;
+    /// Prepare one key (the costly part of building, independent from key to key: callers may
+    /// prepare keys on several threads); an engine that steps at the output rate prepares it at
+    /// `output_rate_hz` instead of the spec's internal rate.
+    fn prepare_key(spec: &UnisonSpec, output_rate_hz: f64)
+        -> Result<Self::Key, system::BuildError>;
+    /// The pool for `specs` (one per key, in order with `keys`) with `voices` voices.
+    fn from_keys(
+        specs: &[UnisonSpec],
+        keys: Vec<Self::Key>,
+        voices: usize,
+        output_rate_hz: f64,
+    ) -> Result<Self, system::BuildError>;
+    /// Prepare every key in turn, then build the pool.
     fn build_pool(
         specs: &[UnisonSpec],
         voices: usize,
         output_rate_hz: f64,
-    ) -> Result<Self, system::BuildError>;
+    ) -> Result<Self, system::BuildError> {
+        let keys = specs
+            .iter()
+            .map(|s| Self::prepare_key(s, output_rate_hz))
+            .collect::<Result<_, _>>()?;
+        Self::from_keys(specs, keys, voices, output_rate_hz)
+    }
     fn n_voices(&self) -> usize;
     fn step_s(&self) -> f64;
     fn step(&mut self);
@@ -66,26 +85,30 @@ pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
 
 /// Both pools implement [`VoicePool`] with their own inherent methods.
 macro_rules! voice_pool {
-    ($t:ty, $rate:expr) => {
+    ($t:ty, $key:ty, $rate:expr) => {
         impl VoicePool for $t {
-            fn build_pool(
+            type Key = $key;
+            fn prepare_key(
+                spec: &UnisonSpec,
+                output_rate_hz: f64,
+            ) -> Result<Self::Key, system::BuildError> {
+                match $rate(output_rate_hz) {
+                    Some(r) => <$t>::prepare_key(&at_rate(spec, r)),
+                    None => <$t>::prepare_key(spec),
+                }
+            }
+            fn from_keys(
                 specs: &[UnisonSpec],
+                keys: Vec<Self::Key>,
                 voices: usize,
                 output_rate_hz: f64,
             ) -> Result<Self, system::BuildError> {
-                let rate: Option<f64> = $rate(output_rate_hz);
-                match rate {
+                match $rate(output_rate_hz) {
                     Some(r) => {
-                        let specs: Vec<UnisonSpec> = specs
-                            .iter()
-                            .map(|s| UnisonSpec {
-                                sample_rate_hz: r,
-                                ..s.clone()
-                            })
-                            .collect();
-                        <$t>::with_pool(&specs, voices)
+                        let specs: Vec<UnisonSpec> = specs.iter().map(|s| at_rate(s, r)).collect();
+                        <$t>::from_keys(&specs, keys, voices)
                     }
-                    None => <$t>::with_pool(specs, voices),
+                    None => <$t>::from_keys(specs, keys, voices),
                 }
             }
             fn n_voices(&self) -> usize {
@@ -149,8 +172,20 @@ macro_rules! voice_pool {
     };
 }
 
-voice_pool!(Instrument, |_| None);
-voice_pool!(exponential::ExponentialInstrument, Some);
+/// `spec` stepping at `rate_hz`.
+fn at_rate(spec: &UnisonSpec, rate_hz: f64) -> UnisonSpec {
+    UnisonSpec {
+        sample_rate_hz: rate_hz,
+        ..spec.clone()
+    }
+}
+
+voice_pool!(Instrument, system::KeyModel<f64>, |_| None::<f64>);
+voice_pool!(
+    exponential::ExponentialInstrument,
+    exponential::PreparedKey,
+    Some::<f64>
+);
 
 /// What the offline renderer needs of a one-key engine: RK4 on [`Instrument`] (the reference, at
 /// the paper's rate) or ETDRK4 on [`exponential::ExponentialUnison`] (at the output rate).

@@ -106,9 +106,10 @@ impl Energy {
 }
 
 /// Coefficients of one key: its strings' modes (laid out from 0), hammer, damper and bridge point.
-/// Built once; a voice playing the key copies the per-mode arrays into its own slot.
+/// Built once ([`Instrument::prepare_key`]); a voice playing the key copies the per-mode arrays
+/// into its own slot.
 #[derive(Debug, Clone)]
-struct KeyModel<T> {
+pub struct KeyModel<T> {
     n_strings: usize,
     /// `ranges[s][d]`: modes of string `s` in direction `d` (T, L, P), from the key's first mode.
     ranges: [[Range<usize>; 3]; MAX_STRINGS],
@@ -225,6 +226,8 @@ pub enum BuildError {
     SharedBoard,
     #[error("an instrument needs at least one key and one voice")]
     NoVoice,
+    #[error("{keys} prepared keys for {specs} key specifications")]
+    PreparedKeys { specs: usize, keys: usize },
     #[error("the duplex damping matrix cannot be factored (non-finite string parameters?)")]
     Duplex,
     #[error("the complex modes of a string direction or the board cannot be computed (non-finite parameters?)")]
@@ -394,7 +397,33 @@ impl<T: Real> Instrument<T> {
     /// A bank of keys (`specs`, all on the same board and internal rate) and a pool of `voices`
     /// voices in precision `T`, each large enough for any key; no voice plays a key yet.
     pub fn pool(specs: &[UnisonSpec], voices: usize) -> Result<Self, BuildError> {
+        let keys = specs
+            .iter()
+            .map(Self::prepare_key)
+            .collect::<Result<_, _>>()?;
+        Self::from_keys(specs, keys, voices)
+    }
+
+    /// One key's coefficients (modes, duplex factor, hammer, damper, stability check), independent
+    /// from key to key (a caller may prepare keys on several threads, then call
+    /// [`Instrument::from_keys`]).
+    pub fn prepare_key(spec: &UnisonSpec) -> Result<KeyModel<T>, BuildError> {
+        build_key(spec)
+    }
+
+    /// The pool of [`Instrument::pool`] from keys already prepared, one per spec.
+    pub fn from_keys(
+        specs: &[UnisonSpec],
+        keys: Vec<KeyModel<T>>,
+        voices: usize,
+    ) -> Result<Self, BuildError> {
         let first = specs.first().ok_or(BuildError::NoVoice)?;
+        if keys.len() != specs.len() {
+            return Err(BuildError::PreparedKeys {
+                specs: specs.len(),
+                keys: keys.len(),
+            });
+        }
         if voices == 0 {
             return Err(BuildError::NoVoice);
         }
@@ -404,7 +433,6 @@ impl<T: Real> Instrument<T> {
         {
             return Err(BuildError::SharedBoard);
         }
-        let keys = specs.iter().map(build_key).collect::<Result<Vec<_>, _>>()?;
         let capacity = keys.iter().map(|k| k.n_modes).max().unwrap_or(0);
         let voice_slots: Vec<Voice> = (0..voices)
             .map(|i| Voice {
