@@ -383,5 +383,5 @@ fn play_runs_the_callback_on_the_alsa_null_device() {
     let summary = ours.last().unwrap();
     let n: u64 = summary.split_whitespace().next().unwrap().parse().unwrap();
     assert!(n >= 300, "{summary}");
-    assert!(summary.ends_with("at most 1 voices sounding"), "{summary}");
+    assert!(summary.contains("at most 1 voices sounding;"), "{summary}");
 }
