@@ -209,7 +209,8 @@ impl<E: VoicePool> Piano<E> {
                             .step_by(threads)
                             .map(|&k| {
                                 let spec = scaling.key_preset(k)?.unison_spec();
-                                let key = E::prepare_key(&spec, rate_hz)?;
+                                let spec = E::at_engine_rate(spec, rate_hz);
+                                let key = E::prepare_key(&spec)?;
                                 Ok((spec, key))
                             })
                             .collect::<Result<Vec<_>, crate::render::RenderError>>()
@@ -226,7 +227,7 @@ impl<E: VoicePool> Piano<E> {
             .map(|i| parts[i % threads].next().expect("one result per key"))
             .unzip();
         Ok(Piano {
-            instrument: E::from_keys(&specs, prepared, voices, rate_hz)?,
+            instrument: E::from_keys(&specs, prepared, voices)?,
             player: Player::new(keys),
             keys: keys.to_vec(),
         })

@@ -3,3 +3,4 @@
 pub mod figures;
 pub mod mobility;
 pub mod spectral;
+pub mod stability;

@@ -52,19 +52,35 @@ pub struct OutputSettings {
     pub silence_j: f64,
 }
 
-/// Default retirement threshold: about 80 dB below the energy a mezzo-forte hammer brings (≈ 0.02 J).
-pub const SILENCE_J: f64 = 1e-10;
+/// Default retirement threshold: about 100 dB below the energy a mezzo-forte hammer brings
+/// (≈ 0.02 J). A retired voice leaves the board, and a string at rest on a moving board holds the
+/// energy of following it, so this also bounds the jolt its leaving gives the board: at 1e-10 J
+/// retiring the nine-key chord's treble voices while its bass still rang raised the decaying tail
+/// from −64 to −59 dBFS (`tests/stability.rs`).
+pub const SILENCE_J: f64 = 1e-12;
 
 /// Energy above which a voice (or the board) is taken as blown up and reset: a fortissimo hammer
 /// brings about 0.2 J, so 50 J is far beyond anything the model can hold legitimately.
 pub const RUNAWAY_J: f64 = 50.0;
 
+/// The growth guard: when the pool's mechanical energy (strings, contact springs, board) has stood
+/// above what it held when nothing last began to drive it — by more than [`GROWTH_TOLERANCE`] —
+/// at the end of this many blocks in a row, while nothing drove it (no hammer in play, no voice
+/// fading, none joining or leaving), every sounding voice and the board are reset. A physical
+/// piano's energy only falls between strikes, and the engines' stays within rounding of that
+/// (`tests/stability.rs`), so this is a safety net for a numerical runaway too slow for
+/// [`RUNAWAY_J`] (steady or oscillating), not something music can trigger.
+pub const GROWTH_BLOCKS: u32 = 8;
+/// Relative rise over its reference that the growth guard counts (rounding moves the energy by
+/// ~1e-12 of itself; the slowest physical decay, A0's first partial, loses 2e-5 per block).
+pub const GROWTH_TOLERANCE: f64 = 1e-6;
+
 /// Output level from which the soft clipper bends the signal towards ±1.
-const KNEE: f32 = 0.8;
+pub const KNEE: f32 = 0.8;
 
 /// Identity below `KNEE`, then a tanh curve that reaches ±1 only asymptotically: no sample leaves
 /// [-1, 1] and loud peaks are rounded rather than cut.
-fn soft_clip(x: f32) -> f32 {
+pub fn soft_clip(x: f32) -> f32 {
     let a = x.abs();
     if a <= KNEE {
         x
@@ -84,6 +100,12 @@ pub struct Stats {
     pub peak_voices: AtomicU64,
     /// Voices (or the board) reset because a value became non-finite or the energy ran away.
     pub resets: AtomicU64,
+    /// Times the growth guard ([`GROWTH_BLOCKS`]) reset the pool.
+    pub growth_resets: AtomicU64,
+    /// Output samples the soft clipper bent (above [`KNEE`] in magnitude), and the largest
+    /// magnitude before it (`f32` bits; non-negative floats order as their bits).
+    pub clipped: AtomicU64,
+    pub peak_before_clip: AtomicU64,
     /// Engine runs split over two cores, and runs done on one because the helper thread did not
     /// start in time ([`Synth::use_second_core`]).
     pub two_core_runs: AtomicU64,
@@ -163,6 +185,11 @@ pub struct Synth<E: VoicePool = Instrument> {
     /// The board's volume velocity after each step of the current run of steps.
     volume: Vec<f64>,
     helper: Option<Helper>,
+    /// The growth guard: the pool's energy when nothing last began to drive it, which voices were
+    /// sounding then (a hash), and the blocks in a row its energy has stood above that.
+    reference_j: f64,
+    sounding: u64,
+    rising_blocks: u32,
 }
 
 /// Most output frames advanced in one run of the engine (longer blocks take several).
@@ -227,6 +254,9 @@ impl<E: VoicePool> Synth<E> {
             running: true,
             volume: vec![0.0; RUN_FRAMES * ratio as usize],
             helper: None,
+            reference_j: 0.0,
+            sounding: 0,
+            rising_blocks: 0,
         };
         let handle = SynthHandle {
             events: prod,
@@ -300,6 +330,7 @@ impl<E: VoicePool> Synth<E> {
                 Control::Replace(new) => {
                     let old = std::mem::replace(&mut self.piano, new);
                     self.last_volume_velocity = 0.0;
+                    (self.reference_j, self.sounding, self.rising_blocks) = (0.0, 0, 0);
                     if let Err(TrySendError::Full(old) | TrySendError::Disconnected(old)) =
                         self.returned.try_send(old)
                     {
@@ -310,6 +341,7 @@ impl<E: VoicePool> Synth<E> {
             }
         }
         let block_start = self.frame;
+        let driven_at_start = self.piano.instrument.is_driven();
         let ratio = self.decimator.ratio();
         let mut frames = out.chunks_exact_mut(channels);
         loop {
@@ -338,6 +370,7 @@ impl<E: VoicePool> Synth<E> {
                 inst.run(&mut self.volume[..n * ratio], helper);
             }
             let mut blown = false;
+            let (mut clipped, mut peak) = (0, 0f32);
             for i in 0..n {
                 let y = if self.running {
                     (self.pressure_pa(i * ratio..(i + 1) * ratio) * self.scale) as f32
@@ -346,18 +379,29 @@ impl<E: VoicePool> Synth<E> {
                 };
                 // Something blew up: silence until it is reset, below.
                 blown |= !y.is_finite();
-                let y = if blown { 0.0 } else { soft_clip(y) };
+                let y = if blown {
+                    0.0
+                } else {
+                    clipped += u64::from(y.abs() > KNEE);
+                    peak = peak.max(y.abs());
+                    soft_clip(y)
+                };
                 if let Some(frame_out) = frames.next() {
                     frame_out.fill(y);
                 }
                 tap(&self.piano.instrument, self.frame);
                 self.frame += 1;
             }
+            self.stats.clipped.fetch_add(clipped, Ordering::Relaxed);
+            self.stats
+                .peak_before_clip
+                .fetch_max(u64::from(peak.to_bits()), Ordering::Relaxed);
             if blown {
                 self.reset_runaways();
             }
         }
         self.reset_runaways();
+        self.guard_growth(driven_at_start);
         let inst = &mut self.piano.instrument;
         inst.retire_silent(self.silence_j);
         let active = (0..inst.n_voices()).filter(|&v| inst.is_active(v)).count() as u64;
@@ -381,6 +425,35 @@ impl<E: VoicePool> Synth<E> {
             self.last_volume_velocity = self.piano.instrument.volume_velocity_m3_s();
             self.decimator.reset();
             self.stats.resets.fetch_add(n as u64, Ordering::Relaxed);
+        }
+    }
+
+    /// The growth guard ([`GROWTH_BLOCKS`]), at a block's end; `driven`: something drove the pool
+    /// at the block's start.
+    fn guard_growth(&mut self, driven: bool) {
+        let inst = &mut self.piano.instrument;
+        let e = inst.mechanical_energy_j();
+        // FNV-1a over the sounding voices: a voice joining brings the energy its strings held in
+        // following the board, one leaving takes it away.
+        let sounding = (0..inst.n_voices())
+            .filter(|&k| inst.is_active(k))
+            .fold(0xcbf2_9ce4_8422_2325u64, |h, k| {
+                (h ^ k as u64).wrapping_mul(0x100_0000_01b3)
+            });
+        if driven || inst.is_driven() || sounding != self.sounding {
+            (self.reference_j, self.sounding, self.rising_blocks) = (e, sounding, 0);
+            return;
+        }
+        let above = e > self.reference_j * (1.0 + GROWTH_TOLERANCE) && e > self.silence_j;
+        self.rising_blocks = if above { self.rising_blocks + 1 } else { 0 };
+        if self.rising_blocks >= GROWTH_BLOCKS {
+            // Every voice holding energy, and the board.
+            let n = inst.reset_runaways(0.0);
+            self.last_volume_velocity = inst.volume_velocity_m3_s();
+            self.decimator.reset();
+            self.stats.resets.fetch_add(n as u64, Ordering::Relaxed);
+            self.stats.growth_resets.fetch_add(1, Ordering::Relaxed);
+            (self.reference_j, self.rising_blocks) = (0.0, 0);
         }
     }
 

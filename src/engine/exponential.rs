@@ -10,10 +10,18 @@
 //! ```
 //! (the string on its contact spring against a *fixed* bridge, Eq. 6 and 13) is diagonalised once
 //! into complex modes `x = V z`, `z' = Lambda z + V^-1 b u`, and advanced exactly by `e^{Lambda h}`.
-//! The board's modes are diagonal already. What stays explicit, at fourth order, is small: the
-//! board's motion felt by the string through its contact spring and damper (≈ 1.7 kHz at the
-//! board's side, `omega h ≈ 0.2` at 48 kHz), the felt hammer (Eq. 8) and the damper felt. RK4 at
-//! the paper's rate stays the reference ([`super::Instrument`]); `tests/integrators.rs` compares.
+//! The board's modes are diagonal already.
+//!
+//! The strings are advanced relative to their static deflection by the bridge, `q^ = q - g y`
+//! with `K g = k psi` ([`Statics`]): a string's end follows the board through its stiff contact
+//! spring within a sample or two, so in `q` itself the board would feel every string's `k`
+//! (with nine keys sounding, 340 × the first board mode's own stiffness) explicitly, cancelled
+//! but for ~1/1000 by the strings' response — and ETDRK4's error on those two large terms acted
+//! as negative damping on the board's modes (a runaway with chords: `tests/stability.rs`). In
+//! `q^` the two cancel exactly and what stays explicit, at fourth order, is small: the contact
+//! spring in series with the string, the string's mass moving with the bridge and the damping of
+//! that motion, the felt hammer (Eq. 8) and the damper felt. RK4 at the paper's rate stays the
+//! reference ([`super::Instrument`]); `tests/integrators.rs` compares.
 //!
 //! ETDRK4 (Cox & Matthews 2002) for `y' = L y + N(y)`, `E = e^{L h/2}`, `Q = (E - 1) L^-1`:
 //! `a = E y + Q N(y)`, `b = E y + Q N(a)`, `c = E² y + (E - 1) Q N(y) + 2 Q N(b)`,
@@ -24,7 +32,8 @@
 //! stage states are never formed: each stage output is a dot product of the step's starting `z`
 //! with a precomputed row (`r`, `r E` or `r E²`) plus precomputed scalar responses to the earlier
 //! stages' inputs. The board, whose modes are known in closed form, is formed once per stage as
-//! modal displacements and velocities and read at each voice's point ([`Board`]).
+//! modal displacements and velocities (and, once every voice's force is known, accelerations) and
+//! read at each voice's point ([`Board`]).
 
 use super::duplex::duplex_damping_matrix;
 use super::hammer::HammerParams;
@@ -195,11 +204,15 @@ impl Modal {
     }
 }
 
-/// A string direction's coefficients with its ports: rows `psi.q` at the bridge, `psi(L_e).q` at
-/// the strike point (T only), `psi.qdot` at the bridge, `psi(x_d).qdot` at the damper (T and P);
-/// inputs the bridge force, the felt (T only) and the damper felt, in that order.
+/// A string direction's coefficients with its ports, in the coordinates `q^ = q - g y` relative
+/// to the string's static deflection `g y` by the bridge (see [`Statics`]): rows `psi.q^` at the
+/// bridge, `psi(L_e).q^` at the strike point (T only), `psi.q^dot` at the bridge, `psi(x_d).q^dot`
+/// at the damper (T and P); inputs ([`INPUTS`]) the bridge's velocity and acceleration, the felt
+/// (T only), the damper felt and the fade of a stolen voice's contact, in that order.
 #[derive(Debug, Clone)]
 struct Block {
+    /// Stored modes (the arrays below are padded to whole SIMD lanes beyond it with zeros).
+    modes: usize,
     /// `e^{lambda h}`.
     e_full: [Vec<f64>; 2],
     /// Per output: the row `r`, `r E`, `r E²` (re, im), weights folded in.
@@ -210,12 +223,49 @@ struct Block {
     resp: Vec<Vec<[f64; 2]>>,
     /// Energy per `|z|²` of each stored mode (J).
     energy: Vec<f64>,
+    /// The row `g.q^dot` (the energy's cross term between the deflection and the motion).
+    g_row: [Vec<f64>; 2],
+    statics: Statics,
+}
+
+/// A string direction's static deflection by its bridge point: when the bridge moves by `y`, the
+/// string on its contact spring (stiffness `K = Omega^2 + k psi psi^T`) comes to rest at `g y`,
+/// `K g = k psi` — at low frequencies its end follows the board almost entirely. The live
+/// integrator advances `q^ = q - g y`, in which the contact spring's pull `k psi y` and the
+/// string's return `K g y` cancel exactly, so that the board coupling left explicit is small: the
+/// net stiffness `k (1 - psi.g) = k / (1 + k psi^T Omega^-2 psi)` (the contact spring in series
+/// with the string, ~1/1000 of `k` at C2), the string's mass moving with the bridge (`-g y''`) and
+/// the damping of that motion (`-C_0 g y'`, `C_0` the modal and duplex damping). In `q` itself the
+/// board felt `k` per string explicitly, nearly cancelled by the string's response within the
+/// step, and ETDRK4's error on those two large terms undamped the board's modes (README,
+/// Robustness).
+#[derive(Debug, Clone, Copy, Default)]
+struct Statics {
+    /// `psi.g` at the bridge, `psi(L_e).g` at the strike point, `psi(x_d).g` at the damper.
+    bridge: f64,
+    strike: f64,
+    damper: f64,
+    /// `g.g` (kg): the string's mass moving with the bridge.
+    mass_kg: f64,
 }
 
 const BRIDGE_Q: usize = 0;
 const STRIKE_Q: usize = 1;
 const BRIDGE_V: usize = 2;
 const DAMPER_V: usize = 3;
+
+/// Inputs of a block (force distributions on `q^dd`, with their stage values): the bridge's
+/// velocity `y'` through `c (1 - psi.g) psi - C_0 g` (the contact damper's net part and the
+/// damping of the deflection's motion), its acceleration `-y''` through `g`, the felt (`psi(L_e)`,
+/// T only), the damper felt (`psi(x_d)`), and while a stolen voice fades with coupling `c_f < 1`,
+/// `(1 - c_f) (k (psi.q^ - (1 - psi.g) y) + c (psi.q^dot - (1 - psi.g) y'))` through `psi` (the
+/// contact the linear part holds but the fade takes away).
+const INPUTS: usize = 5;
+const IN_VEL: usize = 0;
+const IN_ACCEL: usize = 1;
+const IN_FELT: usize = 2;
+const IN_DAMPER: usize = 3;
+const IN_FADE: usize = 4;
 
 /// Complex-mode state of one block (re, im), sized for the largest key's block.
 #[derive(Debug, Clone, Default)]
@@ -265,42 +315,32 @@ fn read_rows<const FMA: bool, const R: usize>(
     })
 }
 
-/// `z <- e^{lambda h} z + f1 g a + f2 g (b + c) + f3 g d` for the bridge input with stage values
-/// `[a, b, c, d]`, in one pass.
+/// `z <- e^{lambda h} z + sum_j (f1 g_j a_j + f2 g_j (b_j + c_j) + f3 g_j d_j)` for two inputs
+/// `j` with stage values `u[j] = [a, b, c, d]`, in one pass.
 #[inline(always)]
 fn propagate_drive<const FMA: bool>(
     e: &[Vec<f64>; 2],
-    gain: &[[Vec<f64>; 2]; 3],
-    u: [f64; 4],
+    gains: [&[[Vec<f64>; 2]; 3]; 2],
+    u: [[f64; 4]; 2],
     z: &mut Modes,
 ) {
     let n = e[0].len();
     let (er, ei) = (&e[0][..n], &e[1][..n]);
-    let [[g1r, g1i], [g2r, g2i], [g3r, g3i]] = gain;
-    let (g1r, g1i, g2r, g2i, g3r, g3i) = (
-        &g1r[..n],
-        &g1i[..n],
-        &g2r[..n],
-        &g2i[..n],
-        &g3r[..n],
-        &g3i[..n],
-    );
+    let g = gains.map(|g| g.each_ref().map(|[re, im]| [&re[..n], &im[..n]]));
+    let s = u.map(|u| [u[0], u[1] + u[2], u[3]]);
     let (zr, zi) = (&mut z.re[..n], &mut z.im[..n]);
-    let (s1, s2, s3) = (u[0], u[1] + u[2], u[3]);
     for m in 0..n {
         let (a, b) = (zr[m], zi[m]);
-        let re = fma::<FMA>(er[m], a, -ei[m] * b);
-        let im = fma::<FMA>(er[m], b, ei[m] * a);
-        zr[m] = fma::<FMA>(
-            g1r[m],
-            s1,
-            fma::<FMA>(g2r[m], s2, fma::<FMA>(g3r[m], s3, re)),
-        );
-        zi[m] = fma::<FMA>(
-            g1i[m],
-            s1,
-            fma::<FMA>(g2i[m], s2, fma::<FMA>(g3i[m], s3, im)),
-        );
+        let mut re = fma::<FMA>(er[m], a, -ei[m] * b);
+        let mut im = fma::<FMA>(er[m], b, ei[m] * a);
+        for (g, s) in g.iter().zip(&s) {
+            for k in 0..3 {
+                re = fma::<FMA>(g[k][0][m], s[k], re);
+                im = fma::<FMA>(g[k][1][m], s[k], im);
+            }
+        }
+        zr[m] = re;
+        zi[m] = im;
     }
 }
 
@@ -348,11 +388,14 @@ struct Board {
     /// `f1 gamma`, `f2 gamma`, `f3 gamma` (re, im): the final update per unit modal force.
     g: [[Vec<f64>; 2]; 3],
     omega2: Vec<f64>,
+    /// `2 zeta omega` (1/s).
+    damp: Vec<f64>,
     volume: Vec<f64>,
-    /// Scratch: modal `q`, `qdot` through `1`, `E`, `E²` at the step's start; at the stage; the
-    /// modal force of each stage.
+    /// Scratch: modal `q`, `qdot` through `1`, `E`, `E²` at the step's start; at the stage, and
+    /// the modal acceleration there; the modal force of each stage.
     start: [[Vec<f64>; 2]; 3],
     stage: [Vec<f64>; 2],
+    acc: Vec<f64>,
     /// This half's modal force of each stage, and both halves' together.
     force: [Vec<f64>; 4],
     total: [Vec<f64>; 4],
@@ -371,9 +414,11 @@ impl Board {
             cv: [vec![0.0; n], vec![0.0; n]],
             g: std::array::from_fn(|_| [vec![0.0; n], vec![0.0; n]]),
             omega2: vec![0.0; n],
+            damp: vec![0.0; n],
             volume: board.volume_m2_per_sqrt_kg.clone(),
             start: std::array::from_fn(|_| [vec![0.0; n], vec![0.0; n]]),
             stage: [vec![0.0; n], vec![0.0; n]],
+            acc: vec![0.0; n],
             force: std::array::from_fn(|_| vec![0.0; n]),
             total: std::array::from_fn(|_| vec![0.0; n]),
         };
@@ -402,8 +447,24 @@ impl Board {
                 set(g, f * gamma);
             }
             b.omega2[i] = w * w;
+            b.damp[i] = 2.0 * zeta * w;
         }
         b
+    }
+
+    /// The modal acceleration at the stage, once its total modal force is known (Eq. 4, 17).
+    #[inline(always)]
+    fn accel(&mut self, stage: usize) {
+        let n = self.zr.len();
+        let (q, v, f) = (
+            &self.stage[0][..n],
+            &self.stage[1][..n],
+            &self.total[stage][..n],
+        );
+        let (w2, c, acc) = (&self.omega2[..n], &self.damp[..n], &mut self.acc[..n]);
+        for i in 0..n {
+            acc[i] = f[i] - w2[i] * q[i] - c[i] * v[i];
+        }
     }
 
     /// Modal `q` and `qdot` of the state `e z`.
@@ -556,12 +617,16 @@ struct KeyModes {
     /// `phi_T`, `phi_L`, `phi_P` of the board at this key's point (Eq. 5).
     board_shape: [Vec<f64>; 3],
     /// Per block (zero where the key has no such string): contact stiffness and damping, the
-    /// damper felt's damping (T and P of a damped key), and `resp[o][j][kind]`, what one unit of
-    /// input `j` adds to output `o` at the later stages (see [`ETDRK4_STAGES`]).
+    /// damper felt's damping (T and P of a damped key), the static deflection's values
+    /// ([`Statics`]: `psi.g` at the bridge, strike point and damper), and `resp[o][j][kind]`, what
+    /// one unit of input `j` adds to output `o` at the later stages (see [`ETDRK4_STAGES`]).
     lane_k: Lanes,
     lane_c: Lanes,
     lane_damper: Lanes,
-    resp: [[[Lanes; 2]; 3]; 4],
+    lane_through: Lanes,
+    lane_strike: Lanes,
+    lane_damper_g: Lanes,
+    resp: [[[Lanes; 2]; INPUTS]; 4],
 }
 
 impl KeyModes {
@@ -576,7 +641,10 @@ impl KeyModes {
             lane_k: [0.0; BLOCKS],
             lane_c: [0.0; BLOCKS],
             lane_damper: [0.0; BLOCKS],
-            resp: [[[[0.0; BLOCKS]; 2]; 3]; 4],
+            lane_through: [0.0; BLOCKS],
+            lane_strike: [0.0; BLOCKS],
+            lane_damper_g: [0.0; BLOCKS],
+            resp: [[[[0.0; BLOCKS]; 2]; INPUTS]; 4],
             strings,
         };
         for (s, blocks) in key.strings.iter().enumerate() {
@@ -587,6 +655,9 @@ impl KeyModes {
                 if d != 1 {
                     key.lane_damper[b] = key.damper_n_s_m;
                 }
+                key.lane_through[b] = block.statics.bridge;
+                key.lane_strike[b] = block.statics.strike;
+                key.lane_damper_g[b] = block.statics.damper;
                 for (o, resp) in block.resp.iter().enumerate() {
                     for (j, r) in resp.iter().enumerate() {
                         key.resp[o][j][0][b] = r[0];
@@ -662,6 +733,26 @@ fn key_strings(spec: &UnisonSpec, h: f64) -> Result<Vec<[Block; 3]>, BuildError>
             };
             let hammer = at((d == 0).then_some(strike_x));
             let damper = at(damper_x.filter(|_| transverse));
+            // The static deflection `K g = k psi` (Sherman–Morrison on `K = Omega^2 + k psi psi^T`)
+            // and `C_0 g`, `C_0` the damping without the contact damper.
+            let flex: Vec<f64> = (0..n).map(|i| psi[i] / omega(i).powi(2)).collect();
+            let compliance: f64 = (0..n).map(|i| psi[i] * flex[i]).sum();
+            let g: Vec<f64> = flex
+                .iter()
+                .map(|f| kc * f / (1.0 + kc * compliance))
+                .collect();
+            let dot = |a: &[f64], b: &[f64]| -> f64 { a.iter().zip(b).map(|(x, y)| x * y).sum() };
+            let through = dot(&psi, &g);
+            // `c (1 - psi.g) psi - C_0 g` = `c psi - C g` with `C` the whole damping.
+            let vel: Vec<f64> = (0..n)
+                .map(|i| cc * psi[i] - dot(&ck[i * n..(i + 1) * n], &g))
+                .collect();
+            let statics = Statics {
+                bridge: through,
+                strike: dot(&hammer, &g),
+                damper: dot(&damper, &g),
+                mass_kg: dot(&g, &g),
+            };
             let modal = Modal::new(&kk, &ck, n, h)?;
             let rows = [
                 modal.row(&psi, false),
@@ -669,12 +760,17 @@ fn key_strings(spec: &UnisonSpec, h: f64) -> Result<Vec<[Block; 3]>, BuildError>
                 modal.row(&psi, true),
                 modal.row(&damper, true),
             ];
-            let inputs = [
-                modal.input(&psi),
+            let inputs: [Vec<c64>; INPUTS] = [
+                modal.input(&vel),
+                modal.input(&g),
                 modal.input(&hammer),
                 modal.input(&damper),
+                modal.input(&psi),
             ];
             blocks.push(Block {
+                modes: modal.keep.len(),
+                g_row: modal.split(&modal.row(&g, true)),
+                statics,
                 e_full: modal.propagator(),
                 rows: rows.iter().map(|r| modal.rows3(r)).collect(),
                 gains: inputs.iter().map(|g| modal.gains3(g)).collect(),
@@ -730,8 +826,8 @@ struct Work {
     /// `start[o][which][b]`: output `o` of block `b` through row `which` (`r`, `r E`, `r E²`) of
     /// the step's starting modes.
     start: [[Lanes; 3]; 4],
-    /// `u[p][j][b]`: input `j` (bridge, felt, damper felt) of block `b` at stage `p`.
-    u: [[Lanes; 3]; 4],
+    /// `u[p][j][b]`: input `j` ([`INPUTS`]) of block `b` at stage `p`.
+    u: [[Lanes; INPUTS]; 4],
     hammer_acc: [f64; 4],
 }
 
@@ -968,6 +1064,11 @@ impl ExponentialInstrument {
         self.voice(k).fade_left > 0
     }
 
+    /// Whether voice `k`'s hammer is in play (from its strike until it is released).
+    pub fn hammer_on(&self, k: usize) -> bool {
+        self.voice(k).hammer_on
+    }
+
     /// Give voice `k` to `key`, at rest, damper lifted, inactive until struck (as
     /// [`super::Instrument::assign`]); never allocates.
     pub fn assign(&mut self, k: usize, key: usize) {
@@ -1016,11 +1117,12 @@ impl ExponentialInstrument {
         };
         let km = &self.keys[key];
         let n = strike.strings_struck(km.strings.len());
+        let y = self.halves[0].board.at(&km.board_shape[0]).0;
         let v = &mut self.halves[k % 2].set.voices[k / 2];
         v.struck = [false; MAX_STRINGS];
         v.struck[..n].iter_mut().for_each(|s| *s = true);
         v.hammer_y = (0..n)
-            .map(|s| read(&km.strings[s][0].rows[STRIKE_Q][0], &v.z[s][0]))
+            .map(|s| strike_point(km, s, &v.z[s][0], y))
             .fold(f64::NEG_INFINITY, f64::max);
         v.hammer_v = strike.velocity_m_s;
         (v.hammer_on, v.active) = (true, true);
@@ -1051,17 +1153,41 @@ impl ExponentialInstrument {
         self.set_damper_voice(0, down);
     }
 
-    /// Mechanical energy in voice `k`'s strings (J), from its complex modes.
+    /// Mechanical energy of the strings, their contact springs and the board (J), hammers apart.
+    pub fn mechanical_energy_j(&self) -> f64 {
+        let voices: f64 = (0..self.n_voices).map(|k| self.voice_energy_j(k)).sum();
+        self.board().energy_j() + voices
+    }
+
+    /// Mechanical energy of voice `k`'s strings and contact springs (J; 0 while it is not
+    /// simulated): what decides when a voice has fallen silent and which voice is the quietest.
+    /// In the coordinates `q^ = q - g y` ([`Statics`]) each string direction holds
+    /// `E_K(q^) + y' g.q^dot + 1/2 g.g y'^2 + 1/2 k (1 - psi.g) y^2` (with the fade's coupling
+    /// `c < 1`: `-(1 - c)/2 k (psi.q^)^2 + (1 - c) k (1 - psi.g) y psi.q^` more, and `c` on the
+    /// contact's share of the last term), `E_K` the energy of its modes on the contact spring
+    /// against a fixed bridge and `y` the board's displacement at the key's point: a string at
+    /// rest on a moving board holds the energy of following it, and is not silent.
     pub fn voice_energy_j(&self, k: usize) -> f64 {
         let v = self.voice(k);
-        let Some(key) = v.key else {
+        let (true, Some(key)) = (v.active, v.key) else {
             return 0.0;
         };
-        let km = &self.keys[key];
+        let (board, km) = (self.board(), &self.keys[key]);
+        let at: [(f64, f64); 3] = std::array::from_fn(|d| board.at(&km.board_shape[d]));
+        let c = v.coupling;
         let mut e = 0.0;
         for (s, blocks) in km.strings.iter().enumerate() {
             for (d, b) in blocks.iter().enumerate() {
-                e += energy_j(&b.energy, &v.z[s][d]);
+                let (z, (y, yv)) = (&v.z[s][d], at[d]);
+                let (st, kc) = (&b.statics, km.contact_k[d]);
+                let rest = 1.0 - st.bridge;
+                let psi_q = read(&b.rows[BRIDGE_Q][0], z);
+                e += energy_j(&b.energy, z)
+                    + yv * read(&b.g_row, z)
+                    + 0.5 * st.mass_kg * yv * yv
+                    + 0.5 * kc * rest * y * y * (st.bridge + c * rest)
+                    - 0.5 * (1.0 - c) * kc * psi_q * psi_q
+                    + (1.0 - c) * kc * rest * y * psi_q;
             }
         }
         e
@@ -1139,14 +1265,15 @@ impl ExponentialInstrument {
         for (s, blocks) in km.strings.iter().enumerate() {
             for d in 0..3 {
                 let (b, z) = (&blocks[d], &v.z[s][d]);
+                let rest = 1.0 - b.statics.bridge;
                 let f = v.coupling
-                    * (km.contact_k[d] * (read(&b.rows[BRIDGE_Q][0], z) - rb[d][0])
-                        + km.contact_c[d] * (read(&b.rows[BRIDGE_V][0], z) - rb[d][1]));
+                    * (km.contact_k[d] * (read(&b.rows[BRIDGE_Q][0], z) - rest * rb[d][0])
+                        + km.contact_c[d] * (read(&b.rows[BRIDGE_V][0], z) - rest * rb[d][1]));
                 obs.bridge_force_n[s][d] = f;
                 obs.total_force_n[d] += f;
             }
             if v.hammer_on && v.struck[s] {
-                let ye = read(&blocks[0].rows[STRIKE_Q][0], &v.z[s][0]);
+                let ye = strike_point(km, s, &v.z[s][0], rb[0][0]);
                 obs.hammer_force_n[s] = km.hammer.felt_force_n(v.hammer_y - ye);
             }
         }
@@ -1235,10 +1362,13 @@ impl ExponentialInstrument {
                 h1.set.stage::<FMA>(keys, stage, plan, h, &b0.stage, mine);
                 b0.sum_forces(stage, mine.iter().copied());
                 mine.fill(0.0);
+                b0.accel(stage);
+                h0.set.accel::<FMA>(keys, stage, &b0.acc);
+                h1.set.accel::<FMA>(keys, stage, &b0.acc);
             }
             h0.board.advance::<FMA>();
-            h0.set.finish::<FMA>(keys, h, fade);
-            h1.set.finish::<FMA>(keys, h, fade);
+            h0.set.finish::<FMA>(keys, h, fade, &h0.board);
+            h1.set.finish::<FMA>(keys, h, fade, &h0.board);
             h0.steps += 1;
             h1.steps += 1;
             *q = h0.board.volume_velocity();
@@ -1296,14 +1426,70 @@ impl ExponentialInstrument {
         }
     }
 
+    /// The state of the linear part: every active voice's string modes (real and imaginary parts,
+    /// voice by voice) and then the board's (see [`super::LinearState`]).
+    pub fn linear_state(&self) -> super::LinearState {
+        let mut state = super::LinearState::default();
+        for k in 0..self.n_voices {
+            let v = self.voice(k);
+            let (true, Some(key)) = (v.active, v.key) else {
+                continue;
+            };
+            for (s, blocks) in self.keys[key].strings.iter().enumerate() {
+                for (d, b) in blocks.iter().enumerate() {
+                    let z = &v.z[s][d];
+                    for part in [&z.re, &z.im] {
+                        state.push(Some(k), &part[..b.modes], &b.energy[..b.modes]);
+                    }
+                }
+            }
+        }
+        let board = self.board();
+        // A board mode `q = 2 Re z` holds `(|lambda|^2 + omega^2) |z|^2` on average.
+        let weight: Vec<f64> = (0..board.zr.len())
+            .map(|i| board.lam[0][i].powi(2) + board.lam[1][i].powi(2) + board.omega2[i])
+            .collect();
+        state.push(None, &board.zr, &weight);
+        state.push(None, &board.zi, &weight);
+        state
+    }
+
+    /// Set the state that [`ExponentialInstrument::linear_state`] reads, in the same layout.
+    pub fn set_linear_state(&mut self, x: &[f64]) {
+        let mut at = 0;
+        let mut take = |n: usize| {
+            at += n;
+            &x[at - n..at]
+        };
+        for k in 0..self.n_voices {
+            let (true, Some(key)) = (self.voice(k).active, self.voice(k).key) else {
+                continue;
+            };
+            let v = &mut self.halves[k % 2].set.voices[k / 2];
+            for (s, blocks) in self.keys[key].strings.iter().enumerate() {
+                for (d, b) in blocks.iter().enumerate() {
+                    let z = &mut v.z[s][d];
+                    z.re[..b.modes].copy_from_slice(take(b.modes));
+                    z.im[..b.modes].copy_from_slice(take(b.modes));
+                }
+            }
+        }
+        let n = self.board().zr.len();
+        let (re, im) = (take(n).to_vec(), take(n).to_vec());
+        for half in &mut self.halves {
+            half.board.zr.copy_from_slice(&re);
+            half.board.zi.copy_from_slice(&im);
+        }
+    }
+
     /// Floating-point operations of one step in the current state, counted from the loops of
     /// [`read_rows`], [`propagate_drive`] and [`drive`]: 4 per mode for each row read (a complex
     /// multiply-add, real part), 6 for the propagation, 4 per non-zero input and final weight.
     pub fn flops_per_step(&self) -> f64 {
         let nb = self.board().zr.len();
         // The board (one replica on one core): start reads (3 × 6), stage forms (2 × 2 per
-        // term), the update (14).
-        let mut flops = nb * (18 + 16 + 14);
+        // term), the stages' accelerations (4 × 4), the update (14).
+        let mut flops = nb * (18 + 16 + 16 + 14);
         for v in self.halves.iter().flat_map(|h| &h.set.voices) {
             let (true, Some(key)) = (v.active, v.key) else {
                 continue;
@@ -1314,13 +1500,16 @@ impl ExponentialInstrument {
                     let n = b.e_full[0].len();
                     let struck = d == 0 && v.hammer_on && v.struck[s];
                     let damped = d != 1 && v.damper_down;
+                    let fading = v.coupling != 1.0;
                     let ports = 2 + usize::from(struck) + usize::from(damped);
-                    let inputs = 1 + usize::from(struck) + usize::from(damped);
+                    let inputs =
+                        2 + usize::from(struck) + usize::from(damped) + usize::from(fading);
                     flops += n * (ports * 3 * 4 + 6 + inputs * 3 * 4);
                 }
             }
-            // Each voice's board reads and forces: 6 dots and 3 axpys per stage.
-            flops += nb * 4 * (6 + 3) * 2;
+            // Each voice's board reads, accelerations and forces: 6 + 3 dots and 3 axpys per
+            // stage.
+            flops += nb * 4 * (6 + 3 + 3) * 2;
         }
         flops as f64
     }
@@ -1388,9 +1577,29 @@ impl VoiceSet {
         }
     }
 
-    /// The step's end for these voices: hammers (classical RK4), strings, fades.
+    /// The stage's bridge accelerations of these voices, from the board's modal acceleration.
     #[inline(always)]
-    fn finish<const FMA: bool>(&mut self, keys: &[KeyModes], h: f64, fade_steps: u32) {
+    fn accel<const FMA: bool>(&mut self, keys: &[KeyModes], stage: usize, acc: &[f64]) {
+        for &i in &self.live {
+            let km = &keys[self.voices[i].key.expect("live voices have a key")];
+            voice_accel(
+                &mut self.work[i],
+                stage,
+                read_accel::<FMA>(&km.board_shape, acc),
+            );
+        }
+    }
+
+    /// The step's end for these voices: hammers (classical RK4), strings, fades; `board` has
+    /// already advanced.
+    #[inline(always)]
+    fn finish<const FMA: bool>(
+        &mut self,
+        keys: &[KeyModes],
+        h: f64,
+        fade_steps: u32,
+        board: &Board,
+    ) {
         for &i in &self.live {
             let v = &mut self.voices[i];
             let km = &keys[v.key.expect("live voices have a key")];
@@ -1407,19 +1616,21 @@ impl VoiceSet {
                 for (d, b) in blocks.iter().enumerate() {
                     let (z, lane) = (&mut v.z[s][d], 3 * s + d);
                     let u = |j: usize| std::array::from_fn(|p| w.u[p][j][lane]);
-                    propagate_drive::<FMA>(&b.e_full, &b.gains[0], u(0), z);
+                    let gains = [&b.gains[IN_VEL], &b.gains[IN_ACCEL]];
+                    propagate_drive::<FMA>(&b.e_full, gains, [u(IN_VEL), u(IN_ACCEL)], z);
+                    drive::<FMA>(&b.gains[IN_FADE], u(IN_FADE), z);
                     if felt && d == 0 {
-                        drive::<FMA>(&b.gains[1], u(1), z);
+                        drive::<FMA>(&b.gains[IN_FELT], u(IN_FELT), z);
                     }
                     if v.damper_down && d != 1 {
-                        drive::<FMA>(&b.gains[2], u(2), z);
+                        drive::<FMA>(&b.gains[IN_DAMPER], u(IN_DAMPER), z);
                     }
                 }
             }
             if v.hammer_on && v.hammer_v < 0.0 {
+                let y = board.at(&km.board_shape[0]).0;
                 let clear = (0..km.strings.len()).filter(|&s| v.struck[s]).all(|s| {
-                    read(&km.strings[s][0].rows[STRIKE_Q][0], &v.z[s][0]) - v.hammer_y
-                        >= km.hammer.release_gap_m
+                    strike_point(km, s, &v.z[s][0], y) - v.hammer_y >= km.hammer.release_gap_m
                 });
                 if clear {
                     v.hammer_on = false;
@@ -1507,17 +1718,24 @@ impl Half {
                 stage,
                 other.map(|o| f64::from_bits(o.load(Ordering::Relaxed))),
             );
+            b.accel(stage);
+            self.set.accel::<FMA>(keys, stage, &b.acc);
         }
         b.advance::<FMA>();
-        self.set.finish::<FMA>(keys, h, fade);
+        self.set.finish::<FMA>(keys, h, fade, &self.board);
         self.steps += 1;
     }
 }
 
 /// One stage of one voice, lane-wise over its blocks: each block's outputs (row `which` of the
 /// start plus the responses to the earlier stages' inputs), the contact forces against the board
-/// at the voice's point (`board`: `(q, qdot)` for T, L, P), the felt and damper forces. Stores the
-/// stage's inputs in `w` and returns the force on the board at the voice's point (T, L, P).
+/// at the voice's point (`board`: `(y, y')` for T, L, P), the felt and damper forces. Stores the
+/// stage's inputs in `w` (all but the bridge acceleration, [`voice_accel`]) and returns the force
+/// on the board at the voice's point (T, L, P).
+///
+/// In the coordinates `q^ = q - g y` ([`Statics`]) the contact force is
+/// `f = c_f (k (psi.q^ - (1 - psi.g) y) + c (psi.q^dot - (1 - psi.g) y'))` with the fade's
+/// coupling `c_f` (see [`INPUTS`] for what the string receives).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn voice_stage(
@@ -1530,15 +1748,18 @@ fn voice_stage(
     board: [[f64; 2]; 3],
     h: f64,
 ) -> [f64; 3] {
-    let (felt, damped) = (v.hammer_on, v.damper_down);
+    let (felt, damped, fading) = (v.hammer_on, v.damper_down, v.coupling != 1.0);
     let out = |o: usize| {
         let mut y = w.start[o][which];
         for &(p, kind, coef) in terms {
             if coef == 0.0 {
                 continue;
             }
-            for j in 0..3 {
-                if (j == 1 && !felt) || (j == 2 && !damped) {
+            for j in 0..INPUTS {
+                if (j == IN_FELT && !felt)
+                    || (j == IN_DAMPER && !damped)
+                    || (j == IN_FADE && !fading)
+                {
                     continue;
                 }
                 let (r, u) = (&km.resp[o][j][kind], &w.u[p][j]);
@@ -1550,15 +1771,17 @@ fn voice_stage(
         y
     };
     let (q, qd) = (out(BRIDGE_Q), out(BRIDGE_V));
-    let (kc, cc) = (&km.lane_k, &km.lane_c);
-    let mut bridge = [0.0; BLOCKS];
+    let (kc, cc, through) = (&km.lane_k, &km.lane_c, &km.lane_through);
+    let mut fade = [0.0; BLOCKS];
     let mut force = [0.0; BLOCKS];
+    let mut velocity = [0.0; BLOCKS];
     for b in 0..BLOCKS {
-        let [bq, bv] = board[b % 3];
-        let f = v.coupling * (kc[b] * (q[b] - bq) + cc[b] * (qd[b] - bv));
-        // The linear part holds -psi (k psi.q + c psi.qdot); the rest of -psi F is this.
-        bridge[b] = kc[b] * q[b] + cc[b] * qd[b] - f;
-        force[b] = f;
+        let [by, bv] = board[b % 3];
+        let rest = 1.0 - through[b];
+        let f = kc[b] * (q[b] - rest * by) + cc[b] * (qd[b] - rest * bv);
+        fade[b] = (1.0 - v.coupling) * f;
+        force[b] = v.coupling * f;
+        velocity[b] = bv;
     }
     let mut felt_u = [0.0; BLOCKS];
     let mut felt_total = 0.0;
@@ -1566,8 +1789,11 @@ fn voice_stage(
         let y = hammer_stage_y(v, &w.hammer_acc, stage, h);
         let strike = out(STRIKE_Q);
         for s in (0..km.strings.len()).filter(|&s| v.struck[s]) {
-            let f = km.hammer.felt_force_n(y - strike[3 * s]);
-            felt_u[3 * s] = f;
+            let b = 3 * s;
+            let f = km
+                .hammer
+                .felt_force_n(y - strike[b] - km.lane_strike[b] * board[0][0]);
+            felt_u[b] = f;
             felt_total += f;
         }
     }
@@ -1575,12 +1801,22 @@ fn voice_stage(
     if damped {
         let dv = out(DAMPER_V);
         for b in 0..BLOCKS {
-            damper_u[b] = -km.lane_damper[b] * dv[b];
+            damper_u[b] = -km.lane_damper[b] * (dv[b] + km.lane_damper_g[b] * board[b % 3][1]);
         }
     }
-    w.u[stage] = [bridge, felt_u, damper_u];
+    w.u[stage][IN_VEL] = velocity;
+    w.u[stage][IN_FELT] = felt_u;
+    w.u[stage][IN_DAMPER] = damper_u;
+    w.u[stage][IN_FADE] = fade;
     w.hammer_acc[stage] = -felt_total / km.hammer.mass_kg;
     std::array::from_fn(|d| (0..MAX_STRINGS).map(|s| force[3 * s + d]).sum())
+}
+
+/// The stage's bridge-acceleration input of one voice, `-y''` at its point in T, L, P (the board's
+/// acceleration once every voice's force of the stage is known).
+#[inline(always)]
+fn voice_accel(w: &mut Work, stage: usize, accel: [f64; 3]) {
+    w.u[stage][IN_ACCEL] = std::array::from_fn(|b| -accel[b % 3]);
 }
 
 /// The hammer's position at `stage` of classical RK4 (it has no linear part): `y0`,
@@ -1594,6 +1830,19 @@ fn hammer_stage_y(v: &Voice, acc: &[f64; 4], stage: usize, h: f64) -> f64 {
         2 => y0 + 0.5 * h * (v0 + 0.5 * h * acc[0]),
         _ => y0 + h * (v0 + 0.5 * h * acc[1]),
     }
+}
+
+/// The displacement of string `s` at the strike point: its motion `q^` plus its static deflection
+/// by the board's displacement `y` (T) at the key's point.
+fn strike_point(km: &KeyModes, s: usize, z: &Modes, y: f64) -> f64 {
+    let b = &km.strings[s][0];
+    read(&b.rows[STRIKE_Q][0], z) + b.statics.strike * y
+}
+
+/// The board's acceleration at one point, `phi_d . acc` for d = T, L, P.
+#[inline(always)]
+fn read_accel<const FMA: bool>(phi: &[Vec<f64>; 3], acc: &[f64]) -> [f64; 3] {
+    std::array::from_fn(|d| f64::dot::<FMA>(&phi[d], acc))
 }
 
 /// One unison on its bridge point advanced by ETDRK4 (the pool with one key and one voice).

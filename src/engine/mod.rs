@@ -36,17 +36,18 @@ pub use system::{Instrument, Observation, Strike, UnisonSpec};
 pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
     /// One key's coefficients, prepared before the pool is built.
     type Key: Send;
-    /// Prepare one key (the costly part of building, independent from key to key: callers may
-    /// prepare keys on several threads); an engine that steps at the output rate prepares it at
-    /// `output_rate_hz` instead of the spec's internal rate.
-    fn prepare_key(spec: &UnisonSpec, output_rate_hz: f64)
-        -> Result<Self::Key, system::BuildError>;
-    /// The pool for `specs` (one per key, in order with `keys`) with `voices` voices.
+    /// `spec` at the rate this engine steps at: unchanged (the internal rate), or `output_rate_hz`
+    /// for an engine that steps at the output rate.
+    fn at_engine_rate(spec: UnisonSpec, output_rate_hz: f64) -> UnisonSpec;
+    /// Prepare one key from its spec at the engine's rate (the costly part of building,
+    /// independent from key to key: callers may prepare keys on several threads).
+    fn prepare_key(spec: &UnisonSpec) -> Result<Self::Key, system::BuildError>;
+    /// The pool for `specs` (at the engine's rate, one per key, in order with `keys`) with
+    /// `voices` voices.
     fn from_keys(
         specs: &[UnisonSpec],
         keys: Vec<Self::Key>,
         voices: usize,
-        output_rate_hz: f64,
     ) -> Result<Self, system::BuildError>;
     /// Prepare every key in turn, then build the pool.
     fn build_pool(
@@ -54,11 +55,15 @@ pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
         voices: usize,
         output_rate_hz: f64,
     ) -> Result<Self, system::BuildError> {
+        let specs: Vec<_> = specs
+            .iter()
+            .map(|s| Self::at_engine_rate(s.clone(), output_rate_hz))
+            .collect();
         let keys = specs
             .iter()
-            .map(|s| Self::prepare_key(s, output_rate_hz))
+            .map(Self::prepare_key)
             .collect::<Result<_, _>>()?;
-        Self::from_keys(specs, keys, voices, output_rate_hz)
+        Self::from_keys(&specs, keys, voices)
     }
     fn n_voices(&self) -> usize;
     fn step_s(&self) -> f64;
@@ -81,6 +86,38 @@ pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
     fn volume_velocity_m3_s(&self) -> f64;
     fn observe_voice(&self, k: usize) -> Observation;
     fn bytes_per_voice(&self) -> usize;
+    /// The linear part's state: the active voices' strings, then the board.
+    fn linear_state(&self) -> LinearState;
+    /// Set the state [`VoicePool::linear_state`] reads (`x` in its layout).
+    fn set_linear_state(&mut self, x: &[f64]);
+    /// Mechanical energy of the strings, their contact springs and the board (J), hammers apart.
+    fn mechanical_energy_j(&self) -> f64;
+    /// Whether energy may enter the strings now: a hammer is in play (from the strike until it
+    /// is released) or a stolen voice is fading (its contact springs change).
+    fn is_driven(&self) -> bool {
+        (0..self.n_voices()).any(|k| self.hammer_on(k) || self.is_fading(k))
+    }
+    fn hammer_on(&self, k: usize) -> bool;
+}
+
+/// The state of a pool's linear part (strings on their contact springs and the board), flattened
+/// in an engine's own coordinates, with the voice each entry belongs to (`None`: the board) and
+/// the energy it holds per unit squared (J, the diagonal of the energy's quadratic form, to tell
+/// where a mode's energy sits). While no hammer touches a string, one step of the engine is a
+/// linear map of it ([`crate::analysis::stability`] forms that map).
+#[derive(Debug, Clone, Default)]
+pub struct LinearState {
+    pub x: Vec<f64>,
+    pub owner: Vec<Option<usize>>,
+    pub energy_weight: Vec<f64>,
+}
+
+impl LinearState {
+    fn push(&mut self, owner: Option<usize>, x: &[f64], weight: &[f64]) {
+        self.x.extend_from_slice(x);
+        self.owner.extend(std::iter::repeat_n(owner, x.len()));
+        self.energy_weight.extend_from_slice(&weight[..x.len()]);
+    }
 }
 
 /// Both pools implement [`VoicePool`] with their own inherent methods.
@@ -88,28 +125,24 @@ macro_rules! voice_pool {
     ($t:ty, $key:ty, $rate:expr) => {
         impl VoicePool for $t {
             type Key = $key;
-            fn prepare_key(
-                spec: &UnisonSpec,
-                output_rate_hz: f64,
-            ) -> Result<Self::Key, system::BuildError> {
+            fn at_engine_rate(spec: UnisonSpec, output_rate_hz: f64) -> UnisonSpec {
                 match $rate(output_rate_hz) {
-                    Some(r) => <$t>::prepare_key(&at_rate(spec, r)),
-                    None => <$t>::prepare_key(spec),
+                    Some(sample_rate_hz) => UnisonSpec {
+                        sample_rate_hz,
+                        ..spec
+                    },
+                    None => spec,
                 }
+            }
+            fn prepare_key(spec: &UnisonSpec) -> Result<Self::Key, system::BuildError> {
+                <$t>::prepare_key(spec)
             }
             fn from_keys(
                 specs: &[UnisonSpec],
                 keys: Vec<Self::Key>,
                 voices: usize,
-                output_rate_hz: f64,
             ) -> Result<Self, system::BuildError> {
-                match $rate(output_rate_hz) {
-                    Some(r) => {
-                        let specs: Vec<UnisonSpec> = specs.iter().map(|s| at_rate(s, r)).collect();
-                        <$t>::from_keys(&specs, keys, voices)
-                    }
-                    None => <$t>::from_keys(specs, keys, voices),
-                }
+                <$t>::from_keys(specs, keys, voices)
             }
             fn n_voices(&self) -> usize {
                 <$t>::n_voices(self)
@@ -168,16 +201,20 @@ macro_rules! voice_pool {
             fn bytes_per_voice(&self) -> usize {
                 <$t>::bytes_per_voice(self)
             }
+            fn linear_state(&self) -> LinearState {
+                <$t>::linear_state(self)
+            }
+            fn mechanical_energy_j(&self) -> f64 {
+                <$t>::mechanical_energy_j(self)
+            }
+            fn hammer_on(&self, k: usize) -> bool {
+                <$t>::hammer_on(self, k)
+            }
+            fn set_linear_state(&mut self, x: &[f64]) {
+                <$t>::set_linear_state(self, x)
+            }
         }
     };
-}
-
-/// `spec` stepping at `rate_hz`.
-fn at_rate(spec: &UnisonSpec, rate_hz: f64) -> UnisonSpec {
-    UnisonSpec {
-        sample_rate_hz: rate_hz,
-        ..spec.clone()
-    }
 }
 
 voice_pool!(Instrument, system::KeyModel<f64>, |_| None::<f64>);

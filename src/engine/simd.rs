@@ -80,8 +80,8 @@ pub trait Real:
 /// The portable and AVX2 kernels of one precision: its type, lanes per register, and the AVX2
 /// intrinsics for that lane type.
 macro_rules! real {
-    ($t:ident, $name:literal, $lanes:literal, $m:ident, $wide:ident, $load:ident, $store:ident, $maskload:ident, $maskstore:ident,
-     $mask:ident,
+    ($t:ident, $name:literal, $lanes:literal, $m:ident, $wide:ident,
+     $load:ident, $store:ident, $maskload:ident, $maskstore:ident, $mask:ident,
      $set1:ident, $zero:ident, $add:ident, $fmadd:ident, $fnmadd:ident, $hsum:ident) => {
         impl Real for $t {
             const ZERO: Self = 0.0;

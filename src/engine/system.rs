@@ -117,6 +117,9 @@ pub struct KeyModel<T> {
     omega2: Vec<T>,
     damp: Vec<T>,
     bridge_shape: Vec<T>,
+    /// Each string direction's static deflection per unit displacement of its bridge point, `g`
+    /// with `(Omega^2 + k psi psi^T) g = k psi`: where a string at rest on a moving board is.
+    static_shape: Vec<T>,
     /// Board modes: `phi_T`, `phi_L`, `phi_P` at this key's bridge point (Eq. 5).
     board_shape: [Vec<T>; 3],
     /// `psi_n(L_e)` of the T modes (identical for every string: same length).
@@ -154,6 +157,8 @@ struct Model<T> {
     damp: Vec<T>,
     /// String modes: `psi_n(L_s)` in the mode's own direction; zero over the board block.
     bridge_shape: Vec<T>,
+    /// The voices' keys' `static_shape`.
+    static_shape: Vec<T>,
     board_volume: Vec<T>,
     h: f64,
 }
@@ -193,6 +198,9 @@ pub struct Instrument<T: Real = f64> {
     v: Vec<T>,
     hammer_y: Vec<f64>,
     hammer_v: Vec<f64>,
+    /// Per voice, the board's displacement and velocity at its point (T, L, P) when it stopped
+    /// being simulated (zero once its strings are set at rest): see [`Instrument::set_active`].
+    left_at: Vec<[[f64; 2]; 3]>,
     flags: VoiceFlags,
     voice_of_key: Vec<Option<usize>>,
     /// Mode ranges simulated in this step: the active voices' and the board's.
@@ -293,6 +301,17 @@ fn build_key<T: Real>(spec: &UnisonSpec) -> Result<KeyModel<T>, BuildError> {
             }
         }
     }
+    // `g = k Omega^-2 psi / (1 + k psi^T Omega^-2 psi)` per string direction (Sherman–Morrison).
+    let mut static_shape = vec![0.0; n_modes];
+    for ranges in &ranges[..ns] {
+        for (d, r) in ranges.iter().enumerate() {
+            let k = spec.contact.stiffness_n_m[d];
+            let compliance: f64 = r.clone().map(|i| bridge_shape[i].powi(2) / omega2[i]).sum();
+            for i in r.clone() {
+                static_shape[i] = k * bridge_shape[i] / omega2[i] / (1.0 + k * compliance);
+            }
+        }
+    }
     let s0 = &spec.strings[0];
     let strike_x = spec.hammer.strike_ratio * s0.speaking_length_m;
     let (damper_shape, damper_n_s_m) = match spec.damper {
@@ -343,6 +362,7 @@ fn build_key<T: Real>(spec: &UnisonSpec) -> Result<KeyModel<T>, BuildError> {
         omega2: cast(&omega2),
         damp: cast(&damp),
         bridge_shape: cast(&bridge_shape),
+        static_shape: cast(&static_shape),
         board_shape: point.shape.each_ref().map(|phi| cast(phi)),
         hammer_shape: (1..=nt)
             .map(|k| T::from_f64(s0.mode_shape(k, strike_x)))
@@ -449,6 +469,7 @@ impl<T: Real> Instrument<T> {
             vec![T::ZERO; strings_end],
             vec![T::ZERO; strings_end],
         );
+        let static_shape = vec![T::ZERO; strings_end];
         let board = strings_end..strings_end + first.board.len();
         for k in 0..first.board.len() {
             let w = 2.0 * PI * first.board.freq_hz[k];
@@ -465,6 +486,7 @@ impl<T: Real> Instrument<T> {
             omega2,
             damp,
             bridge_shape,
+            static_shape,
             board_volume: cast(&first.board.volume_m2_per_sqrt_kg),
             h,
         };
@@ -479,6 +501,7 @@ impl<T: Real> Instrument<T> {
             v: vec![T::ZERO; n],
             hammer_y: vec![0.0; voices],
             hammer_v: vec![0.0; voices],
+            left_at: vec![[[0.0; 2]; 3]; voices],
             flags: VoiceFlags {
                 active: vec![false; voices],
                 hammer_on: vec![false; voices],
@@ -553,9 +576,72 @@ impl<T: Real> Instrument<T> {
         (&self.q, &self.v)
     }
 
+    /// The state of the linear part: every active voice's modal displacements and velocities
+    /// (voice by voice), then the board's (see [`super::LinearState`]; the displacements' energy
+    /// weights include the contact springs', `1/2 (omega^2 + k psi^2)` for a string mode and
+    /// `1/2 (omega^2 + sum k phi^2)` over the active strings for a board mode).
+    pub fn linear_state(&self) -> super::LinearState {
+        let m = &self.model;
+        let mut stiffness: Vec<f64> = m.omega2.iter().map(|w| w.to_f64()).collect();
+        for (k, voice) in m.voices.iter().enumerate() {
+            let (true, Some(key)) = (self.flags.active[k], voice.key) else {
+                continue;
+            };
+            let km = &m.keys[key];
+            for s in 0..voice.n_strings {
+                for d in 0..3 {
+                    let kc = km.contact.stiffness_n_m[d];
+                    for i in voice.ranges[s][d].clone() {
+                        stiffness[i] += kc * m.bridge_shape[i].to_f64().powi(2);
+                    }
+                    for (j, phi) in m.board.clone().zip(&km.board_shape[d]) {
+                        stiffness[j] += kc * phi.to_f64().powi(2);
+                    }
+                }
+            }
+        }
+        let mut state = super::LinearState::default();
+        for (r, k) in self.linear_ranges() {
+            let weight: Vec<f64> = stiffness[r.clone()].iter().map(|w| 0.5 * w).collect();
+            let q: Vec<f64> = self.q[r.clone()].iter().map(|x| x.to_f64()).collect();
+            let v: Vec<f64> = self.v[r.clone()].iter().map(|x| x.to_f64()).collect();
+            state.push(k, &q, &weight);
+            state.push(k, &v, &vec![0.5; r.len()]);
+        }
+        state
+    }
+
+    /// Set the state that [`Instrument::linear_state`] reads, in the same layout.
+    pub fn set_linear_state(&mut self, x: &[f64]) {
+        let mut at = 0;
+        for (r, _) in self.linear_ranges() {
+            for part in [&mut self.q, &mut self.v] {
+                for (p, &x) in part[r.clone()].iter_mut().zip(&x[at..at + r.len()]) {
+                    *p = T::from_f64(x);
+                }
+                at += r.len();
+            }
+        }
+    }
+
+    /// The modes of every active voice and of the board, with their owner.
+    fn linear_ranges(&self) -> Vec<(Range<usize>, Option<usize>)> {
+        let voices = self.model.voices.iter().enumerate();
+        voices
+            .filter(|&(k, v)| self.flags.active[k] && v.key.is_some())
+            .map(|(k, v)| (v.base..v.base + v.n_modes, Some(k)))
+            .chain([(self.model.board.clone(), None)])
+            .collect()
+    }
+
     /// Whether voice 0's hammer is still part of the system.
     pub fn hammer_engaged(&self) -> bool {
         self.flags.hammer_on[0]
+    }
+
+    /// Whether voice `k`'s hammer is in play (from its strike until it is released).
+    pub fn hammer_on(&self, k: usize) -> bool {
+        self.flags.hammer_on[k]
     }
 
     /// The key voice `k` plays (an index into the bank), if any.
@@ -596,8 +682,10 @@ impl<T: Real> Instrument<T> {
         self.model.omega2[base..capacity_end].copy_from_slice(&km.omega2);
         self.model.damp[base..capacity_end].copy_from_slice(&km.damp);
         self.model.bridge_shape[base..capacity_end].copy_from_slice(&km.bridge_shape);
+        self.model.static_shape[base..capacity_end].copy_from_slice(&km.static_shape);
         self.q[base..slot_end].fill(T::ZERO);
         self.v[base..slot_end].fill(T::ZERO);
+        self.left_at[k] = [[0.0; 2]; 3];
         self.voice_of_key[key] = Some(k);
         let f = &mut self.flags;
         (f.active[k], f.hammer_on[k], f.damper_down[k]) = (false, false, false);
@@ -662,9 +750,35 @@ impl<T: Real> Instrument<T> {
         self.v[r].fill(T::ZERO);
     }
 
-    /// Mechanical energy in voice `k`'s strings (J): the measure of how loud it still is.
+    /// Mechanical energy of voice `k`'s strings and contact springs (J; 0 while it is not
+    /// simulated): what decides when a voice has fallen silent and which voice is the quietest. A
+    /// string at rest on a moving board holds the energy of following it, and is not silent.
     pub fn voice_energy_j(&self, k: usize) -> f64 {
-        self.modal_energy_j(self.voice_modes(k))
+        if !self.flags.active[k] {
+            return 0.0;
+        }
+        self.modal_energy_j(self.voice_modes(k)) + self.voice_contact_j(k)
+    }
+
+    /// Energy in voice `k`'s contact springs (J), `1/2 k (r_s - r_b)^2` per string and direction
+    /// (Eq. 6), scaled by the fade of a stolen voice.
+    fn voice_contact_j(&self, k: usize) -> f64 {
+        let (m, voice) = (&self.model, &self.model.voices[k]);
+        let Some(key) = voice.key else {
+            return 0.0;
+        };
+        let km = &m.keys[key];
+        let qb = &self.q[m.board.clone()];
+        let mut e = 0.0;
+        for s in 0..voice.n_strings {
+            for d in 0..3 {
+                let r = voice.ranges[s][d].clone();
+                let rs = T::dot_wide::<false>(&m.bridge_shape[r.clone()], &self.q[r]);
+                let rb = T::dot_wide::<false>(&km.board_shape[d], qb);
+                e += 0.5 * self.flags.coupling[k] * km.contact.stiffness_n_m[d] * (rs - rb).powi(2);
+            }
+        }
+        e
     }
 
     /// Stop simulating the voices that have fallen silent: strings below `threshold_j`, no hammer,
@@ -686,6 +800,7 @@ impl<T: Real> Instrument<T> {
                 && self.voice_energy_j(k) < threshold_j
             {
                 self.rest(self.voice_modes(k));
+                self.left_at[k] = [[0.0; 2]; 3];
                 self.flags.active[k] = false;
                 retired += 1;
             }
@@ -704,6 +819,7 @@ impl<T: Real> Instrument<T> {
             let hammer_ok = self.hammer_y[k].is_finite() && self.hammer_v[k].is_finite();
             if self.flags.active[k] && (!e.is_finite() || e > bound_j || !hammer_ok) {
                 self.rest(self.voice_modes(k));
+                self.left_at[k] = [[0.0; 2]; 3];
                 (self.hammer_y[k], self.hammer_v[k]) = (0.0, 0.0);
                 let f = &mut self.flags;
                 (f.active[k], f.hammer_on[k], f.fade_left[k], f.pending[k]) =
@@ -733,7 +849,10 @@ impl<T: Real> Instrument<T> {
         let Some(key) = voice.key else {
             return;
         };
-        let km = &self.model.keys[key];
+        if !self.flags.active[k] {
+            self.join(k);
+        }
+        let (voice, km) = (&self.model.voices[k], &self.model.keys[key]);
         let n_struck = strike.strings_struck(voice.n_strings);
         let mut struck = [false; MAX_STRINGS];
         let mut contact_y = f64::NEG_INFINITY;
@@ -751,11 +870,55 @@ impl<T: Real> Instrument<T> {
 
     /// Include voice `k` in the simulation without striking it (a key held silently, or every key
     /// under the sustain pedal, whose strings then ring in sympathy through the board), or leave it
-    /// out. A left-out voice keeps its state frozen; a voice without a key stays out.
+    /// out. A left-out voice keeps its motion relative to the bridge frozen, and joins again
+    /// following the board: a string at rest enters at its static deflection by the bridge point
+    /// (`g y`, moving with it), not at zero, which would jolt the board through the contact
+    /// spring. A voice without a key stays out.
     pub fn set_active(&mut self, k: usize, active: bool) {
-        let f = &mut self.flags;
-        f.active[k] =
+        let f = &self.flags;
+        let now =
             self.model.voices[k].key.is_some() && (active || f.hammer_on[k] || f.fade_left[k] > 0);
+        match (f.active[k], now) {
+            (false, true) => self.join(k),
+            (true, false) => self.left_at[k] = self.board_at(k),
+            _ => {}
+        }
+        self.flags.active[k] = now;
+    }
+
+    /// The board's displacement and velocity at voice `k`'s point (T, L, P).
+    fn board_at(&self, k: usize) -> [[f64; 2]; 3] {
+        let m = &self.model;
+        let Some(key) = m.voices[k].key else {
+            return [[0.0; 2]; 3];
+        };
+        let shape = &m.keys[key].board_shape;
+        let (qb, vb) = (&self.q[m.board.clone()], &self.v[m.board.clone()]);
+        std::array::from_fn(|d| {
+            [
+                T::dot_wide::<false>(&shape[d], qb),
+                T::dot_wide::<false>(&shape[d], vb),
+            ]
+        })
+    }
+
+    /// Move voice `k`'s strings with the board since it left: `q += g (y - y_left)`,
+    /// `qdot += g (y' - y'_left)` in each direction.
+    fn join(&mut self, k: usize) {
+        let (now, left) = (self.board_at(k), self.left_at[k]);
+        let voice = &self.model.voices[k];
+        for s in 0..voice.n_strings {
+            for d in 0..3 {
+                let dy = T::from_f64(now[d][0] - left[d][0]);
+                let dv = T::from_f64(now[d][1] - left[d][1]);
+                for i in voice.ranges[s][d].clone() {
+                    let g = self.model.static_shape[i];
+                    self.q[i] += g * dy;
+                    self.v[i] += g * dv;
+                }
+            }
+        }
+        self.left_at[k] = [[0.0; 2]; 3];
     }
 
     /// Whether voice `k` is simulated.
@@ -1045,29 +1208,27 @@ impl<T: Real> Instrument<T> {
         capacity * std::mem::size_of::<T>() * 10
     }
 
+    /// Mechanical energy of the strings, their contact springs and the board (J), hammers apart.
+    pub fn mechanical_energy_j(&self) -> f64 {
+        let e = self.energy();
+        e.strings_j + e.contact_j + e.board_j
+    }
+
     /// Mechanical energy of strings, board, contact springs and hammers (J).
     pub fn energy(&self) -> Energy {
         let m = &self.model;
         let strings_j = self.modal_energy_j(0..m.board.start);
         let board_j = self.modal_energy_j(m.board.clone());
-        let qb = &self.q[m.board.clone()];
         let (mut contact_j, mut hammer_j) = (0.0, 0.0);
         for (k, voice) in m.voices.iter().enumerate() {
             let Some(key) = voice.key else {
                 continue;
             };
-            let km = &m.keys[key];
-            for s in 0..voice.n_strings {
-                for d in 0..3 {
-                    let r = voice.ranges[s][d].clone();
-                    let rs = T::dot_wide::<false>(&m.bridge_shape[r.clone()], &self.q[r]);
-                    let rb = T::dot_wide::<false>(&km.board_shape[d], qb);
-                    contact_j += 0.5
-                        * self.flags.coupling[k]
-                        * km.contact.stiffness_n_m[d]
-                        * (rs - rb).powi(2);
-                }
+            if !self.flags.active[k] {
+                continue;
             }
+            let km = &m.keys[key];
+            contact_j += self.voice_contact_j(k);
             if self.flags.hammer_on[k] {
                 hammer_j += 0.5 * km.hammer.mass_kg * self.hammer_v[k].powi(2);
                 for s in 0..voice.n_strings {

@@ -1,0 +1,459 @@
+//! Stability as a computed property, and the chords that used to run away on the live integrator.
+//!
+//! - The linear one-step map of each engine (no hammer in contact) for 32 keys from A0 to C8 —
+//!   the nine-key chord below, A0, and the 22 keys from D#6 to C8 (the stiffest anchors on the
+//!   board: few modes, three strings each) — formed column by column from the engine's own step,
+//!   dampers up and down, and for the chord alone: its spectral radius must be at most 1
+//!   (`analysis::stability`). Stability is not monotone in the keys sounding: with the old
+//!   coupling the chord alone ran away while the 32 keys, whose strings load the board's modes
+//!   differently, stayed (wrongly damped, but) inside the unit circle.
+//! - The nine-key chord C1 C2 C4 E4 G4 C5 E5 G5 C6 at velocity 115 as a MIDI file, held 5 s and
+//!   under the sustain pedal, through `render --midi`'s path on both integrators: it decays, and
+//!   the live integrator stays within 1 dB of RK4 in every quarter second.
+//! - Random playing over many keys and pedals: whenever nothing drives the pool (no hammer in
+//!   play, no voice fading), its mechanical energy never rises by more than rounding.
+//!
+//! Before the live integrator advanced its strings relative to their static deflection by the
+//! bridge, the chord's map had two eigenvalues at |mu| = 1.0000378 (a 108.5 Hz board mode growing
+//! at 1.8 /s where the exact system decays at 15.3 /s), and the chord grew to full scale.
+
+use std::path::Path;
+use unacorda::analysis::stability::{one_step_map, step_eigenvalues, StepEigen};
+use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
+use unacorda::engine::exponential::ExponentialInstrument;
+use unacorda::engine::{Instrument, VoicePool};
+use unacorda::midi::file::{parse, TimedEvent};
+use unacorda::midi::{Event, Pedal};
+use unacorda::play::Piano;
+use unacorda::render::render_midi_into;
+use unacorda::scaling::{parse_key, Scaling, KEYS};
+
+const CHORD: [&str; 9] = ["C1", "C2", "C4", "E4", "G4", "C5", "E5", "G5", "C6"];
+
+/// The 32 keys of the stability test: the chord, A0, and D#6 (67) to C8.
+fn stability_keys() -> Vec<usize> {
+    let mut keys = chord_keys();
+    keys.push(1);
+    keys.extend(67..=KEYS);
+    keys.sort_unstable();
+    keys
+}
+
+/// Every key of `keys` sounding on its own voice, hammers out of play, dampers `down` or lifted;
+/// the map's eigenvalues, largest modulus first.
+fn eigenvalues<E: VoicePool>(keys: &[usize], down: bool) -> (Vec<StepEigen>, f64, usize) {
+    let scaling = Scaling::resolve("grand").unwrap();
+    let rate = scaling.base.output_rate_hz();
+    let specs: Vec<_> = keys
+        .iter()
+        .map(|&k| scaling.key_preset(k).unwrap().unison_spec())
+        .collect();
+    let mut pool = E::build_pool(&specs, keys.len(), rate).unwrap();
+    for k in 0..keys.len() {
+        pool.assign(k, k);
+        pool.set_active(k, true);
+        pool.set_damper_voice(k, down);
+    }
+    let (map, state) = one_step_map(&pool);
+    let h = pool.step_s();
+    (step_eigenvalues(&map, &state, h), 1.0 / h, map.nrows())
+}
+
+fn stable<E: VoicePool>(engine: &str, keys: &[usize], down: bool) {
+    let (eig, rate, n) = eigenvalues::<E>(keys, down);
+    let name = |e: &StepEigen| match e.owner {
+        Some(v) => unacorda::engine::plate::key_name(keys[v]),
+        None => "the board".to_string(),
+    };
+    let outside = eig.iter().filter(|e| e.modulus > 1.0).count();
+    let top = eig[0];
+    println!(
+        "{engine} at {:.0} kHz, {} keys {}–{}, dampers {}: one-step map of order {n}; largest |mu| = {:.9} ({:.1} Hz, rate {:+.4} /s, {:.0} % of its energy in {}); {outside} outside the unit circle",
+        rate / 1e3,
+        keys.len(),
+        unacorda::engine::plate::key_name(keys[0]),
+        unacorda::engine::plate::key_name(keys[keys.len() - 1]),
+        if down { "down" } else { "up" },
+        top.modulus,
+        top.freq_hz,
+        top.rate_per_s,
+        100.0 * top.share,
+        name(&top),
+    );
+    // The least damped mode whose energy lies mostly in the board, where the live integrator's
+    // runaway was.
+    if let Some(b) = eig.iter().find(|e| e.owner.is_none() && e.share > 0.5) {
+        println!(
+            "  least damped board mode: |mu| = {:.9} ({:.1} Hz, rate {:+.3} /s, {:.0} % of its energy in the board)",
+            b.modulus, b.freq_hz, b.rate_per_s, 100.0 * b.share
+        );
+    }
+    // The eigenvalues are computed to ~1e-13 of the map's norm (about 1); the slowest physical
+    // decay (A0's first partial, 0.0085 /s) sits 1.8e-7 inside the circle.
+    assert!(
+        top.modulus <= 1.0 + 1e-10,
+        "{engine}: unstable, |mu| = {:.9} at {:.1} Hz in {}",
+        top.modulus,
+        top.freq_hz,
+        name(&top)
+    );
+}
+
+fn chord_keys() -> Vec<usize> {
+    CHORD.iter().map(|k| parse_key(k).unwrap()).collect()
+}
+
+#[test]
+fn the_live_integrators_step_is_stable_with_32_keys_dampers_up() {
+    stable::<ExponentialInstrument>("ETDRK4", &stability_keys(), false);
+}
+
+#[test]
+fn the_live_integrators_step_is_stable_with_32_keys_dampers_down() {
+    stable::<ExponentialInstrument>("ETDRK4", &stability_keys(), true);
+}
+
+#[test]
+fn the_live_integrators_step_is_stable_with_the_chord() {
+    stable::<ExponentialInstrument>("ETDRK4", &chord_keys(), false);
+}
+
+#[test]
+fn rk4s_step_is_stable_with_32_keys_dampers_up() {
+    stable::<Instrument>("RK4", &stability_keys(), false);
+}
+
+#[test]
+fn rk4s_step_is_stable_with_32_keys_dampers_down() {
+    stable::<Instrument>("RK4", &stability_keys(), true);
+}
+
+#[test]
+fn rk4s_step_is_stable_with_the_chord() {
+    stable::<Instrument>("RK4", &chord_keys(), false);
+}
+
+/// A standard MIDI file (format 0, 480 ticks per beat at 120 bpm: 960 ticks per second) of
+/// `(time s, status, data1, data2)` messages, parsed back as `render --midi` reads it.
+fn midi(messages: &[(f64, u8, u8, u8)]) -> Vec<TimedEvent> {
+    use midly::num::{u15, u28, u4, u7};
+    use midly::{
+        Format, Header, MetaMessage, MidiMessage, Smf, Timing, TrackEvent, TrackEventKind,
+    };
+    let mut track = Vec::new();
+    let mut last = 0;
+    for &(t, status, a, b) in messages {
+        let tick = (t * 960.0).round() as u32;
+        let message = match status {
+            0x90 => MidiMessage::NoteOn {
+                key: u7::new(a),
+                vel: u7::new(b),
+            },
+            0x80 => MidiMessage::NoteOff {
+                key: u7::new(a),
+                vel: u7::new(b),
+            },
+            _ => MidiMessage::Controller {
+                controller: u7::new(a),
+                value: u7::new(b),
+            },
+        };
+        track.push(TrackEvent {
+            delta: u28::new(tick - last),
+            kind: TrackEventKind::Midi {
+                channel: u4::new(0),
+                message,
+            },
+        });
+        last = tick;
+    }
+    track.push(TrackEvent {
+        delta: u28::new(0),
+        kind: TrackEventKind::Meta(MetaMessage::EndOfTrack),
+    });
+    let mut smf = Smf::new(Header::new(
+        Format::SingleTrack,
+        Timing::Metrical(u15::new(480)),
+    ));
+    smf.tracks.push(track);
+    let mut bytes = Vec::new();
+    smf.write_std(&mut bytes).unwrap();
+    parse(&bytes, Path::new("chord.mid")).unwrap()
+}
+
+/// MIDI note of a key name.
+fn note(name: &str) -> u8 {
+    (parse_key(name).unwrap() + 20) as u8
+}
+
+/// The chord at velocity 115: struck at 0 (after the pedal, if `pedal_up_s`), released at
+/// `release_s`; the sustain pedal down from the start and up at `pedal_up_s`.
+fn chord(release_s: f64, pedal_up_s: Option<f64>) -> Vec<TimedEvent> {
+    let mut m = Vec::new();
+    if pedal_up_s.is_some() {
+        m.push((0.0, 0xB0, 64, 127));
+    }
+    m.extend(CHORD.iter().map(|k| (0.01, 0x90, note(k), 115)));
+    m.extend(CHORD.iter().map(|k| (release_s, 0x80, note(k), 0)));
+    if let Some(t) = pedal_up_s {
+        m.push((t, 0xB0, 64, 0));
+    }
+    midi(&m)
+}
+
+/// Level (dBFS) of every quarter second of `render --midi`'s output on engine `E`.
+fn quarter_seconds<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> Vec<f64> {
+    let scaling = Scaling::resolve("grand").unwrap();
+    let mut samples = Vec::new();
+    let r = render_midi_into::<E>(
+        &scaling,
+        events,
+        tail_s,
+        32,
+        |_| {},
+        |_, _| {},
+        |block| {
+            samples.extend_from_slice(block);
+            std::ops::ControlFlow::Continue(())
+        },
+    )
+    .unwrap();
+    samples
+        .chunks((0.25 * r.rate_hz) as usize)
+        .map(|w| {
+            let ms = w.iter().map(|&x| f64::from(x).powi(2)).sum::<f64>() / w.len() as f64;
+            10.0 * ms.max(1e-30).log10()
+        })
+        .collect()
+}
+
+/// The chord on both integrators: no quarter second louder than the first half second (a runaway
+/// rises to full scale), falling from `silenced_s` on (when the dampers drop) by at least
+/// `fall_db` to the end, and the live integrator within 1 dB of RK4 in every quarter second.
+fn chord_decays(what: &str, events: &[TimedEvent], silenced_s: f64, tail_s: f64, fall_db: f64) {
+    let rk4 = quarter_seconds::<Instrument>(events, tail_s);
+    let etd = quarter_seconds::<ExponentialInstrument>(events, tail_s);
+    let from = (silenced_s / 0.25).ceil() as usize;
+    println!("{what}: level per quarter second (dBFS), RK4 / live integrator:");
+    for (i, (r, e)) in rk4.iter().zip(&etd).enumerate() {
+        println!(
+            "  {:5.2} s  {r:8.2}  {e:8.2}  ({:+.3} dB)",
+            i as f64 * 0.25,
+            e - r
+        );
+    }
+    for (engine, level) in [("RK4", &rk4), ("live integrator", &etd)] {
+        let onset = level[0].max(level[1]);
+        let loudest = level.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        assert!(
+            loudest <= onset + 0.5,
+            "{what}, {engine}: grew to {loudest:.1} dBFS from {onset:.1}"
+        );
+        let (start, end) = (level[from], *level.last().unwrap());
+        assert!(
+            end < start - fall_db,
+            "{what}, {engine}: {start:.1} dBFS when the dampers drop, {end:.1} at the end"
+        );
+        for w in level[from..].windows(2) {
+            assert!(
+                w[1] <= w[0] + 0.5,
+                "{what}, {engine}: rose from {:.1} to {:.1} dBFS after the dampers dropped",
+                w[0],
+                w[1]
+            );
+        }
+    }
+    let worst = rk4
+        .iter()
+        .zip(&etd)
+        .map(|(r, e)| (e - r).abs())
+        .fold(0.0, f64::max);
+    println!("  live integrator vs RK4: worst quarter second {worst:.3} dB (limit 1)");
+    assert!(
+        worst < 1.0,
+        "{what}: the live integrator is {worst:.2} dB from RK4"
+    );
+}
+
+#[test]
+fn the_nine_key_chord_held_decays_on_every_integrator() {
+    chord_decays("chord held 5 s", &chord(5.0, None), 5.0, 1.5, 40.0);
+}
+
+#[test]
+fn the_nine_key_chord_under_the_pedal_decays_on_every_integrator() {
+    chord_decays(
+        "chord released at 1.9 s under the pedal, pedal up at 6 s",
+        &chord(1.9, Some(6.0)),
+        6.0,
+        1.5,
+        40.0,
+    );
+}
+
+/// xorshift64*: reproducible random playing.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+}
+
+/// Random playing on 24 keys spread over the keyboard, 24 voices (no stealing), notes every
+/// ~60 ms at random velocities, releases, and the three pedals toggled: through the synth, frame
+/// by frame, the pool's mechanical energy at every frame that sounds (above 1e-15 J) with nothing
+/// driving it (and no voice joining or leaving), against the frame before. Returns (such frames,
+/// rises above rounding, largest relative rise).
+fn energy_stress<E: VoicePool>(seconds: f64) -> (u64, u64, f64) {
+    let scaling = Scaling::resolve("grand").unwrap();
+    let keys: Vec<usize> = (1..=KEYS).step_by(4).chain([88]).take(24).collect();
+    let piano = Piano::<E>::build(&scaling, &keys, keys.len()).unwrap();
+    let settings = scaling.base.output_settings();
+    let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
+    let frames = (seconds * settings.rate_hz) as u64;
+    let mut rng = Rng(0x2545_F491_4F6C_DD1D);
+    let mut t = 0;
+    while t < frames {
+        t += 1000 + rng.below(3000);
+        let k = keys[rng.below(keys.len() as u64) as usize];
+        let note = (k + 20) as u8;
+        let event = match rng.below(6) {
+            0 | 1 => Event::NoteOn {
+                note,
+                velocity: 20 + rng.below(100) as u8,
+            },
+            2 | 3 => Event::NoteOff { note },
+            d => Event::Pedal {
+                pedal: [Pedal::Sustain, Pedal::Sostenuto, Pedal::Soft][rng.below(3) as usize],
+                down: d == 4,
+            },
+        };
+        handle.schedule(Scheduled { frame: t, event }).unwrap();
+    }
+    let mut out = vec![0f32; 64];
+    let (mut last, mut undriven, mut rises, mut worst) = (None::<f64>, 0, 0, f64::NEG_INFINITY);
+    let mut sounding = 0u64;
+    for _ in 0..frames / 64 {
+        synth.process_with(&mut out, 1, |pool, _| {
+            // A voice joining brings the energy its strings held in following the board (they
+            // were on the bridge all along, unsimulated); one leaving takes it away.
+            let now = (0..pool.n_voices())
+                .filter(|&k| pool.is_active(k))
+                .fold(0u64, |m, k| m | 1 << k);
+            if pool.is_driven() || now != sounding {
+                (last, sounding) = (None, now);
+                return;
+            }
+            let e = pool.mechanical_energy_j();
+            if let Some(before) = last.filter(|&b| b > 1e-15) {
+                let rise = (e - before) / before;
+                undriven += 1;
+                worst = worst.max(rise);
+                // Rounding: the energy is a sum of ~1e4 terms in f64.
+                rises += u64::from(rise > 1e-12);
+            }
+            last = Some(e);
+        });
+    }
+    (undriven, rises, worst)
+}
+
+#[test]
+fn undriven_energy_never_rises() {
+    for (engine, (undriven, rises, worst)) in [
+        ("RK4", energy_stress::<Instrument>(3.0)),
+        (
+            "live integrator",
+            energy_stress::<ExponentialInstrument>(3.0),
+        ),
+    ] {
+        println!(
+            "{engine}: random playing on 24 keys, 3 s: {undriven} frames sounding with nothing driving the pool; the energy rose above rounding (1e-12) in {rises}; largest relative change {worst:+.2e} per frame"
+        );
+        assert!(undriven > 50_000, "{engine}: too few undriven frames");
+        assert_eq!(
+            rises, 0,
+            "{engine}: the energy rose with nothing driving it"
+        );
+    }
+}
+
+/// A runaway too slow for the absolute guard (50 J): C2 on a board whose modes are given negative
+/// damping, struck once. The growth guard must reset it within a few blocks of the hammer's
+/// release, while the energy is still far below 50 J; the same key on the real board never trips
+/// it.
+fn growth_guard<E: VoicePool>(zeta: f64) -> (Option<f64>, f64) {
+    use std::sync::atomic::Ordering;
+    let scaling = Scaling::resolve("grand").unwrap();
+    let key = parse_key("C2").unwrap();
+    let mut spec = scaling.key_preset(key).unwrap().unison_spec();
+    spec.board.damping_ratio.iter_mut().for_each(|z| *z = zeta);
+    let rate = scaling.base.output_rate_hz();
+    let instrument = E::build_pool(&[spec], 1, rate).unwrap();
+    let piano = Piano {
+        instrument,
+        player: unacorda::play::Player::new(&[key]),
+        keys: vec![key],
+    };
+    let settings = scaling.base.output_settings();
+    let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
+    let strike = Event::NoteOn {
+        note: 36,
+        velocity: 64,
+    };
+    handle
+        .schedule(Scheduled {
+            frame: 0,
+            event: strike,
+        })
+        .unwrap();
+    let mut out = vec![0f32; 64];
+    let mut peak_j = 0f64;
+    for b in 0..(1.0 * settings.rate_hz / 64.0) as usize {
+        synth.process(&mut out, 1);
+        if handle.stats.growth_resets.load(Ordering::Relaxed) > 0 {
+            return (Some((b + 1) as f64 * 64.0 / settings.rate_hz), peak_j);
+        }
+        peak_j = peak_j.max(synth.piano().instrument.mechanical_energy_j());
+    }
+    (None, peak_j)
+}
+
+#[test]
+fn the_growth_guard_resets_a_slow_runaway() {
+    for (engine, unstable, stable) in [
+        (
+            "RK4",
+            growth_guard::<Instrument>(-0.01),
+            growth_guard::<Instrument>(0.03),
+        ),
+        (
+            "live integrator",
+            growth_guard::<ExponentialInstrument>(-0.01),
+            growth_guard::<ExponentialInstrument>(0.03),
+        ),
+    ] {
+        println!(
+            "{engine}: C2 on a board with zeta = -0.01: growth guard reset at {:?} s, energy at most {:.3} J before (absolute guard 50 J); on the real board (zeta = 0.03): {:?} over 1 s",
+            unstable.0, unstable.1, stable.0
+        );
+        let at = unstable.0.expect("the growth guard never fired");
+        assert!(at < 0.1, "{engine}: the growth guard fired only at {at} s");
+        assert!(
+            unstable.1 < 1.0,
+            "{engine}: {} J before the reset",
+            unstable.1
+        );
+        assert_eq!(
+            stable.0, None,
+            "{engine}: the guard fired on a decaying key"
+        );
+    }
+}
