@@ -64,8 +64,8 @@ fn malformed_presets_are_rejected_with_field_and_range() {
     assert!(e.contains("unknown preset `c3`") && e.contains("c2"));
 }
 
-/// Run the CLI; returns (success, stderr).
-fn cli(args: &[&str]) -> (bool, String) {
+/// Run the CLI; returns (exit status, stderr).
+fn cli(args: &[&str]) -> (Option<i32>, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_unacorda"))
         .args(args)
         .output()
@@ -78,14 +78,18 @@ fn cli(args: &[&str]) -> (bool, String) {
         stderr.trim()
     );
     assert!(!stderr.contains("panicked"), "the CLI must not panic");
-    (out.status.success(), stderr)
+    (out.status.code(), stderr)
 }
 
 /// Each command fails, its message contains the needle, and `out` (if any) was not written.
 fn assert_refused(cases: &[(&[&str], &str)], out: Option<&str>) {
     for &(args, needle) in cases {
-        let (ok, stderr) = cli(args);
-        assert!(!ok, "must fail");
+        let (code, stderr) = cli(args);
+        assert_eq!(
+            code,
+            Some(1),
+            "must fail with status 1 (the README's promise)"
+        );
         assert!(stderr.contains(needle), "message names `{needle}`");
         if let Some(out) = out {
             assert!(!Path::new(out).exists(), "nothing written");
@@ -133,7 +137,7 @@ fn cli_rejects_bad_input_without_writing() {
 fn cli_renders_a_short_wav() {
     let dir = tempfile::tempdir().unwrap();
     let wav = dir.path().join("c2.wav");
-    let (ok, _) = cli(&[
+    let (code, _) = cli(&[
         "render",
         "--offline",
         "--preset",
@@ -144,7 +148,7 @@ fn cli_renders_a_short_wav() {
         "--out",
         wav.to_str().unwrap(),
     ]);
-    assert!(ok);
+    assert_eq!(code, Some(0));
     let reader = hound::WavReader::open(&wav).unwrap();
     assert_eq!(reader.spec().sample_rate, 48_000);
     let samples: Vec<f32> = reader.into_samples::<f32>().map(Result::unwrap).collect();

@@ -83,7 +83,7 @@ fn a_full_disk_leaves_a_valid_wav_and_says_how_much() {
         .output()
         .unwrap();
     let e = report("render --midi … --out /nonexistent/dir/out.wav", &out);
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(1));
     assert!(
         e.contains("/nonexistent/dir/out.wav: cannot create the WAV") && e.contains("No such file")
     );
@@ -94,7 +94,7 @@ fn a_full_disk_leaves_a_valid_wav_and_says_how_much() {
         .output()
         .unwrap();
     let e = report("render --midi … --out /dev/full", &out);
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(1));
     assert!(e.contains("/dev/full") && e.contains("No space left on device"));
     // A file-size limit of 400 blocks (200–400 kB): the render fills it part way. SIGXFSZ is
     // ignored, as a disk-full write fails, with an error rather than a signal.
@@ -107,7 +107,7 @@ fn a_full_disk_leaves_a_valid_wav_and_says_how_much() {
         .output()
         .unwrap();
     let e = report("ulimit -f 400; render --midi (10 s) …", &out);
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(1));
     assert!(e.contains("limited.wav") && e.contains("File too large"));
     let kept = number_after(&e, "holds the first ");
     let seconds = valid_wav_seconds(&wav);
@@ -146,7 +146,7 @@ fn ctrl_c_during_a_render_leaves_a_valid_wav_and_says_how_much() {
     assert!(status.success());
     let out = child.wait_with_output().unwrap();
     let e = report("render --midi (61 s) …, SIGINT after ≥ 1 s written", &out);
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(1));
     assert!(e.contains("interrupted") && e.contains("valid WAV"));
     let kept = number_after(&e, "holds the first ");
     let seconds = valid_wav_seconds(&wav);

@@ -118,7 +118,9 @@ fn exponential_integrator_at_48_khz_matches_rk4_at_96_khz() {
             fast.hammer_peak_n,
             100.0 * dh
         );
-        assert!(dh.abs() < 0.01);
+        // Issue 5's gates were 1 %, 1 cent, 2 % and 0.5 dB; measured −0.04 %, 0.0008 cents,
+        // 0.01 % and 0.07 dB, the limits hold the engine near what it does.
+        assert!(dh.abs() < 1e-3);
         // Partials 1–20: frequency and decay rate, from 0.1 s on.
         let skip = (0.1 * FS) as usize;
         let (xr, xf) = (&reference.force_t[skip..], &fast.force_t[skip..]);
@@ -154,11 +156,11 @@ fn exponential_integrator_at_48_khz_matches_rk4_at_96_khz() {
             }
         }
         println!(
-            "  partials 1–20: worst {worst_cents:.4} cents (limit 1); decay rates of partials 1–10: worst {:.2} % (limit 2)",
+            "  partials 1–20: worst {worst_cents:.4} cents (limit 0.01); decay rates of partials 1–10: worst {:.2} % (limit 0.5)",
             100.0 * worst_decay
         );
-        assert!(worst_cents < 1.0);
-        assert!(worst_decay < 0.02);
+        assert!(worst_cents < 0.01);
+        assert!(worst_decay < 0.005);
         // Spectrum of the bridge force, third-octave bands 50 Hz – 5 kHz, first 1.2 s.
         let (br, bf) = (
             band_levels_db(&reference.force_t),
@@ -169,15 +171,18 @@ fn exponential_integrator_at_48_khz_matches_rk4_at_96_khz() {
             .zip(&bf)
             .map(|((c, a), (_, b))| ((a - b).abs(), *c))
             .fold((0.0, 0.0), |m, x| if x.0 > m.0 { x } else { m });
-        println!("  bridge T force, third-octave bands 50 Hz – 5 kHz: worst {worst_band:.3} dB at {at:.0} Hz (limit 0.5)");
-        assert!(worst_band < 0.5);
+        println!("  bridge T force, third-octave bands 50 Hz – 5 kHz: worst {worst_band:.3} dB at {at:.0} Hz (limit 0.2)");
+        assert!(worst_band < 0.2);
     }
 }
 
 #[test]
 fn the_radiated_sound_agrees_through_the_renderer() {
     // The same through `simulate_with` (what `render --offline --integrator` runs): RK4 at 96 kHz
-    // decimated to 48 kHz, and ETDRK4 at 48 kHz, radiated pressure RMS over 0.1–1 s.
+    // decimated to 48 kHz through the anti-alias FIR (a delay of 0.72 ms), and ETDRK4 at 48 kHz
+    // (no filter), radiated pressure 0.1–1 s. Compared as waveforms, Hann-windowed, after the
+    // relative delay that best aligns them (found from the cross-spectrum, sub-sample), and in
+    // third-octave bands (which no delay changes).
     use unacorda::engine::Integrator;
     use unacorda::render::simulate_with;
     let c2 = Preset::resolve("c2").unwrap();
@@ -185,18 +190,71 @@ fn the_radiated_sound_agrees_through_the_renderer() {
         velocity_m_s: 2.5,
         una_corda: false,
     };
-    let rms_db = |integrator| {
+    let window = |integrator| {
         let rec = simulate_with(&c2, integrator, strike, None, 1.0, |_| {}).unwrap();
         let p = rec.channel(|f| f.pressure_pa);
-        let tail = &p[(0.1 * rec.rate_hz) as usize..];
-        10.0 * (tail.iter().map(|x| x * x).sum::<f64>() / tail.len() as f64).log10()
+        let x = &p[(0.1 * rec.rate_hz) as usize..(0.1 * rec.rate_hz) as usize + 43_200];
+        let n = x.len() as f64;
+        let hann: Vec<f64> = x
+            .iter()
+            .enumerate()
+            .map(|(k, v)| v * (std::f64::consts::PI * k as f64 / n).sin().powi(2))
+            .collect();
+        (hann, rec.delay_s)
     };
-    let (r, e) = (rms_db(Integrator::Rk4), rms_db(Integrator::Exponential));
+    let ((r, r_delay), (e, e_delay)) = (window(Integrator::Rk4), window(Integrator::Exponential));
+    let spectrum = |x: &[f64]| {
+        let mut planner = RealFftPlanner::<f64>::new();
+        let fft = planner.plan_fft_forward(x.len());
+        let (mut input, mut out) = (x.to_vec(), fft.make_output_vec());
+        fft.process(&mut input, &mut out).unwrap();
+        out
+    };
+    let (pr, pe) = (spectrum(&r), spectrum(&e));
+    let df = FS / r.len() as f64;
+    let audible = |k: usize| (20.0..20_000.0).contains(&(k as f64 * df));
+    // The residual of RK4's spectrum advanced by `tau` against the live integrator's.
+    let residual = |tau: f64| -> f64 {
+        let (mut diff, mut power) = (0.0, 0.0);
+        for (k, (a, b)) in pr.iter().zip(&pe).enumerate().filter(|(k, _)| audible(*k)) {
+            let w = 2.0 * std::f64::consts::PI * k as f64 * df;
+            let shifted = a * faer::c64::new((w * tau).cos(), (w * tau).sin());
+            diff += (shifted - b).norm_sqr();
+            power += b.norm_sqr();
+        }
+        (diff / power).sqrt()
+    };
+    let (tau, err) = (-2000..=2000)
+        .map(|i| i as f64 * 1e-6)
+        .map(|tau| (tau, residual(tau)))
+        .fold((0.0, f64::INFINITY), |m, x| if x.1 < m.1 { x } else { m });
+    let bands = |x: &[f64]| band_levels_db(x);
+    // Bands within 40 dB of the loudest: those holding partials (the empty ones between them,
+    // 75 dB down, are window leakage).
+    let (br, be) = (bands(&r), bands(&e));
+    let loudest = br.iter().map(|b| b.1).fold(f64::NEG_INFINITY, f64::max);
+    let worst_band = br
+        .iter()
+        .zip(&be)
+        .filter(|((_, a), _)| *a > loudest - 40.0)
+        .map(|((_, a), (_, b))| (a - b).abs())
+        .fold(0.0, f64::max);
     println!(
-        "radiated pressure RMS 0.1–1 s: RK4 {r:.2} dB re 1 Pa, exponential {e:.2} dB ({:+.3} dB)",
-        e - r
+        "radiated pressure 0.1–1 s, RK4 (filter delay {:.3} ms) vs live integrator (delay {:.3} ms): best aligned {:.3} ms apart, waveform difference {err:.2e} of the sound ({:.1} dB); third-octave bands 50 Hz–5 kHz within 40 dB of the loudest agree to {worst_band:.3} dB",
+        r_delay * 1e3,
+        e_delay * 1e3,
+        tau * 1e3,
+        20.0 * err.log10()
     );
-    assert!((e - r).abs() < 0.1);
+    // The FIR's delay is what separates them (to a quarter of a sample: the filter is linear
+    // phase), and once aligned the two sound alike to −50 dB (3.1e-3 measured), band by band to
+    // 0.03 dB.
+    assert!(
+        (tau - (r_delay - e_delay)).abs() < 1e-5,
+        "aligned {tau} s apart"
+    );
+    assert!(err < 5e-3, "waveform difference {err:.2e}");
+    assert!(worst_band < 0.1, "bands differ by {worst_band} dB");
 }
 
 #[test]
@@ -251,7 +309,8 @@ fn keys_couple_through_the_shared_board_alike() {
             etd[v],
             etd[v] - rk4[v]
         );
-        assert!((etd[v] - rk4[v]).abs() < 0.5);
+        // 0.000 dB measured (0.25 dB before the strings moved relative to their deflection).
+        assert!((etd[v] - rk4[v]).abs() < 0.05);
     }
     assert!(
         rk4[1].is_finite() && rk4[1] > rk4[0] - 40.0,

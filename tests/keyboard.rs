@@ -3,7 +3,7 @@
 
 use unacorda::analysis::spectral::peak_frequency;
 use unacorda::engine::system::Instrument;
-use unacorda::engine::Strike;
+use unacorda::engine::{Strike, VoicePool};
 use unacorda::preset::Preset;
 use unacorda::render::simulate;
 use unacorda::scaling::{equal_tempered_hz, parse_key, Scaling, KEYS};
@@ -27,7 +27,6 @@ fn c2_key_is_the_c2_preset() {
 #[test]
 fn every_key_builds_with_the_documented_layout() {
     let keyboard = Scaling::resolve("grand").unwrap();
-    let layout = &keyboard.scaling.layout;
     println!("key  name  strings wound  L_s m   T0 N   mu g/m  d mm   B        modes T/L  f_max Hz  m_H g  K_H        p    rate kHz  L_s pitch cents");
     for k in 1..=KEYS {
         let lp = keyboard.key_preset(k).unwrap();
@@ -59,15 +58,23 @@ fn every_key_builds_with_the_documented_layout() {
                 cents
             );
         }
-        let expected_strings = if k <= layout.single_until_key {
-            1
-        } else if k <= layout.bichord_until_key {
-            2
-        } else {
-            3
+        // The layout the README documents, typed here rather than read from the scaling: single
+        // strings A0–E1 (1–8), bichords F1–F#2 (9–22), trichords above; wound through F#2;
+        // duplex felt-muted up to C5 (52); dampers up to F6 (69).
+        let expected_strings = match k {
+            1..=8 => 1,
+            9..=22 => 2,
+            _ => 3,
         };
         assert_eq!(s.count, expected_strings, "key {k}");
         assert_eq!(unison.n_strings(), expected_strings);
+        assert_eq!(s.wound, k <= 22, "key {k}: wound");
+        assert_eq!(
+            spec.duplex_damping_n_s_m2 > 0.0,
+            k <= 52,
+            "key {k}: duplex felt"
+        );
+        assert_eq!(spec.damper.is_some(), k <= 69, "key {k}: damper");
         assert!(s.modes_t <= 100 && s.modes_l <= 5);
         assert!(
             spec.max_mode_freq_hz() < 9600.0 || s.modes_t == 1,
@@ -81,6 +88,64 @@ fn every_key_builds_with_the_documented_layout() {
         assert_eq!(
             spec.board.points[spec.bridge_point].name,
             unacorda::engine::plate::key_name(k)
+        );
+    }
+}
+
+/// Every key struck at 6 m/s (fortissimo) and stepped for 20 ms on engine `E`: the state stays
+/// finite, and once the hammer is out of play the energy never rises. Returns the largest
+/// relative rise per step after the hammer's release, and the keys whose hammer was released.
+fn strike_every_key<E: VoicePool>() -> (f64, usize) {
+    let keyboard = Scaling::resolve("grand").unwrap();
+    let rate = keyboard.base.output_rate_hz();
+    let (mut worst, mut released) = (f64::NEG_INFINITY, 0);
+    for k in 1..=KEYS {
+        let spec = keyboard.key_preset(k).unwrap().unison_spec();
+        let mut pool = E::build_pool(&[spec], 1, rate).unwrap();
+        pool.assign(0, 0);
+        pool.strike_voice(
+            0,
+            Strike {
+                velocity_m_s: 6.0,
+                una_corda: false,
+            },
+        );
+        let mut out = [0.0];
+        let mut last = None;
+        for _ in 0..(0.02 / pool.step_s()) as usize {
+            pool.run(&mut out, None);
+            let e = pool.mechanical_energy_j();
+            assert!(e.is_finite() && out[0].is_finite(), "key {k}: not finite");
+            if pool.is_driven() {
+                continue;
+            }
+            if let Some(before) = last {
+                worst = f64::max(worst, (e - before) / before);
+            } else {
+                released += 1;
+            }
+            last = Some(e);
+        }
+    }
+    (worst, released)
+}
+
+#[test]
+fn every_key_struck_fortissimo_stays_finite_and_decays() {
+    use unacorda::engine::exponential::ExponentialInstrument;
+    for (engine, (worst, released)) in [
+        ("RK4", strike_every_key::<Instrument>()),
+        (
+            "live integrator",
+            strike_every_key::<ExponentialInstrument>(),
+        ),
+    ] {
+        println!("{engine}: all 88 keys struck at 6 m/s for 20 ms: finite; {released} hammers released, after which the energy changed by at most {worst:+.2e} per step");
+        assert!(released > 80, "{engine}: only {released} hammers released");
+        // Rounding: the energy is a sum of ~1e3 terms in f64.
+        assert!(
+            worst < 1e-12,
+            "{engine}: the energy rose by {worst:e} in a step"
         );
     }
 }

@@ -82,16 +82,31 @@ fn fig3_una_corda_hammer_force_is_higher_and_longer() {
         unstruck, 0.0,
         "the unstruck string never touches the hammer"
     );
+    // The paper gives no numbers for Figure 3, only its shape: una corda higher and longer than
+    // each of the two equal forces of normal playing. The figures here (12.2 N for 3.23 ms
+    // against 10.7 N for 2.83 ms) are the paper's model as an independent implementation of it
+    // gives them too, to 1e-12 of the peak: a change of more than a few percent is a change of
+    // the model, and these limits say so.
+    let (peak_ratio, time_ratio) = (uc_peak / n1_peak.max(n2_peak), uc_ms / n1_ms.max(n2_ms));
+    println!("  una corda / normal: peak × {peak_ratio:.3}, contact × {time_ratio:.3}");
     assert!(
-        uc_peak > 1.05 * n1_peak.max(n2_peak),
-        "una corda peak must exceed the per-string normal peak"
+        (1.10..1.18).contains(&peak_ratio),
+        "una corda peak × {peak_ratio} the per-string normal peak"
     );
     assert!(
-        uc_ms > 1.05 * n1_ms.max(n2_ms),
-        "una corda contact must last longer"
+        (1.10..1.18).contains(&time_ratio),
+        "una corda contact × {time_ratio} as long"
     );
     assert!(
-        (n1_peak / n2_peak - 1.0).abs() < 0.05,
+        (uc_peak / 12.18 - 1.0).abs() < 0.03,
+        "una corda peak {uc_peak} N"
+    );
+    assert!(
+        (n1_peak / 10.73 - 1.0).abs() < 0.03,
+        "normal peak {n1_peak} N"
+    );
+    assert!(
+        (n1_peak / n2_peak - 1.0).abs() < 0.01,
         "normal playing: two near-equal forces"
     );
 }
@@ -188,7 +203,10 @@ fn fig6_normal_playing_beats_una_corda_decays_evenly() {
     };
     let (mu, mn) = (median(&uc), median(&normal));
     println!("  median: una corda {mu:.2} dB, normal {mn:.2} dB");
-    assert!(mn > 1.5 * mu, "normal playing beats more than una corda");
+    // Normal playing's partials beat by several dB (5.48 here), una corda's barely (0.24): a
+    // beat of 1 dB is already plain to hear, and an even decay leaves well under half a dB.
+    assert!(mn > 4.0, "normal playing beats: {mn:.2} dB");
+    assert!(mu < 0.5, "una corda decays evenly: {mu:.2} dB");
 }
 
 #[test]
@@ -208,9 +226,11 @@ fn fig5_aftersound_to_attack_is_larger_with_una_corda() {
     println!("Figure 5 — total transmitted T force: attack (max 20 ms RMS, first 0.2 s) vs aftersound (RMS 2–3 s)");
     println!("  una corda: attack {ua:8.3} N, aftersound {uf:8.4} N, ratio {ur:6.1} dB");
     println!("  normal:    attack {na:8.3} N, aftersound {nf:8.4} N, ratio {nr:6.1} dB");
-    assert!(na > ua, "normal playing transmits the larger attack");
+    assert!(na > 1.3 * ua, "normal playing transmits the larger attack");
+    // Weinreich: with one string struck, the aftersound is larger relative to the attack (by
+    // 2.7 dB here: −12.6 against −15.3 dB).
     assert!(
-        ur > nr + 1.0,
-        "aftersound relative to attack is larger with una corda (Weinreich)"
+        (2.0..3.5).contains(&(ur - nr)),
+        "aftersound relative to attack: una corda {ur:.1} dB, normal {nr:.1} dB"
     );
 }

@@ -1,9 +1,35 @@
 //! The RK4 engine in `f32` against the same engine in `f64` (the reference): a c2 strike, normal
 //! and una corda, over 4 s. The bridge forces must stay within 1e-4 of the largest force, the
-//! hammer's within 1e-4 of its peak, and the board's volume velocity within 1e-4 of its peak.
+//! hammer's within 2e-6 of its peak, and the board's volume velocity within 3e-5 of its peak; and
+//! a voice in `f32` must take half the memory, as measured by the allocator.
 
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
 use unacorda::engine::{Instrument, Strike};
 use unacorda::preset::Preset;
+
+/// The system allocator, counting the bytes each thread holds (tests run on several threads).
+struct Counting;
+
+thread_local! {
+    static HELD: Cell<isize> = const { Cell::new(0) };
+}
+
+// SAFETY: forwards to the system allocator unchanged; the counter is a const-initialised
+// thread-local `Cell` (no allocation, no destructor).
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        HELD.with(|h| h.set(h.get() + layout.size() as isize));
+        System.alloc(layout)
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        HELD.with(|h| h.set(h.get() - layout.size() as isize));
+        System.dealloc(ptr, layout)
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
 
 /// Largest differences over `seconds` of a strike, each relative to the `f64` run's peak:
 /// (bridge forces, hammer force, volume velocity).
@@ -45,9 +71,11 @@ fn check(una_corda: bool) {
         "c2 {}, f32 vs f64 over 4 s, largest difference / peak: bridge forces {force:.2e}, hammer force {hammer:.2e}, volume velocity {volume:.2e} (bound 1e-4)",
         if una_corda { "una corda" } else { "normal" }
     );
+    // Measured 3.2e-5 / 4.5e-5, 2.8e-7 / 4.7e-7 and 1.1e-5 / 1.2e-5 (normal / una corda): the
+    // f32 modes' rounding over 4 s; the hammer, computed in f64, sees it only through the strings.
     assert!(force < 1e-4, "bridge forces drift {force:.2e}");
-    assert!(hammer < 1e-4, "hammer force drifts {hammer:.2e}");
-    assert!(volume < 1e-4, "volume velocity drifts {volume:.2e}");
+    assert!(hammer < 2e-6, "hammer force drifts {hammer:.2e}");
+    assert!(volume < 3e-5, "volume velocity drifts {volume:.2e}");
     // Not trivially equal: f32 really rounds differently.
     assert!(
         force > 1e-9,
@@ -65,17 +93,39 @@ fn f32_bridge_forces_stay_within_1e_4_of_f64_over_4_s_una_corda() {
     check(true);
 }
 
+/// Bytes a pool of `T` holds per voice, measured: the pool with 9 voices less the pool with 1.
+fn measured_bytes_per_voice<T: unacorda::engine::simd::Real>() -> (f64, usize) {
+    // Building runs faer's factorisations; on one thread every byte is counted where it is held.
+    faer::set_global_parallelism(faer::Par::Seq);
+    let spec = Preset::resolve("c2").unwrap().unison_spec();
+    let held = |voices: usize| {
+        let before = HELD.with(Cell::get);
+        let pool = Instrument::<T>::pool(std::slice::from_ref(&spec), voices).unwrap();
+        let after = HELD.with(Cell::get);
+        (after - before, pool.bytes_per_voice())
+    };
+    // The first build also fills one-time caches: measure after it.
+    held(1);
+    let ((one, stated), (nine, _)) = (held(1), held(9));
+    ((nine - one) as f64 / 8.0, stated)
+}
+
 #[test]
 fn f32_halves_the_bytes_per_voice() {
-    let spec = Preset::resolve("c2").unwrap().unison_spec();
-    let (a, b) = (
-        Instrument::new(&spec).unwrap(),
-        Instrument::<f32>::unison(&spec).unwrap(),
-    );
+    let (f64_bytes, f64_stated) = measured_bytes_per_voice::<f64>();
+    let (f32_bytes, f32_stated) = measured_bytes_per_voice::<f32>();
     println!(
-        "bytes per c2 voice: f64 {}, f32 {}",
-        a.bytes_per_voice(),
-        b.bytes_per_voice()
+        "bytes per c2 voice, measured by the allocator: f64 {f64_bytes:.0} (stated {f64_stated}), f32 {f32_bytes:.0} (stated {f32_stated}); ratio {:.3}",
+        f32_bytes / f64_bytes
     );
-    assert_eq!(2 * b.bytes_per_voice(), a.bytes_per_voice());
+    // What a voice adds beyond its modes (flags, hammer, a few f64 per voice) is small.
+    let ratio = f32_bytes / f64_bytes;
+    assert!((0.49..0.53).contains(&ratio), "f32 / f64 = {ratio}");
+    // `bytes_per_voice`, what `bench` reports, is what the pool really holds.
+    for (measured, stated) in [(f64_bytes, f64_stated), (f32_bytes, f32_stated)] {
+        assert!(
+            (measured / stated as f64 - 1.0).abs() < 0.02,
+            "{measured} vs {stated}"
+        );
+    }
 }

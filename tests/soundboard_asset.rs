@@ -49,24 +49,26 @@ fn committed_asset_equals_a_fresh_generation_and_the_board_checks_out() {
         solved.modes.freq_hz[1],
         solved.modes.freq_hz[2]
     );
-    assert!((count / expected - 1.0).abs() < 0.25);
-
-    // Mass normalisation cᵀ M c = 1 and M-orthogonality, from the Ritz matrices.
-    let c = &solved.coefficients;
-    let gram = c.transpose() * &solved.mass_matrix * c;
-    let mut worst_diag: f64 = 0.0;
-    let mut worst_off: f64 = 0.0;
-    for i in 0..gram.nrows() {
-        for j in 0..gram.ncols() {
-            if i == j {
-                worst_diag = worst_diag.max((gram[(i, j)] - 1.0).abs());
-            } else {
-                worst_off = worst_off.max(gram[(i, j)].abs());
-            }
-        }
-    }
-    println!("mass normalisation: max |cᵀMc − 1| = {worst_diag:.2e}, max |c_iᵀ M c_j| = {worst_off:.2e} (limit 1e-9)");
-    assert!(worst_diag < 1e-9 && worst_off < 1e-9);
+    // The bare clamped plate (no ribs, no bridges) on the same basis: its count follows the
+    // asymptote less the clamped edges' correction; the ribs and bridges stiffen the board and
+    // leave fewer modes.
+    let mut bare = spec.clone();
+    bare.ribs = None;
+    bare.bridges.clear();
+    let bare_count = bare.solve().unwrap().modes.len() as f64;
+    println!(
+        "bare clamped plate: {bare_count} modes ({:+.1} % from the asymptote); with ribs and bridges {count} ({:+.1} % from the bare plate)",
+        100.0 * (bare_count / expected - 1.0),
+        100.0 * (count / bare_count - 1.0)
+    );
+    assert!(
+        (bare_count / expected - 1.0).abs() < 0.08,
+        "bare plate: {bare_count} vs {expected:.0}"
+    );
+    assert!(
+        count < 0.9 * bare_count,
+        "the ribs stiffen the board: {count} vs {bare_count}"
+    );
 
     // Reduced vs full driving-point mobility at C2, 1/3-octave band levels below 1 kHz.
     let full_c2 = solved.modes.point("C2").unwrap();
@@ -93,20 +95,25 @@ fn committed_asset_equals_a_fresh_generation_and_the_board_checks_out() {
             worst_tt = worst_tt.max((full_tt - bands_red[0][b].1).abs());
         }
     }
-    println!("  worst TT band difference below 1 kHz: {worst_tt:.2} dB (limit 3)");
-    assert!(worst_tt < 3.0);
-    // Reciprocity: the mobility matrix is symmetric.
-    let y = reduced.mobility(red_c2, 2.0 * PI * 100.0);
-    for (i, j) in [(0, 1), (0, 2), (1, 2)] {
-        let (a, b) = (y[i][j], y[j][i]);
-        assert!(
-            (a[0] - b[0]).abs() <= 1e-15 * a[0].abs().max(1e-30)
-                && (a[1] - b[1]).abs() <= 1e-15 * a[1].abs().max(1e-30)
-        );
-    }
+    // The paper keeps the mode with the largest peak per band: the reduced model follows the
+    // full one within a dB or so below 1 kHz (0.67 dB measured).
+    println!("  worst TT band difference below 1 kHz: {worst_tt:.2} dB (limit 1.5)");
+    assert!(worst_tt < 1.5);
+    // The driving-point mobility against an infinite plate of Table 1's spruce,
+    // 1 / (8 sqrt(rho h sqrt(D1 D2))) (Cremer & Heckl), from its raw values typed here.
+    let (e1, e2, nu12, h, rho): (f64, f64, f64, f64, f64) = (12.7e9, 1.04e9, 0.37, 0.008, 488.0);
+    let den = 12.0 * (1.0 - nu12 * nu12 * e2 / e1);
+    let (d1, d2) = (e1 * h.powi(3) / den, e2 * h.powi(3) / den);
+    let infinite = 1.0 / (8.0 * (rho * h * (d1 * d2).sqrt()).sqrt());
+    let y = solved.modes.mobility(full_c2, 2.0 * PI * 100.0);
     let tt100 = (y[0][0][0].powi(2) + y[0][0][1].powi(2)).sqrt();
-    println!("|Y_TT| at 100 Hz, C2: {tt100:.2e} m/(N s) (grand pianos: about 1e-4 to 1e-2)");
-    assert!((1e-4..1e-2).contains(&tt100));
+    println!(
+        "|Y_TT| at 100 Hz, C2: {tt100:.2e} m/(N s); the infinite plate {infinite:.2e} ({:.2} ×)",
+        tt100 / infinite
+    );
+    // A finite, ribbed board swings about the infinite plate's value with its modes; at 100 Hz
+    // (between modes, under a bridge) it must stay within a factor of 2.
+    assert!((0.5..2.0).contains(&(tt100 / infinite)));
 }
 
 #[test]
@@ -118,24 +125,111 @@ fn simply_supported_bare_plate_matches_the_closed_form() {
     spec.basis.terms_x = 12;
     spec.basis.terms_y = 12;
     spec.reduction.f_min_hz = 1.0;
+    spec.reduction.f_max_hz = 2e4;
     let solved = spec.solve().unwrap();
-    let mut exact: Vec<f64> = (1..=12)
+    // Leissa §11.3 from Table 1's raw values, typed here (not the engine's rigidities): modes
+    // (m, n), `f = pi/2 sqrt((D1 k^4 + 2 (nu12 D2 + 2 D66) k^2 l^2 + D2 l^4) / (rho h))` with
+    // `k = m/a`, `l = n/b`, and mass-normalised shapes `2 / sqrt(rho h a b) sin sin`, whose net
+    // volume is `8 sqrt(a b) / (pi^2 m n sqrt(rho h))` for odd m and n and 0 otherwise.
+    let (a, b, h, rho) = (1.37f64, 1.0f64, 0.008f64, 488.0f64);
+    let (e1, e2, nu12, g12): (f64, f64, f64, f64) = (12.7e9, 1.04e9, 0.37, 1.0e9);
+    let den = 12.0 * (1.0 - nu12 * nu12 * e2 / e1);
+    let (d1, d2, d66) = (
+        e1 * h.powi(3) / den,
+        e2 * h.powi(3) / den,
+        g12 * h.powi(3) / 12.0,
+    );
+    let mut exact: Vec<(f64, f64)> = (1..=12)
         .flat_map(|m| (1..=12).map(move |n| (m, n)))
-        .map(|(m, n)| spec.plate.simply_supported_freq_hz(m, n))
+        .map(|(m, n)| {
+            let (k, l) = (m as f64 / a, n as f64 / b);
+            let f = PI / 2.0
+                * ((d1 * k.powi(4)
+                    + 2.0 * (nu12 * d2 + 2.0 * d66) * k * k * l * l
+                    + d2 * l.powi(4))
+                    / (rho * h))
+                    .sqrt();
+            let odd = m % 2 == 1 && n % 2 == 1;
+            let volume = if odd {
+                8.0 * (a * b).sqrt() / (PI * PI * (m * n) as f64 * (rho * h).sqrt())
+            } else {
+                0.0
+            };
+            (f, volume)
+        })
         .collect();
-    exact.sort_by(f64::total_cmp);
-    println!("simply-supported bare plate, Ritz vs closed form (first 20 modes):");
-    let mut worst: f64 = 0.0;
-    for (k, (ritz, closed)) in solved.modes.freq_hz.iter().zip(&exact).take(20).enumerate() {
+    exact.sort_by(|x, y| x.0.total_cmp(&y.0));
+    println!("simply-supported bare plate, Ritz vs closed form (first 20 modes): frequency, |net volume|");
+    let (mut worst_f, mut worst_v): (f64, f64) = (0.0, 0.0);
+    let modes = &solved.modes;
+    for k in 0..20 {
+        let (ritz, (closed, volume)) = (modes.freq_hz[k], exact[k]);
         let err = 100.0 * (ritz / closed - 1.0);
+        let v = modes.volume_m2_per_sqrt_kg[k].abs();
+        worst_f = worst_f.max(err.abs());
+        worst_v = worst_v.max((v - volume).abs() / exact[0].1);
+        println!("  {:2}: {ritz:9.3} Hz vs {closed:9.3} Hz ({err:+.1e} %), volume {v:.5e} vs {volume:.5e}", k + 1);
+    }
+    // The sine basis holds the exact modes: the frequencies are exact to rounding, the volumes to
+    // the Simpson quadrature of each basis function's mean (7e-6; the trapezoid gave 1.4e-3).
+    println!("  worst {worst_f:.1e} % in frequency, {worst_v:.1e} of the first mode's volume in volume (limits 1e-6 %, 5e-5)");
+    assert!(worst_f < 1e-6 && worst_v < 5e-5);
+    // Mass from the modes: sum_k (rho h V_k)^2 over the 12 × 12 modes is the share of the plate's
+    // mass rho h a b that they carry, (sum of 1/m^2 over odd m <= 11)^2 / (pi^2 / 8)^2.
+    let carried: f64 = modes
+        .volume_m2_per_sqrt_kg
+        .iter()
+        .map(|v| (rho * h * v).powi(2))
+        .sum();
+    let odd: f64 = (1..=11).step_by(2).map(|m| 1.0 / (m * m) as f64).sum();
+    let share = (odd / (PI * PI / 8.0)).powi(2);
+    println!(
+        "  mass carried by the modes: {:.6} of rho h a b = {:.3} kg (closed form {share:.6})",
+        carried / (rho * h * a * b),
+        rho * h * a * b
+    );
+    assert!((carried / (rho * h * a * b) - share).abs() < 1e-4);
+}
+
+#[test]
+fn clamped_isotropic_square_plate_matches_leissa() {
+    // Leissa (1969), Table 4.23: a clamped square plate, lambda = omega a^2 sqrt(rho h / D) =
+    // 35.99, 73.39 (twice), 108.2 for its first four modes.
+    let mut spec = grand();
+    let (e, nu) = (12.7e9, 0.3);
+    spec.plate = unacorda::engine::plate::PlateSpec {
+        width_m: 1.0,
+        length_m: 1.0,
+        e1_pa: e,
+        e2_pa: e,
+        nu12: nu,
+        g12_pa: e / (2.0 * (1.0 + nu)),
+        edges: Edges::Clamped,
+        ..spec.plate
+    };
+    spec.ribs = None;
+    spec.bridges.clear();
+    spec.basis.terms_x = 30;
+    spec.basis.terms_y = 30;
+    spec.reduction.f_min_hz = 1.0;
+    let solved = spec.solve().unwrap();
+    let p = &spec.plate;
+    let d = e * p.thickness_m.powi(3) / (12.0 * (1.0 - nu * nu));
+    let scale = 2.0 * PI * (p.density_kg_m3 * p.thickness_m / d).sqrt();
+    let leissa = [35.99, 73.39, 73.39, 108.2];
+    let mut worst: f64 = 0.0;
+    for (k, l) in leissa.iter().enumerate() {
+        let lambda = solved.modes.freq_hz[k] * scale;
+        let err = 100.0 * (lambda / l - 1.0);
         worst = worst.max(err.abs());
         println!(
-            "  {:2}: {ritz:9.3} Hz vs {closed:9.3} Hz ({err:+.2e} %)",
+            "  clamped square, mode {}: lambda {lambda:.3} vs Leissa {l} ({err:+.3} %)",
             k + 1
         );
     }
-    println!("  worst {worst:.2e} % (limit 0.5 %)");
-    assert!(worst < 0.5);
+    // Leissa's figures are given to four digits; on 30 × 30 terms the Ritz values have converged
+    // to them from above (on 14 × 14 they were 0.11 % high at mode 4).
+    assert!(worst < 0.05, "{worst} %");
 }
 
 #[test]

@@ -72,8 +72,9 @@ fn uncoupled_partials_follow_eq2() {
         worst = worst.max(cents.abs());
         println!("  {n:2} {f:12.5} {m:14.5} {cents:12.5}");
     }
-    println!("  worst |error| = {worst:.5} cents (limit 0.1)");
-    assert!(worst < 0.1);
+    // RK4's phase error at 96 kHz, (omega h)^4 / 120, is 8e-4 cents at partial 20 (1.3 kHz).
+    println!("  worst |error| = {worst:.5} cents (limit 0.003)");
+    assert!(worst < 0.003);
 }
 
 #[test]
@@ -95,8 +96,10 @@ fn free_decay_matches_modal_damping() {
         worst = worst.max(err.abs());
         println!("  {n:2} {sigma:13.5} {measured:14.5} {err:9.3}");
     }
-    println!("  worst |error| = {worst:.3} % (limit 2 %)");
-    assert!(worst < 2.0);
+    // RK4's own amplitude error is negligible here ((omega h)^6 / 144 per step is 1e-6 of the
+    // damping at partial 10); what remains is the DTFT estimate between two 0.25-s windows.
+    println!("  worst |error| = {worst:.3} % (limit 0.1 %)");
+    assert!(worst < 0.1);
 }
 
 /// A linear sub-problem: one string on the bridge and the board, no hammer, 20 + 20 + 2 modes.
@@ -279,8 +282,114 @@ fn c2_first_partial_is_on_pitch() {
     let x = &x[(0.2 * rec.rate_hz) as usize..];
     let f1 = peak_frequency(x, rec.rate_hz, 60.0, 70.0);
     let cents = 1200.0 * (f1 / 65.406).log2();
+    // The tuner puts the undamped system's first partial on C2; with damping, the pair's two
+    // modes sit at 65.410 and 65.452 Hz (+0.1, +1.2 cents: the linearised system above), and the
+    // struck sound's peak lies between them, nearer the louder prompt mode.
     println!(
-        "Pitch — c2 first partial {f1:.3} Hz, {cents:+.2} cents from C2 = 65.406 Hz (limit ±3)"
+        "Pitch — c2 first partial {f1:.3} Hz, {cents:+.2} cents from C2 = 65.406 Hz (limit ±0.5)"
     );
-    assert!(cents.abs() < 3.0);
+    assert!(cents.abs() < 0.5);
+}
+
+/// The eigenvalues of an engine's one-step map as continuous rates, `ln(mu) / h`: (frequency Hz,
+/// decay 1/s) of each oscillating mode.
+fn map_modes<E: unacorda::engine::VoicePool>(spec: &UnisonSpec, rate_hz: f64) -> Vec<(f64, f64)> {
+    use unacorda::analysis::stability::one_step_map;
+    let mut pool = E::build_pool(std::slice::from_ref(spec), 1, rate_hz).unwrap();
+    pool.assign(0, 0);
+    pool.set_active(0, true);
+    let (map, _) = one_step_map(&pool);
+    let h = pool.step_s();
+    map.eigenvalues()
+        .unwrap()
+        .into_iter()
+        .filter(|mu| mu.im > 0.0)
+        .map(|mu| (mu.im.atan2(mu.re) / (2.0 * PI * h), -mu.norm().ln() / h))
+        .collect()
+}
+
+#[test]
+fn both_engines_match_the_linearised_systems_eigenvalues() {
+    // c2's partials 1–20 (the modes whose energy lies mostly in the strings' T motion near
+    // n × 65.4 Hz: per partial the prompt and the aftersound of the pair) from the dense
+    // state matrix of Eq. 10–11 with the contact forces folded in (independent of both engines'
+    // code), against the one-step maps of RK4 at 96 kHz and the live integrator at 48 kHz.
+    use unacorda::analysis::modes::linear_modes;
+    use unacorda::engine::exponential::ExponentialInstrument;
+    let spec = c2().unison_spec();
+    let exact: Vec<_> = linear_modes(&spec)
+        .unwrap()
+        .into_iter()
+        .filter(|m| m.shares[0] > 0.5)
+        .filter(|m| {
+            let n = (m.freq_hz / 65.4).round();
+            (1.0..=20.0).contains(&n) && (m.freq_hz / (n * 65.4) - 1.0).abs() < 0.03
+        })
+        .collect();
+    println!(
+        "c2 linearised: {} T modes in partials 1–20; partial 1: {:.4} Hz (T60 {:.1} s) and {:.4} Hz (T60 {:.1} s)",
+        exact.len(),
+        exact[0].freq_hz,
+        exact[0].t60_s(),
+        exact[1].freq_hz,
+        exact[1].t60_s()
+    );
+    assert!(exact.len() >= 40, "two modes per partial");
+    // Limits: RK4's own phase error at 96 kHz, (omega h)^4 / 120, is 8e-4 cents at partial 20;
+    // the decay rates agree to a few hundredths of a percent (measured 0.033 % and 0.018 %).
+    for (engine, rate, modes, (cents_limit, decay_limit)) in [
+        (
+            "RK4",
+            96_000.0,
+            map_modes::<Instrument>(&spec, 96_000.0),
+            (2e-3, 0.1),
+        ),
+        (
+            "live integrator",
+            48_000.0,
+            map_modes::<ExponentialInstrument>(&spec, 48_000.0),
+            (1e-3, 0.1),
+        ),
+    ] {
+        let (mut cents, mut decay) = (0f64, 0f64);
+        for m in &exact {
+            let &(f, sigma) = modes
+                .iter()
+                .min_by(|a, b| {
+                    let d = |x: &(f64, f64)| (x.0 - m.freq_hz).abs() + (x.1 - m.decay_per_s).abs();
+                    d(a).total_cmp(&d(b))
+                })
+                .unwrap();
+            cents = cents.max((1200.0 * (f / m.freq_hz).log2()).abs());
+            decay = decay.max((100.0 * (sigma / m.decay_per_s - 1.0)).abs());
+        }
+        println!(
+            "  {engine} at {:.0} kHz: worst {cents:.2e} cents, decay rate {decay:.3} % (limits {cents_limit} cents, {decay_limit} %)",
+            rate / 1e3
+        );
+        assert!(cents < cents_limit && decay < decay_limit, "{engine}");
+    }
+}
+
+#[test]
+fn string_2_sounds_its_mistuning_above_string_1_on_the_bridge() {
+    // The c2 preset mistunes string 2 by +1.5 cents through its tension. On its contact spring
+    // and the board (each string alone on the bridge, the undamped coupled system), its first
+    // partial must sit 1.5 cents above string 1's: the bridge and board pull both alike.
+    use unacorda::engine::tuning::bridged_first_partial_hz;
+    let spec = c2().unison_spec();
+    let point = &spec.board.points[spec.bridge_point];
+    let partial = |s: usize| {
+        bridged_first_partial_hz(
+            &spec.strings[s],
+            spec.modes.modes_t,
+            spec.contact.stiffness_n_m[0],
+            Some((&spec.board, point)),
+            65.4,
+        )
+    };
+    let (f1, f2) = (partial(0), partial(1));
+    let cents = 1200.0 * (f2 / f1).log2();
+    println!("c2 on the bridge and board: string 1 {f1:.4} Hz, string 2 {f2:.4} Hz: {cents:+.3} cents (preset +1.5)");
+    assert!((cents - 1.5).abs() < 0.1);
 }

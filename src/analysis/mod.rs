@@ -2,5 +2,6 @@
 
 pub mod figures;
 pub mod mobility;
+pub mod modes;
 pub mod spectral;
 pub mod stability;

@@ -23,6 +23,15 @@ pub const SPIN: Duration = Duration::from_millis(2);
 /// 64-frame block at 48 kHz; a spinning helper takes it within a microsecond).
 pub const CLAIM: Duration = Duration::from_micros(50);
 
+/// What the helper runs each job inside: [`run_job`] as it is, or a harness around it (the
+/// tests run the helper's half under the allocation checker).
+pub type JobWrapper = fn(&mut dyn FnMut());
+
+/// A job as it is.
+pub fn run_job(job: &mut dyn FnMut()) {
+    job()
+}
+
 const IDLE: u32 = 0;
 const POSTED: u32 = 1;
 const DONE: u32 = 2;
@@ -62,6 +71,11 @@ impl std::fmt::Debug for Helper {
 impl Helper {
     /// Start the helper thread.
     pub fn spawn() -> std::io::Result<Helper> {
+        Helper::spawn_with(run_job)
+    }
+
+    /// Start the helper thread, running each job inside `wrap`.
+    pub fn spawn_with(wrap: JobWrapper) -> std::io::Result<Helper> {
         let shared = Arc::new(Shared {
             state: AtomicU32::new(IDLE),
             joined: AtomicU64::new(0),
@@ -71,7 +85,7 @@ impl Helper {
         let theirs = shared.clone();
         let thread = std::thread::Builder::new()
             .name("unacorda-helper".into())
-            .spawn(move || work(&theirs))?;
+            .spawn(move || work(&theirs, wrap))?;
         Ok(Helper {
             shared,
             thread: Some(thread),
@@ -89,8 +103,9 @@ impl Helper {
     }
 }
 
-/// The helper's loop: wait (spinning, then parked) for a job, run it, report it done.
-fn work(shared: &Shared) {
+/// The helper's loop: wait (spinning, then parked) for a job, run it inside `wrap`, report it
+/// done.
+fn work(shared: &Shared, wrap: JobWrapper) {
     let mut awake_since = Instant::now();
     loop {
         match shared.state.load(Ordering::Acquire) {
@@ -111,7 +126,7 @@ fn work(shared: &Shared) {
                 if let Some(job) = job {
                     // SAFETY: the caller of `join` keeps the closure alive and untouched until it
                     // sees `DONE`; a panic is caught so that `DONE` is always reported.
-                    let run = std::panic::AssertUnwindSafe(|| unsafe { (*job)() });
+                    let run = std::panic::AssertUnwindSafe(|| wrap(&mut || unsafe { (*job)() }));
                     // SAFETY: flush-to-zero and denormals-are-zero for the job, as on the audio
                     // thread (the guard restores MXCSR).
                     let _ = unsafe { no_denormals::no_denormals(|| std::panic::catch_unwind(run)) };

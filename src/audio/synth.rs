@@ -80,7 +80,7 @@ pub const KNEE: f32 = 0.8;
 
 /// Identity below `KNEE`, then a tanh curve that reaches ±1 only asymptotically: no sample leaves
 /// [-1, 1] and loud peaks are rounded rather than cut.
-pub fn soft_clip(x: f32) -> f32 {
+fn soft_clip(x: f32) -> f32 {
     let a = x.abs();
     if a <= KNEE {
         x
@@ -309,7 +309,12 @@ impl<E: VoicePool> Synth<E> {
     /// live pool's voices while the callback advances the other half (engines that cannot split
     /// ignore it).
     pub fn use_second_core(&mut self) -> std::io::Result<()> {
-        self.helper = Some(Helper::spawn()?);
+        self.use_second_core_with(super::helper::run_job)
+    }
+
+    /// [`Synth::use_second_core`], the helper running each of its jobs inside `wrap`.
+    pub fn use_second_core_with(&mut self, wrap: super::helper::JobWrapper) -> std::io::Result<()> {
+        self.helper = Some(Helper::spawn_with(wrap)?);
         Ok(())
     }
 
@@ -508,5 +513,37 @@ impl<E: VoicePool> SynthHandle<E> {
     pub fn replace(&self, piano: Piano<E>) -> Option<Box<Piano<E>>> {
         self.control.send(Control::Replace(Box::new(piano))).ok()?;
         self.returned.recv().ok()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{soft_clip, KNEE};
+
+    #[test]
+    fn the_soft_clipper_is_odd_increasing_continuous_and_below_one() {
+        // Identity to the knee; there, continuous with slope 1 (tanh'(0) = 1).
+        assert_eq!(soft_clip(0.5), 0.5);
+        assert_eq!(soft_clip(KNEE), KNEE);
+        let slope = (soft_clip(KNEE + 1e-4) - KNEE) / 1e-4;
+        // A known value: 0.8 + 0.2 tanh(0.5) at 0.9.
+        let known = soft_clip(0.9);
+        println!("soft clip: slope just above the knee {slope:.4}, f(0.9) = {known:.7}, f(10) = {}, f(1e30) = {}", soft_clip(10.0), soft_clip(1e30));
+        assert!((slope - 1.0).abs() < 1e-2, "slope {slope}");
+        assert!((known - 0.892_423_4).abs() < 1e-6, "{known}");
+        let mut last = -1.0f32;
+        for i in -2000..=2000 {
+            let x = i as f32 * 0.005;
+            let y = soft_clip(x);
+            assert_eq!(soft_clip(-x), -y, "odd at {x}");
+            assert!(y >= last, "increasing at {x}");
+            // In f32 the curve rounds to 1 from about 0.8 + 0.2 * 8.2 = 2.44 on.
+            assert!(
+                y.abs() < 1.0 || x.abs() > 2.4,
+                "reaches full scale only asymptotically: {x} -> {y}"
+            );
+            last = y;
+        }
+        assert!(soft_clip(1e30) <= 1.0 && soft_clip(f32::INFINITY) <= 1.0);
     }
 }

@@ -220,20 +220,29 @@ impl Basis1d {
         out
     }
 
-    /// `∫ f_i dx` for all i.
+    /// `∫ f_i dx` for all i, by Simpson's rule (the trapezoid's `(pi h)^2 / 12` was 5e-4 of a
+    /// mode's net volume; checked against the simply-supported plate's closed form).
     fn means(&self) -> Vec<f64> {
         let intervals = 4 * (self.terms + 2);
         let h = self.len / intervals as f64;
         (0..self.terms)
             .map(|i| {
                 (0..=intervals)
-                    .map(|s| {
-                        let w = if s == 0 || s == intervals { 0.5 * h } else { h };
-                        w * self.eval(i, s as f64 * h)[0]
-                    })
+                    .map(|s| simpson_weight(s, intervals, h) * self.eval(i, s as f64 * h)[0])
                     .sum()
             })
             .collect()
+    }
+}
+
+/// Composite Simpson weight of point `s` of `0..=intervals` (an even count) spaced `h`.
+fn simpson_weight(s: usize, intervals: usize, h: f64) -> f64 {
+    if s == 0 || s == intervals {
+        h / 3.0
+    } else if s % 2 == 1 {
+        4.0 * h / 3.0
+    } else {
+        2.0 * h / 3.0
     }
 }
 

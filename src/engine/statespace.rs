@@ -19,8 +19,11 @@ use std::ops::Range;
 pub struct DenseUnison {
     spec: UnisonSpec,
     n_strings: usize,
-    /// Length of `q` (all string and board modes).
+    /// Length of `q` (all string and board modes), and where each string's directions and the
+    /// board lie in it.
     nq: usize,
+    ranges: [[Range<usize>; 3]; MAX_STRINGS],
+    board: Range<usize>,
     a: Mat<f64>,
     b: Mat<f64>,
     b2: Mat<f64>,
@@ -155,6 +158,8 @@ impl DenseUnison {
             spec: spec.clone(),
             n_strings: ns,
             nq,
+            ranges,
+            board,
             a,
             b,
             b2,
@@ -175,6 +180,36 @@ impl DenseUnison {
     /// State size (the order of `A`).
     pub fn state_len(&self) -> usize {
         self.x.nrows()
+    }
+
+    /// The linear part of Eq. 10 with the hammer out of play: `xdot = (A + B2 G C) x` over
+    /// `x = (q, qdot)` (the hammer's two states left out), where `F_b = G C x` are the contact
+    /// forces of Eq. 6 (Eq. 17), each string on its contact spring and damper against the board.
+    /// Its eigenvalues are every partial's frequency and decay, exactly (DESIGN.md §5).
+    pub fn linear_system(&self) -> Mat<f64> {
+        let (ns, n) = (self.n_strings, 2 * self.nq);
+        let ct = &self.spec.contact;
+        // G: outputs (bridge displacement and velocity of strings and board) to F_b.
+        let mut g = Mat::<f64>::zeros(3 * (ns + 1), OUTPUTS);
+        for s in 0..ns {
+            for d in 0..3 {
+                let (k, c) = (ct.stiffness_n_m[d], ct.damping_n_s_m[d]);
+                for (row, sign) in [(3 * s + d, -1.0), (3 * ns + d, 1.0)] {
+                    g[(row, out_rs(s, d))] += sign * k;
+                    g[(row, out_rb(d))] -= sign * k;
+                    g[(row, out_vs(s, d))] += sign * c;
+                    g[(row, out_vb(d))] -= sign * c;
+                }
+            }
+        }
+        let gc = &g * &self.c;
+        let coupled = &self.a + &self.b2 * &gc;
+        coupled.submatrix(0, 0, n, n).to_owned()
+    }
+
+    /// Where string `s`'s modes in direction `d` (T, L, P) and the board's lie in `q`.
+    pub fn layout(&self) -> ([[Range<usize>; 3]; MAX_STRINGS], Range<usize>) {
+        (self.ranges.clone(), self.board.clone())
     }
 
     /// Launch the hammer as [`super::Instrument::strike_voice`] does: in contact with the struck

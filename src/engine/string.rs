@@ -129,12 +129,4 @@ mod tests {
             assert!((m - 1.0).abs() < 1e-9, "modal mass of mode {n} = {m}");
         }
     }
-
-    #[test]
-    fn detuning_moves_f0_by_the_requested_cents() {
-        let s = c2_like();
-        let d = s.detuned(3.0);
-        let cents = 1200.0 * (d.f0_hz() / s.f0_hz()).log2();
-        assert!((cents - 3.0).abs() < 1e-9);
-    }
 }

@@ -464,20 +464,16 @@ impl<T: Real> Instrument<T> {
             })
             .collect();
         let strings_end = voices * capacity;
-        let (mut omega2, mut damp, mut bridge_shape) = (
-            vec![T::ZERO; strings_end],
-            vec![T::ZERO; strings_end],
-            vec![T::ZERO; strings_end],
-        );
-        let static_shape = vec![T::ZERO; strings_end];
         let board = strings_end..strings_end + first.board.len();
-        for k in 0..first.board.len() {
+        let n = board.end;
+        // Every per-mode array at its final length at once (no growth, no spare capacity).
+        let (mut omega2, mut damp) = (vec![T::ZERO; n], vec![T::ZERO; n]);
+        let (bridge_shape, static_shape) = (vec![T::ZERO; n], vec![T::ZERO; strings_end]);
+        for (k, i) in board.clone().enumerate() {
             let w = 2.0 * PI * first.board.freq_hz[k];
-            omega2.push(T::from_f64(w * w));
-            damp.push(T::from_f64(2.0 * first.board.damping_ratio[k] * w));
-            bridge_shape.push(T::ZERO);
+            omega2[i] = T::from_f64(w * w);
+            damp[i] = T::from_f64(2.0 * first.board.damping_ratio[k] * w);
         }
-        let n = omega2.len();
         let h = 1.0 / first.sample_rate_hz;
         let model = Model {
             keys,
@@ -1202,10 +1198,23 @@ impl<T: Real> Instrument<T> {
 
     /// Bytes of state and coefficients per voice slot (arrays of `T` over its modes).
     pub fn bytes_per_voice(&self) -> usize {
+        use std::mem::size_of;
         let capacity = self.model.board.start / self.n_voices().max(1);
-        // q and v, the RK4 stage state and acceleration (3), the stage sums (2), and the
-        // coefficients omega^2, damping, bridge shape (3).
-        capacity * std::mem::size_of::<T>() * 10
+        // Per mode: q and v, the RK4 stage state and acceleration (3), the stage sums (2), and
+        // the coefficients omega^2, damping, bridge shape, static deflection (4). Per voice: its
+        // slot, the hammer's state and RK4 scratch (7 f64), where it left the board, its flags
+        // and its entry in the list of simulated ranges.
+        let flags = 4 * size_of::<bool>()
+            + size_of::<[bool; MAX_STRINGS]>()
+            + size_of::<f64>()
+            + size_of::<u32>()
+            + size_of::<Option<(usize, Strike)>>();
+        capacity * size_of::<T>() * 11
+            + size_of::<Voice>()
+            + 7 * size_of::<f64>()
+            + size_of::<[[f64; 2]; 3]>()
+            + flags
+            + size_of::<Range<usize>>()
     }
 
     /// Mechanical energy of the strings, their contact springs and the board (J), hammers apart.
@@ -1421,6 +1430,7 @@ mod tests {
     /// precisions: c2 struck, 20 ms, bridge forces relative to their peak.
     fn portable_agrees<T: Real>(tol: f64) {
         if !has_avx2_fma() {
+            println!("skipped: this CPU has no AVX2 + FMA, so the portable step is the only one");
             return;
         }
         let spec = crate::preset::Preset::resolve("c2").unwrap().unison_spec();

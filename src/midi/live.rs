@@ -1,8 +1,8 @@
 //! The MIDI byte-stream parser used for live input: whatever the port delivers, in whatever
 //! pieces, comes out as piano events. It follows the MIDI 1.0 byte grammar: running status,
 //! real-time bytes (0xF8–0xFF) allowed anywhere (even inside another message) and ignored, SysEx
-//! (0xF0 … 0xF7) skipped, system common messages (0xF1–0xF6) skipped with their data and clearing
-//! running status, and data bytes without a status dropped. It never allocates, so it can run on
+//! (0xF0 … 0xF7) skipped, system common messages (0xF1–0xF7, the end of a SysEx among them)
+//! skipped with their data and clearing running status, and data bytes without a status dropped. It never allocates, so it can run on
 //! the audio thread.
 
 use super::{map_channel_message, Event};
@@ -40,11 +40,7 @@ impl LiveParser {
                 self.running_status = None;
                 None
             }
-            0xF7 => {
-                self.in_sysex = false;
-                None
-            }
-            0xF1..=0xF6 => {
+            0xF1..=0xF7 => {
                 self.in_sysex = false;
                 self.running_status = None;
                 self.skip = match byte {

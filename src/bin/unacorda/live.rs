@@ -238,7 +238,7 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     let block = s.max_frames.load(Ordering::Relaxed);
     let deadline_ms = block as f64 / settings.rate_hz * 1e3;
     eprintln!(
-        "{} callbacks ({} frames) of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {xruns} xruns reported by the device; device reopened {reopened} times; {} late events; {} voices reset; at most {} voices sounding; {} engine runs on two cores, {} on one because the helper thread was late",
+        "{} callbacks ({} frames) of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {xruns} xruns reported by the device; device reopened {reopened} times; {} late events; {} voices reset; at most {} voices sounding; output peak {:.1} dBFS, {} samples soft-clipped; {} engine runs on two cores, {} on one because the helper thread was late",
         s.callbacks.load(Ordering::Relaxed),
         stats.frames.load(Ordering::Relaxed),
         s.busy_ns.load(Ordering::Relaxed) as f64 / callbacks as f64 * 1e-6,
@@ -247,6 +247,10 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         stats.late_events.load(Ordering::Relaxed),
         stats.resets.load(Ordering::Relaxed),
         stats.peak_voices.load(Ordering::Relaxed),
+        20.0 * f32::from_bits(stats.peak_before_clip.load(Ordering::Relaxed) as u32)
+            .max(1e-10)
+            .log10(),
+        stats.clipped.load(Ordering::Relaxed),
         stats.two_core_runs.load(Ordering::Relaxed),
         stats.helper_late.load(Ordering::Relaxed),
     );

@@ -1,0 +1,72 @@
+//! The modes of one key's linearised system — strings on their contact springs and dampers, the
+//! duplex damping and the board at the key's point, hammer out of play (DESIGN.md §5): the
+//! eigenvalues of the paper's dense state matrix with the contact forces folded in
+//! ([`crate::engine::statespace::DenseUnison::linear_system`]). Each is a partial's exact
+//! frequency and decay rate, what any integrator is measured against.
+
+use crate::engine::statespace::DenseUnison;
+use crate::engine::UnisonSpec;
+use crate::engine::MAX_STRINGS;
+
+/// One mode (a complex-conjugate pair of eigenvalues `-sigma ± i omega`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinearMode {
+    pub freq_hz: f64,
+    /// `sigma` (1/s): the amplitude falls as `e^{-sigma t}`.
+    pub decay_per_s: f64,
+    /// Share of the mode's energy in the strings' T, L and P motion and in the board (the diagonal
+    /// of the energy's quadratic form, contact springs included), and in each string.
+    pub shares: [f64; 4],
+    pub string_shares: [f64; MAX_STRINGS],
+}
+
+impl LinearMode {
+    /// Time for the energy to fall by 60 dB (s).
+    pub fn t60_s(&self) -> f64 {
+        6.0 * std::f64::consts::LN_10 / (2.0 * self.decay_per_s)
+    }
+}
+
+/// Why the modes cannot be computed.
+#[derive(Debug, thiserror::Error, PartialEq)]
+#[error("the eigen-decomposition of the linearised system did not converge")]
+pub struct ModesError;
+
+/// Every oscillating mode of `spec`'s linearised system, by rising frequency.
+pub fn linear_modes(spec: &UnisonSpec) -> Result<Vec<LinearMode>, ModesError> {
+    let dense = DenseUnison::new(spec);
+    let a = dense.linear_system();
+    let nq = a.nrows() / 2;
+    let (ranges, board) = dense.layout();
+    // Energy per unit squared of each displacement, 1/2 K_ii (K the stiffness with the contact
+    // springs, -A's lower-left block); of each velocity, 1/2.
+    let stiffness: Vec<f64> = (0..nq).map(|i| -0.5 * a[(nq + i, i)]).collect();
+    let eig = a.eigen().map_err(|_| ModesError)?;
+    let (u, s) = (eig.U(), eig.S().column_vector());
+    let mut modes: Vec<LinearMode> = (0..s.nrows())
+        .filter(|&m| s[m].im > 0.0)
+        .map(|m| {
+            let energy =
+                |i: usize| u[(i, m)].norm_sqr() * stiffness[i] + 0.5 * u[(nq + i, m)].norm_sqr();
+            let total: f64 = (0..nq).map(energy).sum::<f64>().max(f64::MIN_POSITIVE);
+            let mut shares = [0.0; 4];
+            let mut string_shares = [0.0; MAX_STRINGS];
+            for (st, dirs) in ranges.iter().enumerate() {
+                for (d, r) in dirs.iter().enumerate() {
+                    let e: f64 = r.clone().map(energy).sum::<f64>() / total;
+                    shares[d] += e;
+                    string_shares[st] += e;
+                }
+            }
+            shares[3] = board.clone().map(energy).sum::<f64>() / total;
+            LinearMode {
+                freq_hz: s[m].im / (2.0 * std::f64::consts::PI),
+                decay_per_s: -s[m].re,
+                shares,
+                string_shares,
+            }
+        })
+        .collect();
+    modes.sort_by(|a, b| a.freq_hz.total_cmp(&b.freq_hz));
+    Ok(modes)
+}
