@@ -85,8 +85,8 @@ fn fig3_una_corda_hammer_force_is_higher_and_longer() {
     // The paper gives no numbers for Figure 3, only its shape: una corda higher and longer than
     // each of the two equal forces of normal playing. The figures here (12.2 N for 3.23 ms
     // against 10.7 N for 2.83 ms) are the paper's model as an independent implementation of it
-    // gives them too, to 1e-12 of the peak: a change of more than a few percent is a change of
-    // the model, and these limits say so.
+    // gives them too, to 1e-12 of the peak: a change of more than a percent is a change of the
+    // model (a felt 10 % stiffer raises the peaks 3 %), and these limits say so.
     let (peak_ratio, time_ratio) = (uc_peak / n1_peak.max(n2_peak), uc_ms / n1_ms.max(n2_ms));
     println!("  una corda / normal: peak × {peak_ratio:.3}, contact × {time_ratio:.3}");
     assert!(
@@ -98,11 +98,11 @@ fn fig3_una_corda_hammer_force_is_higher_and_longer() {
         "una corda contact × {time_ratio} as long"
     );
     assert!(
-        (uc_peak / 12.18 - 1.0).abs() < 0.03,
+        (uc_peak / 12.18 - 1.0).abs() < 0.01,
         "una corda peak {uc_peak} N"
     );
     assert!(
-        (n1_peak / 10.73 - 1.0).abs() < 0.03,
+        (n1_peak / 10.73 - 1.0).abs() < 0.01,
         "normal peak {n1_peak} N"
     );
     assert!(

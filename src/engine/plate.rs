@@ -148,23 +148,6 @@ impl PlateSpec {
         let d2 = self.e2_pa * h3 / den;
         (d1, d2, self.nu12 * d2, self.g12_pa * h3 / 12.0)
     }
-
-    /// Closed-form frequency of mode (m, n) of the simply-supported plate (Hz) (Leissa §11.3).
-    pub fn simply_supported_freq_hz(&self, m: usize, n: usize) -> f64 {
-        let (d1, d2, d12, d66) = self.rigidities();
-        let (km, kn) = (m as f64 / self.width_m, n as f64 / self.length_m);
-        let h = d12 + 2.0 * d66;
-        let w2 = PI.powi(4) / (self.density_kg_m3 * self.thickness_m)
-            * (d1 * km.powi(4) + 2.0 * h * km * km * kn * kn + d2 * kn.powi(4));
-        w2.sqrt() / (2.0 * PI)
-    }
-
-    /// Asymptotic modal density `n = S/2 sqrt(rho h / sqrt(D1 D2))` (modes per Hz).
-    pub fn modal_density_per_hz(&self) -> f64 {
-        let (d1, d2, _, _) = self.rigidities();
-        let rho_h = self.density_kg_m3 * self.thickness_m;
-        self.width_m * self.length_m / 2.0 * (rho_h / (d1 * d2).sqrt()).sqrt()
-    }
 }
 
 /// One-dimensional basis along an edge of length `len`: values and derivatives 0–2.
