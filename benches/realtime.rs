@@ -13,14 +13,14 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
-use unacorda::engine::exponential::ExponentialInstrument;
+use unacorda::config::scaling::{Scaling, KEYS};
+use unacorda::engine::etd::ExponentialInstrument;
 use unacorda::engine::{Instrument, VoicePool};
 use unacorda::measure::{loaded_synth, percentile};
 use unacorda::midi::Event;
 use unacorda::play::Piano;
-use unacorda::scaling::{Scaling, KEYS};
 
-fn keyboard<E: VoicePool>() -> (Piano<E>, unacorda::audio::synth::OutputSettings) {
+fn keyboard<E: VoicePool>() -> (Piano<E>, unacorda::config::output::OutputSettings) {
     let scaling = Scaling::resolve("grand").expect("built-in keyboard");
     let keys: Vec<usize> = (1..=KEYS).collect();
     let piano = Piano::<E>::build(&scaling, &keys, 32).expect("the keyboard builds");

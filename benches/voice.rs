@@ -8,10 +8,10 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
-use unacorda::engine::exponential::ExponentialUnison;
-use unacorda::engine::statespace::DenseUnison;
+use unacorda::config::preset::Preset;
+use unacorda::engine::etd::ExponentialUnison;
+use unacorda::engine::rk4::dense::DenseUnison;
 use unacorda::engine::{Instrument, Strike};
-use unacorda::preset::Preset;
 use unacorda::render::Renderer;
 
 const FRAMES: usize = 480; // 10 ms at 48 kHz

@@ -18,10 +18,10 @@
 
 pub mod analysis;
 pub mod audio;
+pub mod board;
+pub mod config;
 pub mod engine;
 pub mod measure;
 pub mod midi;
 pub mod play;
-pub mod preset;
 pub mod render;
-pub mod scaling;

@@ -2,10 +2,11 @@
 //! engine, timings of its callback, real-time factors and FLOP rates. Timing is never a pass/fail
 //! test (CI machines are noisy); these report figures.
 
-use crate::audio::synth::{OutputSettings, Scheduled, Synth, SynthHandle, EVENT_QUEUE};
-use crate::engine::exponential::ExponentialUnison;
-use crate::engine::simd::Real;
-use crate::engine::statespace::DenseUnison;
+use crate::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
+use crate::config::output::OutputSettings;
+use crate::engine::etd::ExponentialUnison;
+use crate::engine::kernels::Real;
+use crate::engine::rk4::dense::DenseUnison;
 use crate::engine::{Instrument, Strike, UnisonSpec, VoicePool};
 use crate::midi::{Event, Pedal};
 use crate::play::Piano;

@@ -172,6 +172,15 @@ impl Player {
     }
 }
 
+/// Why a piano cannot be built.
+#[derive(Debug, thiserror::Error)]
+pub enum PianoError {
+    #[error(transparent)]
+    Preset(#[from] crate::config::preset::PresetError),
+    #[error(transparent)]
+    Build(#[from] crate::engine::BuildError),
+}
+
 /// An instrument with its player: what the audio thread owns.
 #[derive(Debug, Clone)]
 pub struct Piano<E: VoicePool = Instrument> {
@@ -191,10 +200,10 @@ impl<E: VoicePool> Piano<E> {
     /// The `keys` (1–88) of `scaling` on one soundboard with a pool of `voices` voices. Keys are
     /// built (tuned, and prepared for the engine) on all cores.
     pub fn build(
-        scaling: &crate::scaling::LoadedScaling,
+        scaling: &crate::config::scaling::LoadedScaling,
         keys: &[usize],
         voices: usize,
-    ) -> Result<Piano<E>, crate::render::RenderError> {
+    ) -> Result<Piano<E>, PianoError> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let threads = threads.min(keys.len()).max(1);
         let rate_hz = scaling.base.output_rate_hz();
@@ -213,7 +222,7 @@ impl<E: VoicePool> Piano<E> {
                                 let key = E::prepare_key(&spec)?;
                                 Ok((spec, key))
                             })
-                            .collect::<Result<Vec<_>, crate::render::RenderError>>()
+                            .collect::<Result<Vec<_>, PianoError>>()
                     })
                 })
                 .collect();

@@ -3,8 +3,8 @@
 
 use std::path::Path;
 use std::process::Command;
-use unacorda::engine::soundboard::SoundboardModes;
-use unacorda::preset::Preset;
+use unacorda::config::preset::Preset;
+use unacorda::engine::physics::soundboard::SoundboardModes;
 
 fn data(name: &str) -> String {
     format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"))

@@ -1,9 +1,9 @@
 //! The optimised engine against the paper's literal dense formulation (Eq. 10–19 with the dense
 //! state matrix A): the same c2 strike, normal and una corda, must give the same bridge forces.
 
-use unacorda::engine::statespace::DenseUnison;
+use unacorda::config::preset::Preset;
+use unacorda::engine::rk4::dense::DenseUnison;
 use unacorda::engine::{Instrument, Strike};
-use unacorda::preset::Preset;
 
 #[test]
 fn optimised_engine_matches_the_dense_state_space_form() {

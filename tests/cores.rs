@@ -4,12 +4,14 @@
 
 use assert_no_alloc::{assert_no_alloc, reset_violation_count, violation_count, AllocDisabler};
 use std::sync::atomic::{AtomicU64, Ordering};
-use unacorda::audio::synth::{OutputSettings, Scheduled, Synth, EVENT_QUEUE};
-use unacorda::engine::exponential::{ExponentialInstrument, Pair};
+use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
+use unacorda::config::output::OutputSettings;
+use unacorda::config::scaling::{parse_key, Scaling};
+use unacorda::engine::etd::ExponentialInstrument;
+use unacorda::engine::Pair;
 use unacorda::engine::{Instrument, VoicePool};
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Piano;
-use unacorda::scaling::{parse_key, Scaling};
 
 #[global_allocator]
 static ALLOCATOR: AllocDisabler = AllocDisabler;

@@ -1,10 +1,10 @@
 //! Releasing a key drops the damper: the note dies within a fraction of a second; held, it rings.
 
 use unacorda::analysis::spectral::rms_envelope;
+use unacorda::config::preset::Preset;
+use unacorda::config::scaling::Scaling;
 use unacorda::engine::Strike;
-use unacorda::preset::Preset;
 use unacorda::render::simulate;
-use unacorda::scaling::Scaling;
 
 /// Level (dB) of the total T force in 50 ms windows at `times` (s).
 fn levels_db(x: &[f64], fs: f64, times: &[f64]) -> Vec<f64> {

@@ -5,9 +5,9 @@
 
 use realfft::RealFftPlanner;
 use unacorda::analysis::spectral::{partial_envelope, peak_frequency};
-use unacorda::engine::exponential::ExponentialUnison;
+use unacorda::config::preset::Preset;
+use unacorda::engine::etd::ExponentialUnison;
 use unacorda::engine::{Instrument, Observation, Strike};
-use unacorda::preset::Preset;
 
 const FS: f64 = 48_000.0;
 
@@ -262,9 +262,9 @@ fn keys_couple_through_the_shared_board_alike() {
     // Two keys on one board: C2 struck, C3 held silently (damper lifted, not struck). C3 sounds
     // only through the board. Its bridge force over 0.3–0.6 s, and C2's, must agree between RK4
     // at 96 kHz and ETDRK4 at 48 kHz.
-    use unacorda::engine::exponential::ExponentialInstrument;
+    use unacorda::config::scaling::{parse_key, Scaling};
+    use unacorda::engine::etd::ExponentialInstrument;
     use unacorda::engine::VoicePool;
-    use unacorda::scaling::{parse_key, Scaling};
     let scaling = Scaling::resolve("grand").unwrap();
     let specs: Vec<_> = ["C2", "C3"]
         .iter()

@@ -2,11 +2,11 @@
 //! point, string layout and mode counts follow the documented rules, and the keys sound near pitch.
 
 use unacorda::analysis::spectral::peak_frequency;
-use unacorda::engine::system::Instrument;
+use unacorda::config::preset::Preset;
+use unacorda::config::scaling::{equal_tempered_hz, parse_key, Scaling, KEYS};
+use unacorda::engine::rk4::Instrument;
 use unacorda::engine::{Strike, VoicePool};
-use unacorda::preset::Preset;
 use unacorda::render::simulate;
-use unacorda::scaling::{equal_tempered_hz, parse_key, Scaling, KEYS};
 
 #[test]
 fn c2_key_is_the_c2_preset() {
@@ -87,7 +87,7 @@ fn every_key_builds_with_the_documented_layout() {
         );
         assert_eq!(
             spec.board.points[spec.bridge_point].name,
-            unacorda::engine::plate::key_name(k)
+            unacorda::board::key_name(k)
         );
     }
 }
@@ -132,7 +132,7 @@ fn strike_every_key<E: VoicePool>() -> (f64, usize) {
 
 #[test]
 fn every_key_struck_fortissimo_stays_finite_and_decays() {
-    use unacorda::engine::exponential::ExponentialInstrument;
+    use unacorda::engine::etd::ExponentialInstrument;
     for (engine, (worst, released)) in [
         ("RK4", strike_every_key::<Instrument>()),
         (
@@ -183,8 +183,8 @@ fn keys_sound_near_their_pitch() {
 /// order asked for, exactly as built one after another.
 #[test]
 fn keys_prepared_on_several_threads_land_in_order() {
-    use unacorda::engine::exponential::ExponentialInstrument;
-    use unacorda::engine::system::BuildError;
+    use unacorda::engine::etd::ExponentialInstrument;
+    use unacorda::engine::BuildError;
     use unacorda::engine::VoicePool;
     use unacorda::play::Piano;
     let keyboard = Scaling::resolve("grand").unwrap();

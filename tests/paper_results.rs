@@ -4,8 +4,8 @@ use std::sync::OnceLock;
 use unacorda::analysis::spectral::{
     beating_depth_db, partial_envelope, peak_frequency, rms_envelope,
 };
+use unacorda::config::preset::{LoadedPreset, Preset};
 use unacorda::engine::Strike;
-use unacorda::preset::{LoadedPreset, Preset};
 use unacorda::render::{simulate, Recording};
 
 const SECONDS: f64 = 3.0;

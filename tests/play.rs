@@ -3,12 +3,12 @@
 use midly::num::{u15, u28, u4, u7};
 use midly::{Format, Header, MetaMessage, MidiMessage, Smf, Timing, TrackEvent, TrackEventKind};
 use std::process::Command;
-use unacorda::engine::system::UnisonSpec;
+use unacorda::config::scaling::{parse_key, Scaling};
+use unacorda::engine::UnisonSpec;
 use unacorda::engine::{Instrument, Strike};
 use unacorda::midi::file::TimedEvent;
 use unacorda::midi::{Event, Pedal};
 use unacorda::render::render_midi_with;
-use unacorda::scaling::{parse_key, Scaling};
 
 fn key_spec(name: &str) -> (usize, UnisonSpec) {
     let keyboard = Scaling::resolve("grand").unwrap();

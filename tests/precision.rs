@@ -5,8 +5,8 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
+use unacorda::config::preset::Preset;
 use unacorda::engine::{Instrument, Strike};
-use unacorda::preset::Preset;
 
 /// The system allocator, counting the bytes each thread holds (tests run on several threads).
 struct Counting;
@@ -94,7 +94,7 @@ fn f32_bridge_forces_stay_within_1e_4_of_f64_over_4_s_una_corda() {
 }
 
 /// Bytes a pool of `T` holds per voice, measured: the pool with 9 voices less the pool with 1.
-fn measured_bytes_per_voice<T: unacorda::engine::simd::Real>() -> (f64, usize) {
+fn measured_bytes_per_voice<T: unacorda::engine::kernels::Real>() -> (f64, usize) {
     // Building runs faer's factorisations; on one thread every byte is counted where it is held.
     faer::set_global_parallelism(faer::Par::Seq);
     let spec = Preset::resolve("c2").unwrap().unison_spec();

@@ -5,16 +5,16 @@
 use assert_no_alloc::{assert_no_alloc, reset_violation_count, violation_count, AllocDisabler};
 use std::process::Command;
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
+use unacorda::config::scaling::{parse_key, Scaling};
 use unacorda::engine::{Instrument, Strike};
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Piano;
 use unacorda::render::Renderer;
-use unacorda::scaling::{parse_key, Scaling};
 
 #[global_allocator]
 static ALLOCATOR: AllocDisabler = AllocDisabler;
 
-fn piano(names: &[&str], voices: usize) -> (Piano, unacorda::audio::synth::OutputSettings) {
+fn piano(names: &[&str], voices: usize) -> (Piano, unacorda::config::output::OutputSettings) {
     let scaling = Scaling::resolve("grand").unwrap();
     let keys: Vec<usize> = names.iter().map(|n| parse_key(n).unwrap()).collect();
     (

@@ -14,12 +14,12 @@
 use assert_no_alloc::{assert_no_alloc, reset_violation_count, violation_count, AllocDisabler};
 use std::sync::atomic::Ordering;
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
-use unacorda::engine::exponential::ExponentialInstrument;
+use unacorda::config::scaling::{Scaling, KEYS};
+use unacorda::engine::etd::ExponentialInstrument;
 use unacorda::engine::{Instrument, VoicePool};
 use unacorda::measure::resident_bytes;
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Piano;
-use unacorda::scaling::{Scaling, KEYS};
 
 #[global_allocator]
 static ALLOCATOR: AllocDisabler = AllocDisabler;

@@ -7,9 +7,9 @@ use std::f64::consts::PI;
 use std::path::Path;
 use std::sync::OnceLock;
 use unacorda::analysis::mobility::{band_levels_db, mobility_curves};
-use unacorda::engine::plate::{generate_asset, BoardSpec, Edges, SolvedBoard};
-use unacorda::engine::soundboard::SoundboardModes;
-use unacorda::preset::{parse_board_spec, GRAND_BOARD_TOML};
+use unacorda::board::{generate_asset, BoardSpec, Edges, SolvedBoard};
+use unacorda::config::preset::{parse_board_spec, GRAND_BOARD_TOML};
+use unacorda::engine::physics::soundboard::SoundboardModes;
 
 const ASSET: &str = "assets/soundboard_modes/grand.txt";
 const COMMAND: &str =
@@ -238,7 +238,7 @@ fn clamped_isotropic_square_plate_matches_leissa() {
     // 35.99, 73.39 (twice), 108.2 for its first four modes.
     let mut spec = grand();
     let (e, nu) = (12.7e9, 0.3);
-    spec.plate = unacorda::engine::plate::PlateSpec {
+    spec.plate = unacorda::board::PlateSpec {
         width_m: 1.0,
         length_m: 1.0,
         e1_pa: e,

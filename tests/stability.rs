@@ -20,13 +20,13 @@
 use std::path::Path;
 use unacorda::analysis::stability::{one_step_map, step_eigenvalues, StepEigen};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
-use unacorda::engine::exponential::ExponentialInstrument;
+use unacorda::config::scaling::{parse_key, Scaling, KEYS};
+use unacorda::engine::etd::ExponentialInstrument;
 use unacorda::engine::{Instrument, VoicePool};
 use unacorda::midi::file::{parse, TimedEvent};
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Piano;
 use unacorda::render::render_midi_into;
-use unacorda::scaling::{parse_key, Scaling, KEYS};
 
 const CHORD: [&str; 9] = ["C1", "C2", "C4", "E4", "G4", "C5", "E5", "G5", "C6"];
 
@@ -62,7 +62,7 @@ fn eigenvalues<E: VoicePool>(keys: &[usize], down: bool) -> (Vec<StepEigen>, f64
 fn stable<E: VoicePool>(engine: &str, keys: &[usize], down: bool) {
     let (eig, rate, n) = eigenvalues::<E>(keys, down);
     let name = |e: &StepEigen| match e.owner {
-        Some(v) => unacorda::engine::plate::key_name(keys[v]),
+        Some(v) => unacorda::board::key_name(keys[v]),
         None => "the board".to_string(),
     };
     let outside = eig.iter().filter(|e| e.modulus > 1.0).count();
@@ -71,8 +71,8 @@ fn stable<E: VoicePool>(engine: &str, keys: &[usize], down: bool) {
         "{engine} at {:.0} kHz, {} keys {}–{}, dampers {}: one-step map of order {n}; largest |mu| = {:.9} ({:.1} Hz, rate {:+.4} /s, {:.0} % of its energy in {}); {outside} outside the unit circle",
         rate / 1e3,
         keys.len(),
-        unacorda::engine::plate::key_name(keys[0]),
-        unacorda::engine::plate::key_name(keys[keys.len() - 1]),
+        unacorda::board::key_name(keys[0]),
+        unacorda::board::key_name(keys[keys.len() - 1]),
         if down { "down" } else { "up" },
         top.modulus,
         top.freq_hz,

@@ -3,9 +3,9 @@
 
 use std::f64::consts::PI;
 use unacorda::analysis::spectral::{dtft_magnitude, peak_frequency};
-use unacorda::engine::system::{Instrument, UnisonSpec};
+use unacorda::config::preset::{LoadedPreset, Preset};
 use unacorda::engine::Strike;
-use unacorda::preset::{LoadedPreset, Preset};
+use unacorda::engine::{Instrument, UnisonSpec};
 
 fn c2() -> LoadedPreset {
     Preset::resolve("c2").unwrap()
@@ -315,7 +315,7 @@ fn both_engines_match_the_linearised_systems_eigenvalues() {
     // state matrix of Eq. 10–11 with the contact forces folded in (independent of both engines'
     // code), against the one-step maps of RK4 at 96 kHz and the live integrator at 48 kHz.
     use unacorda::analysis::modes::linear_modes;
-    use unacorda::engine::exponential::ExponentialInstrument;
+    use unacorda::engine::etd::ExponentialInstrument;
     let spec = c2().unison_spec();
     let exact: Vec<_> = linear_modes(&spec)
         .unwrap()

@@ -2,7 +2,7 @@
 //! are all finite — never a panic.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use unacorda::engine::soundboard::SoundboardModes;
+use unacorda::engine::physics::soundboard::SoundboardModes;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(text) = std::str::from_utf8(data) {

@@ -5,6 +5,6 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(text) = std::str::from_utf8(data) {
-        let _ = unacorda::preset::Preset::parse(text, std::path::Path::new("fuzz.toml"));
+        let _ = unacorda::config::preset::Preset::parse(text, std::path::Path::new("fuzz.toml"));
     }
 });

@@ -7,7 +7,7 @@
 
 use super::mobility::{mobility_curves, TERM_NAMES};
 use super::spectral::spectrogram;
-use crate::engine::soundboard::SoundboardModes;
+use crate::engine::physics::soundboard::SoundboardModes;
 use crate::engine::DIRECTIONS;
 use crate::render::Recording;
 use plotters::coord::Shift;

@@ -1,6 +1,6 @@
 //! Driving-point mobility curves of a modal soundboard (paper Eq. 4, Figure 2).
 
-use crate::engine::soundboard::{BridgePoint, SoundboardModes};
+use crate::engine::physics::soundboard::{BridgePoint, SoundboardModes};
 use std::f64::consts::PI;
 
 /// The six distinct terms of the symmetric 3×3 mobility, in the order of `TERMS`.

@@ -1,10 +1,10 @@
 //! The modes of one key's linearised system — strings on their contact springs and dampers, the
 //! duplex damping and the board at the key's point, hammer out of play (DESIGN.md §5): the
 //! eigenvalues of the paper's dense state matrix with the contact forces folded in
-//! ([`crate::engine::statespace::DenseUnison::linear_system`]). Each is a partial's exact
+//! ([`crate::engine::rk4::dense::DenseUnison::linear_system`]). Each is a partial's exact
 //! frequency and decay rate, what any integrator is measured against.
 
-use crate::engine::statespace::DenseUnison;
+use crate::engine::rk4::dense::DenseUnison;
 use crate::engine::UnisonSpec;
 use crate::engine::MAX_STRINGS;
 

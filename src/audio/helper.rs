@@ -9,7 +9,7 @@
 //! the caller takes it back and [`Pair::join`] says so, so the engine runs the block on one core
 //! instead of waiting for a thread it does not control.
 
-use crate::engine::exponential::Pair;
+use crate::engine::Pair;
 use std::cell::UnsafeCell;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;

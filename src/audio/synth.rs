@@ -9,7 +9,8 @@
 
 use super::helper::Helper;
 use super::Decimator;
-use crate::engine::exponential::Pair;
+use crate::config::output::OutputSettings;
+use crate::engine::Pair;
 use crate::engine::{Instrument, VoicePool};
 use crate::midi::Event;
 use crate::play::Piano;
@@ -37,27 +38,6 @@ pub enum Control<E: VoicePool = Instrument> {
     /// one is handed back through the handle so that it is never freed on the audio thread.
     Replace(Box<Piano<E>>),
 }
-
-/// Output stage settings.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct OutputSettings {
-    /// Output sample rate (Hz); the instrument's internal rate must be an integer multiple.
-    pub rate_hz: f64,
-    /// Air density and listener distance give `rho0 / (4 pi r)` (kg/m^4).
-    pub air_density_kg_m3: f64,
-    pub distance_m: f64,
-    /// Sound pressure at digital full scale (Pa).
-    pub full_scale_pa: f64,
-    /// Voices whose strings hold less energy than this stop being simulated (J).
-    pub silence_j: f64,
-}
-
-/// Default retirement threshold: about 100 dB below the energy a mezzo-forte hammer brings
-/// (≈ 0.02 J). A retired voice leaves the board, and a string at rest on a moving board holds the
-/// energy of following it, so this also bounds the jolt its leaving gives the board: at 1e-10 J
-/// retiring the nine-key chord's treble voices while its bass still rang raised the decaying tail
-/// from −64 to −59 dBFS (`tests/stability.rs`).
-pub const SILENCE_J: f64 = 1e-12;
 
 /// Energy above which a voice (or the board) is taken as blown up and reset: a fortissimo hammer
 /// brings about 0.2 J, so 50 J is far beyond anything the model can hold legitimately.

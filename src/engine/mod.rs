@@ -14,24 +14,24 @@
 //!   and measured against,
 //! - [`tuning`]: the coupled first partial, from the undamped linear system.
 
-pub mod contact;
-pub mod damper;
-pub mod duplex;
-pub mod exponential;
-pub mod hammer;
-pub mod plate;
-pub mod simd;
-pub mod soundboard;
-pub mod statespace;
-pub mod string;
-pub mod system;
+pub mod etd;
+pub mod kernels;
+pub mod parallel;
+pub mod physics;
+pub mod rk4;
+pub mod spec;
 pub mod tuning;
 
-pub use system::{Instrument, Observation, Strike, UnisonSpec};
+pub use parallel::Pair;
+pub use rk4::Instrument;
+pub use spec::{
+    BuildError, Energy, LinearState, Observation, Strike, UnisonSpec, DIRECTIONS, MAX_STRINGS,
+    SILENCE_J, STEAL_FADE_S,
+};
 
 /// A pool of voices on one shared board, as the player and the audio callback drive it: RK4 at
 /// the paper's rate ([`Instrument`], the reference) or ETDRK4 at the output rate
-/// ([`exponential::ExponentialInstrument`], the live integrator). See [`Instrument`] for what each
+/// ([`etd::ExponentialInstrument`], the live integrator). See [`Instrument`] for what each
 /// method does; both behave alike.
 pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
     /// One key's coefficients, prepared before the pool is built.
@@ -41,20 +41,20 @@ pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
     fn at_engine_rate(spec: UnisonSpec, output_rate_hz: f64) -> UnisonSpec;
     /// Prepare one key from its spec at the engine's rate (the costly part of building,
     /// independent from key to key: callers may prepare keys on several threads).
-    fn prepare_key(spec: &UnisonSpec) -> Result<Self::Key, system::BuildError>;
+    fn prepare_key(spec: &UnisonSpec) -> Result<Self::Key, BuildError>;
     /// The pool for `specs` (at the engine's rate, one per key, in order with `keys`) with
     /// `voices` voices.
     fn from_keys(
         specs: &[UnisonSpec],
         keys: Vec<Self::Key>,
         voices: usize,
-    ) -> Result<Self, system::BuildError>;
+    ) -> Result<Self, BuildError>;
     /// Prepare every key in turn, then build the pool.
     fn build_pool(
         specs: &[UnisonSpec],
         voices: usize,
         output_rate_hz: f64,
-    ) -> Result<Self, system::BuildError> {
+    ) -> Result<Self, BuildError> {
         let specs: Vec<_> = specs
             .iter()
             .map(|s| Self::at_engine_rate(s.clone(), output_rate_hz))
@@ -70,7 +70,7 @@ pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
     fn step(&mut self);
     /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity after
     /// each; an engine that can split its voices over two cores does so through `pair`.
-    fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn exponential::Pair>);
+    fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn Pair>);
     fn is_active(&self, k: usize) -> bool;
     fn set_active(&mut self, k: usize, active: bool);
     fn is_fading(&self, k: usize) -> bool;
@@ -100,26 +100,6 @@ pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
     fn hammer_on(&self, k: usize) -> bool;
 }
 
-/// The state of a pool's linear part (strings on their contact springs and the board), flattened
-/// in an engine's own coordinates, with the voice each entry belongs to (`None`: the board) and
-/// the energy it holds per unit squared (J, the diagonal of the energy's quadratic form, to tell
-/// where a mode's energy sits). While no hammer touches a string, one step of the engine is a
-/// linear map of it ([`crate::analysis::stability`] forms that map).
-#[derive(Debug, Clone, Default)]
-pub struct LinearState {
-    pub x: Vec<f64>,
-    pub owner: Vec<Option<usize>>,
-    pub energy_weight: Vec<f64>,
-}
-
-impl LinearState {
-    fn push(&mut self, owner: Option<usize>, x: &[f64], weight: &[f64]) {
-        self.x.extend_from_slice(x);
-        self.owner.extend(std::iter::repeat_n(owner, x.len()));
-        self.energy_weight.extend_from_slice(&weight[..x.len()]);
-    }
-}
-
 /// Both pools implement [`VoicePool`] with their own inherent methods.
 macro_rules! voice_pool {
     ($t:ty, $key:ty, $rate:expr) => {
@@ -134,14 +114,14 @@ macro_rules! voice_pool {
                     None => spec,
                 }
             }
-            fn prepare_key(spec: &UnisonSpec) -> Result<Self::Key, system::BuildError> {
+            fn prepare_key(spec: &UnisonSpec) -> Result<Self::Key, BuildError> {
                 <$t>::prepare_key(spec)
             }
             fn from_keys(
                 specs: &[UnisonSpec],
                 keys: Vec<Self::Key>,
                 voices: usize,
-            ) -> Result<Self, system::BuildError> {
+            ) -> Result<Self, BuildError> {
                 <$t>::from_keys(specs, keys, voices)
             }
             fn n_voices(&self) -> usize {
@@ -153,7 +133,7 @@ macro_rules! voice_pool {
             fn step(&mut self) {
                 <$t>::step(self)
             }
-            fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn exponential::Pair>) {
+            fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn Pair>) {
                 <$t>::run(self, volume_velocity, pair)
             }
             fn is_active(&self, k: usize) -> bool {
@@ -217,15 +197,11 @@ macro_rules! voice_pool {
     };
 }
 
-voice_pool!(Instrument, system::KeyModel<f64>, |_| None::<f64>);
-voice_pool!(
-    exponential::ExponentialInstrument,
-    exponential::PreparedKey,
-    Some::<f64>
-);
+voice_pool!(Instrument, rk4::KeyModel<f64>, |_| None::<f64>);
+voice_pool!(etd::ExponentialInstrument, etd::PreparedKey, Some::<f64>);
 
 /// What the offline renderer needs of a one-key engine: RK4 on [`Instrument`] (the reference, at
-/// the paper's rate) or ETDRK4 on [`exponential::ExponentialUnison`] (at the output rate).
+/// the paper's rate) or ETDRK4 on [`etd::ExponentialUnison`] (at the output rate).
 pub trait Engine {
     /// Advance one internal step.
     fn step(&mut self);
@@ -255,21 +231,21 @@ impl Engine for Instrument {
     }
 }
 
-impl Engine for exponential::ExponentialUnison {
+impl Engine for etd::ExponentialUnison {
     fn step(&mut self) {
-        exponential::ExponentialUnison::step(self)
+        etd::ExponentialUnison::step(self)
     }
     fn observe(&self) -> Observation {
-        exponential::ExponentialUnison::observe(self)
+        etd::ExponentialUnison::observe(self)
     }
     fn strike(&mut self, strike: Strike) {
-        exponential::ExponentialUnison::strike(self, strike)
+        etd::ExponentialUnison::strike(self, strike)
     }
     fn set_damper(&mut self, down: bool) {
-        exponential::ExponentialUnison::set_damper(self, down)
+        etd::ExponentialUnison::set_damper(self, down)
     }
     fn step_s(&self) -> f64 {
-        exponential::ExponentialUnison::step_s(self)
+        etd::ExponentialUnison::step_s(self)
     }
 }
 
@@ -282,10 +258,3 @@ pub enum Integrator {
     Rk4,
     Exponential,
 }
-
-/// Directions at the bridge, in the paper's order (Eq. 5–6): transverse to the
-/// board (T), longitudinal along the string (L), parallel to the board (P).
-pub const DIRECTIONS: [&str; 3] = ["T", "L", "P"];
-
-/// The most strings a unison can hold (a treble trichord).
-pub const MAX_STRINGS: usize = 3;

@@ -11,8 +11,8 @@
 //! kept; the spring and the board's reactance move it further. Tuning against this system puts the
 //! struck note on pitch.
 
-use super::soundboard::{BridgePoint, SoundboardModes};
-use super::string::StringParams;
+use crate::engine::physics::soundboard::{BridgePoint, SoundboardModes};
+use crate::engine::physics::string::StringParams;
 use faer::{Mat, Side};
 use std::f64::consts::PI;
 

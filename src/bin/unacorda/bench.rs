@@ -3,15 +3,15 @@
 
 use anyhow::{bail, Result};
 use std::sync::atomic::Ordering;
-use unacorda::engine::exponential::ExponentialInstrument;
+use unacorda::config::preset::Preset;
+use unacorda::config::scaling::{LoadedScaling, Scaling, KEYS};
+use unacorda::engine::etd::ExponentialInstrument;
 use unacorda::engine::{Instrument, VoicePool};
 use unacorda::measure::{
     block_times_s, denormal_tail_step_s, dense_real_time_factor, exponential_speed, loaded_synth,
     nominal_f64_peak, percentile, resident_bytes, voice_speed,
 };
 use unacorda::play::{Piano, MAX_VOICES};
-use unacorda::preset::Preset;
-use unacorda::scaling::{LoadedScaling, Scaling, KEYS};
 
 /// Block length of the live figures (frames at 48 kHz).
 const BLOCK: usize = 64;

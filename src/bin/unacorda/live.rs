@@ -8,11 +8,11 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use unacorda::audio::device::{self, midi_input, output_devices, CallbackStats, Fault};
 use unacorda::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
-use unacorda::engine::exponential::ExponentialInstrument;
+use unacorda::config::scaling::{Scaling, KEYS};
+use unacorda::engine::etd::ExponentialInstrument;
 use unacorda::engine::{Instrument, VoicePool};
 use unacorda::midi::live::LiveParser;
 use unacorda::play::{Piano, MAX_VOICES};
-use unacorda::scaling::{Scaling, KEYS};
 
 /// The flags of `play`.
 #[derive(clap::Args)]
@@ -345,7 +345,7 @@ impl MidiLink {
 
 /// `devices`: audio outputs (with whether they can play the engine's format) and MIDI inputs.
 pub fn devices() -> Result<()> {
-    let rate = unacorda::preset::Preset::resolve("c2")?
+    let rate = unacorda::config::preset::Preset::resolve("c2")?
         .output_settings()
         .rate_hz as u32;
     println!("audio outputs (--device):");

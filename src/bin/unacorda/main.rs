@@ -8,12 +8,12 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use unacorda::audio::wav::WavStream;
-use unacorda::engine::plate::generate_asset;
+use unacorda::board::generate_asset;
+use unacorda::config::preset::Preset;
+use unacorda::config::preset::GRAND_BOARD_TOML;
+use unacorda::config::scaling::Scaling;
 use unacorda::engine::Strike;
-use unacorda::preset::Preset;
-use unacorda::preset::GRAND_BOARD_TOML;
 use unacorda::render::{simulate, simulate_with, Recording};
-use unacorda::scaling::Scaling;
 
 #[derive(Parser)]
 #[command(
@@ -195,7 +195,7 @@ fn write_samples(out: &Path, rate_hz: f64, samples: &[f32]) -> Result<f64> {
 /// `render --offline --midi` on the engine `E`: the WAV streamed as it is rendered, Ctrl-C and
 /// write failures leaving a valid file and saying how much it holds.
 fn render_midi_file<E: unacorda::engine::VoicePool>(
-    scaling: &unacorda::scaling::LoadedScaling,
+    scaling: &unacorda::config::scaling::LoadedScaling,
     events: &[unacorda::midi::file::TimedEvent],
     tail: f64,
     voices: usize,
@@ -322,7 +322,7 @@ fn run(cli: Cli) -> Result<()> {
                         &scaling, &events, tail, voices, &path, &out, length_s,
                     ),
                     IntegratorArg::Exponential => {
-                        render_midi_file::<unacorda::engine::exponential::ExponentialInstrument>(
+                        render_midi_file::<unacorda::engine::etd::ExponentialInstrument>(
                             &scaling, &events, tail, voices, &path, &out, length_s,
                         )
                     }
@@ -333,7 +333,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             let loaded = match &key {
                 Some(name) => {
-                    let k = unacorda::scaling::parse_key(name).with_context(|| {
+                    let k = unacorda::config::scaling::parse_key(name).with_context(|| {
                         format!("--key {name}: expected A0–C8 (e.g. C4, Bb0, F#6) or 1–88")
                     })?;
                     Scaling::resolve(&keyboard)?.key_preset(k)?
@@ -420,8 +420,8 @@ fn run(cli: Cli) -> Result<()> {
             });
             let runs = [una_corda?, normal?];
             let spec = match &board {
-                Some(path) => unacorda::preset::load_board_spec(path)?,
-                None => unacorda::preset::parse_board_spec(
+                Some(path) => unacorda::config::preset::load_board_spec(path)?,
+                None => unacorda::config::preset::parse_board_spec(
                     GRAND_BOARD_TOML,
                     Path::new("assets/soundboard_modes/grand.toml"),
                 )?,
@@ -444,7 +444,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Devices => live::devices()?,
         Command::Bench { seconds, voices } => bench::bench(seconds, voices)?,
         Command::Soundboard { input, out } => {
-            let spec = unacorda::preset::load_board_spec(&input)?;
+            let spec = unacorda::config::preset::load_board_spec(&input)?;
             let command = format!(
                 "cargo run --release -- soundboard --input {} --out {}",
                 input.display(),

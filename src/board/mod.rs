@@ -28,7 +28,7 @@
 //! the mid-plane, moves in the plane by `-lever ∇w` when the board rotates under it, which gives
 //! the L (along the strings) and P (across them) components (DESIGN.md §4).
 
-use super::soundboard::{BridgePoint, SoundboardModes};
+use crate::engine::physics::soundboard::{BridgePoint, SoundboardModes};
 use faer::{Mat, Side};
 use serde::Deserialize;
 use std::f64::consts::PI;

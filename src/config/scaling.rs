@@ -7,14 +7,14 @@
 //! `mu = T0 / (2 L_s f_ET)^2`, times a correction exact at the anchors. Each key becomes an ordinary
 //! per-note [`Preset`] bridged at its own point of the soundboard.
 
-use crate::engine::string::StringParams;
+use crate::config::preset::{bridge_point_index, LoadedPreset, Preset, PresetError};
+use crate::engine::physics::string::StringParams;
 use crate::engine::tuning::bridged_first_partial_hz;
-use crate::preset::{bridge_point_index, LoadedPreset, Preset, PresetError};
 use serde::Deserialize;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
-const BUILTIN: &[(&str, &str)] = &[("grand", include_str!("../presets/keyboard.toml"))];
+const BUILTIN: &[(&str, &str)] = &[("grand", include_str!("../../presets/keyboard.toml"))];
 
 /// The number of keys.
 pub const KEYS: usize = 88;
@@ -200,11 +200,7 @@ impl LoadedScaling {
     pub fn key_preset(&self, key: usize) -> Result<LoadedPreset, PresetError> {
         let l = &self.scaling.layout;
         let mut preset = self.base.preset.clone();
-        preset.name = format!(
-            "{} {}",
-            self.scaling.name,
-            crate::engine::plate::key_name(key)
-        );
+        preset.name = format!("{} {}", self.scaling.name, crate::board::key_name(key));
         preset.damper.present = key <= l.dampers_until_key;
         let s = &mut preset.strings;
         s.count = if key <= l.single_until_key {
@@ -262,7 +258,7 @@ impl LoadedScaling {
             // Tune the tension until the first partial on the bridge and board is on pitch (it
             // converges in a few rounds: the partial goes as sqrt(T0), with a small stiffness term).
             let k_contact = self.base.contact().stiffness_n_m[0];
-            let point = self.base.board.point(&crate::engine::plate::key_name(key));
+            let point = self.base.board.point(&crate::board::key_name(key));
             let board = point.map(|p| (&self.base.board, p));
             for _ in 0..4 {
                 let (modes, _) = count_modes(&string);
@@ -278,7 +274,7 @@ impl LoadedScaling {
         h.stiffness_n_m_p = self.interpolate(key, |a| a.hammer_stiffness_n_m_p);
         h.exponent = self.interpolate(key, |a| a.hammer_exponent);
         h.strike_ratio = self.interpolate(key, |a| a.strike_ratio);
-        preset.soundboard.bridge_point = crate::engine::plate::key_name(key);
+        preset.soundboard.bridge_point = crate::board::key_name(key);
         preset.validate(&self.source)?;
         let bridge_point = bridge_point_index(
             &self.base.board,

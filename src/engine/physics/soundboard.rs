@@ -292,7 +292,7 @@ fn expected_columns(points: &[String]) -> Vec<String> {
         .map(|s| s.to_string())
         .collect();
     for p in points {
-        for d in super::DIRECTIONS {
+        for d in crate::engine::DIRECTIONS {
             cols.push(format!("{d}@{p}"));
         }
     }

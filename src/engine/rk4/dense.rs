@@ -4,12 +4,11 @@
 //! classical RK4. Every evaluation is a dense matrix–vector product, O(n²) in the state size.
 //!
 //! It is assembled here from the physical parts (string, duplex, board, contact, hammer) without
-//! the optimised [`super::system`]'s layout or kernels, so that the two check each other, and it
+//! the optimised [`crate::engine::rk4`]'s layout or kernels, so that the two check each other, and it
 //! is the baseline the optimised engine's speed is reported against.
 
-use super::duplex::duplex_damping_matrix;
-use super::system::{Strike, UnisonSpec};
-use super::MAX_STRINGS;
+use crate::engine::physics::duplex::duplex_damping_matrix;
+use crate::engine::spec::{Strike, UnisonSpec, MAX_STRINGS};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
 use std::f64::consts::PI;
@@ -212,7 +211,7 @@ impl DenseUnison {
         (self.ranges.clone(), self.board.clone())
     }
 
-    /// Launch the hammer as [`super::Instrument::strike_voice`] does: in contact with the struck
+    /// Launch the hammer as [`crate::engine::Instrument::strike_voice`] does: in contact with the struck
     /// strings' current displacement, moving at the strike's speed.
     pub fn strike(&mut self, strike: Strike) {
         let ns = self.n_strings;

@@ -12,98 +12,18 @@
 //! ydd_H = -(1/m_H) sum_i F_e,i
 //! ```
 
-use super::contact::Contact;
-use super::damper::DamperParams;
-use super::duplex::{duplex_damping_matrix, low_rank_factor};
-use super::hammer::HammerParams;
-use super::simd::{has_avx2_fma, Real};
-use super::soundboard::SoundboardModes;
-use super::string::{ModeSet, StringParams};
-use super::MAX_STRINGS;
+pub mod dense;
+
+use crate::engine::kernels::{has_avx2_fma, Real};
+use crate::engine::physics::contact::Contact;
+use crate::engine::physics::duplex::{duplex_damping_matrix, low_rank_factor};
+use crate::engine::physics::hammer::HammerParams;
+use crate::engine::physics::string::ModeSet;
+use crate::engine::spec::{
+    BuildError, Energy, Observation, Strike, UnisonSpec, MAX_STRINGS, STEAL_FADE_S,
+};
 use std::f64::consts::PI;
 use std::ops::Range;
-
-/// Everything needed to build a [`Instrument`]; plain data, every field public.
-#[derive(Debug, Clone)]
-pub struct UnisonSpec {
-    /// The strings of the unison (1 to 3), which differ only in tension.
-    pub strings: Vec<StringParams>,
-    pub modes: ModeSet,
-    /// Damping per unit length on the duplex segment, c_d (N s/m^2) (Eq. 13).
-    pub duplex_damping_n_s_m2: f64,
-    pub hammer: HammerParams,
-    /// The key's damper; `None` for the top keys, which have none.
-    pub damper: Option<DamperParams>,
-    pub contact: Contact,
-    /// The reduced soundboard and the index of the bridge point where this unison rests.
-    pub board: SoundboardModes,
-    pub bridge_point: usize,
-    /// Internal (integration) rate (Hz).
-    pub sample_rate_hz: f64,
-}
-
-impl UnisonSpec {
-    /// Highest natural frequency among the retained modes (Hz), the paper's `f_max`.
-    pub fn max_mode_freq_hz(&self) -> f64 {
-        let strings = self.strings.iter().map(|s| {
-            let t = s.transverse_omega(self.modes.modes_t.max(self.modes.modes_p));
-            let l = s.longitudinal_omega(self.modes.modes_l);
-            t.max(l) / (2.0 * PI)
-        });
-        let board = self.board.freq_hz.iter().copied();
-        strings.chain(board).fold(0.0, f64::max)
-    }
-}
-
-/// How the hammer meets the unison.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Strike {
-    /// Hammer speed when it reaches the strings (m/s).
-    pub velocity_m_s: f64,
-    /// Soft pedal: the hammer misses the last string of the unison (one of two, two of three).
-    pub una_corda: bool,
-}
-
-impl Strike {
-    /// How many of a unison's `n_strings` strings the hammer strikes (the first ones).
-    pub fn strings_struck(&self, n_strings: usize) -> usize {
-        if self.una_corda && n_strings > 1 {
-            n_strings - 1
-        } else {
-            n_strings
-        }
-    }
-}
-
-/// Physical outputs read from the state (Eq. 19).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct Observation {
-    /// Felt force on each string (N), zero for strings the hammer does not touch (Eq. 8).
-    pub hammer_force_n: [f64; MAX_STRINGS],
-    /// Force each string exerts on the bridge, per direction T, L, P (N) (Eq. 6).
-    pub bridge_force_n: [[f64; 3]; MAX_STRINGS],
-    /// Total force on the soundboard per direction (N): the sum over strings.
-    pub total_force_n: [f64; 3],
-    /// Velocity of the bridge point per direction (m/s).
-    pub bridge_velocity_m_s: [f64; 3],
-    /// Net volume velocity of the board (m^3/s), the source of the radiated sound (DESIGN.md §1.7).
-    pub volume_velocity_m3_s: f64,
-}
-
-/// Mechanical energy split by part (J).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct Energy {
-    pub strings_j: f64,
-    pub board_j: f64,
-    pub contact_j: f64,
-    pub hammer_j: f64,
-}
-
-impl Energy {
-    pub fn total_j(&self) -> f64 {
-        self.strings_j + self.board_j + self.contact_j + self.hammer_j
-    }
-}
 
 /// Coefficients of one key: its strings' modes (laid out from 0), hammer, damper and bridge point.
 /// Built once ([`Instrument::prepare_key`]); a voice playing the key copies the per-mode arrays
@@ -222,39 +142,6 @@ pub struct Instrument<T: Real = f64> {
     fast_path: bool,
     time_s: f64,
 }
-
-/// Why an [`Instrument`] cannot be built.
-#[derive(Debug, thiserror::Error, PartialEq)]
-pub enum BuildError {
-    #[error("a unison holds 1 to {MAX_STRINGS} strings, got {0}")]
-    StringCount(usize),
-    #[error("bridge point index {0} is not in the soundboard model")]
-    BridgePoint(usize),
-    #[error("keys of one instrument must share one soundboard and one internal rate")]
-    SharedBoard,
-    #[error("an instrument needs at least one key and one voice")]
-    NoVoice,
-    #[error("{keys} prepared keys for {specs} key specifications")]
-    PreparedKeys { specs: usize, keys: usize },
-    #[error("the duplex damping matrix cannot be factored (non-finite string parameters?)")]
-    Duplex,
-    #[error("the complex modes of a string direction or the board cannot be computed (non-finite parameters?)")]
-    Modes,
-    #[error(
-        "RK4 would be unstable: the stiffest coupled mode (≈{freq_hz:.0} Hz) gives omega h = {omega_h:.2} \
-         above the limit 2.78 at {rate_hz:.0} Hz; raise the internal rate or soften the contact"
-    )]
-    Unstable {
-        freq_hz: f64,
-        omega_h: f64,
-        rate_hz: f64,
-    },
-}
-
-/// Length of the fade that takes a stolen voice off the board (s): long enough not to click
-/// (a raised cosine over 5 ms has no energy above ~200 Hz beyond the sound itself), short enough
-/// that the new note's delay stays below what a pianist feels.
-pub const STEAL_FADE_S: f64 = 0.005;
 
 /// One key's coefficients, its modes laid out from 0.
 fn build_key<T: Real>(spec: &UnisonSpec) -> Result<KeyModel<T>, BuildError> {
@@ -573,10 +460,10 @@ impl<T: Real> Instrument<T> {
     }
 
     /// The state of the linear part: every active voice's modal displacements and velocities
-    /// (voice by voice), then the board's (see [`super::LinearState`]; the displacements' energy
+    /// (voice by voice), then the board's (see [`crate::engine::LinearState`]; the displacements' energy
     /// weights include the contact springs', `1/2 (omega^2 + k psi^2)` for a string mode and
     /// `1/2 (omega^2 + sum k phi^2)` over the active strings for a board mode).
-    pub fn linear_state(&self) -> super::LinearState {
+    pub fn linear_state(&self) -> crate::engine::LinearState {
         let m = &self.model;
         let mut stiffness: Vec<f64> = m.omega2.iter().map(|w| w.to_f64()).collect();
         for (k, voice) in m.voices.iter().enumerate() {
@@ -596,7 +483,7 @@ impl<T: Real> Instrument<T> {
                 }
             }
         }
-        let mut state = super::LinearState::default();
+        let mut state = crate::engine::LinearState::default();
         for (r, k) in self.linear_ranges() {
             let weight: Vec<f64> = stiffness[r.clone()].iter().map(|w| 0.5 * w).collect();
             let q: Vec<f64> = self.q[r.clone()].iter().map(|x| x.to_f64()).collect();
@@ -945,11 +832,7 @@ impl<T: Real> Instrument<T> {
 
     /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity (m^3/s)
     /// after each (one core: RK4's many small stages are not worth splitting).
-    pub fn run(
-        &mut self,
-        volume_velocity: &mut [f64],
-        _pair: Option<&dyn super::exponential::Pair>,
-    ) {
+    pub fn run(&mut self, volume_velocity: &mut [f64], _pair: Option<&dyn crate::engine::Pair>) {
         for q in volume_velocity {
             self.step();
             *q = self.volume_velocity_m3_s();
@@ -1433,7 +1316,9 @@ mod tests {
             println!("skipped: this CPU has no AVX2 + FMA, so the portable step is the only one");
             return;
         }
-        let spec = crate::preset::Preset::resolve("c2").unwrap().unison_spec();
+        let spec = crate::config::preset::Preset::resolve("c2")
+            .unwrap()
+            .unison_spec();
         let mut fast = Instrument::<T>::unison(&spec).unwrap();
         let mut portable = fast.clone();
         portable.fast_path = false;

@@ -6,11 +6,11 @@
 //! anti-alias filter to the output rate.
 
 use crate::audio::Decimator;
-use crate::engine::exponential::ExponentialUnison;
-use crate::engine::system::{BuildError, Instrument, Observation, Strike};
+use crate::config::preset::LoadedPreset;
+use crate::engine::etd::ExponentialUnison;
 use crate::engine::MAX_STRINGS;
+use crate::engine::{BuildError, Instrument, Observation, Strike};
 use crate::engine::{Engine, Integrator};
-use crate::preset::LoadedPreset;
 use std::ops::ControlFlow;
 
 /// Number of decimated channels: hammer (3), bridge (3 × 3), total (3), bridge velocity (3), pressure.
@@ -252,9 +252,11 @@ fn record<E: Engine>(
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
     #[error(transparent)]
-    Preset(#[from] crate::preset::PresetError),
+    Preset(#[from] crate::config::preset::PresetError),
     #[error(transparent)]
     Build(#[from] BuildError),
+    #[error(transparent)]
+    Piano(#[from] crate::play::PianoError),
     #[error(transparent)]
     Synth(#[from] crate::audio::synth::SynthError),
     #[error("the MIDI file plays no key of the piano (notes 21–108)")]
@@ -297,7 +299,7 @@ pub const OFFLINE_BLOCK: usize = 256;
 /// with their output frame and applied by the [`crate::audio::Synth`] block by block, and `tail_s`
 /// of sound after the last event.
 pub fn render_midi(
-    scaling: &crate::scaling::LoadedScaling,
+    scaling: &crate::config::scaling::LoadedScaling,
     events: &[crate::midi::file::TimedEvent],
     tail_s: f64,
     voices: usize,
@@ -308,7 +310,7 @@ pub fn render_midi(
 
 /// [`render_midi`], with `tap(instrument, frame)` called after every output frame.
 pub fn render_midi_with(
-    scaling: &crate::scaling::LoadedScaling,
+    scaling: &crate::config::scaling::LoadedScaling,
     events: &[crate::midi::file::TimedEvent],
     tail_s: f64,
     voices: usize,
@@ -330,11 +332,11 @@ pub fn render_midi_with(
 }
 
 /// [`render_midi_with`] on the engine `E` (RK4 [`Instrument`] or the live integrator,
-/// [`crate::engine::exponential::ExponentialInstrument`]), handing each block of samples to `sink`
+/// [`crate::engine::etd::ExponentialInstrument`]), handing each block of samples to `sink`
 /// as it is made (a WAV being written) instead of keeping them; the render stops early when
 /// `sink` breaks (interrupted, or the disk is full).
 pub fn render_midi_into<E: crate::engine::VoicePool>(
-    scaling: &crate::scaling::LoadedScaling,
+    scaling: &crate::config::scaling::LoadedScaling,
     events: &[crate::midi::file::TimedEvent],
     tail_s: f64,
     voices: usize,

@@ -4,27 +4,27 @@
 //! and the allowed range. A preset names its soundboard asset either as a built-in (`grand`) or
 //! as a path relative to the preset file.
 
-use crate::engine::contact::{hertz_stiffness_n_m, Contact};
-use crate::engine::damper::DamperParams;
-use crate::engine::hammer::HammerParams;
-use crate::engine::plate::BoardSpec;
-use crate::engine::soundboard::{AssetError, SoundboardModes};
-use crate::engine::string::{ModeSet, StringParams};
-use crate::engine::system::UnisonSpec;
+use crate::board::BoardSpec;
+use crate::engine::physics::contact::{hertz_stiffness_n_m, Contact};
+use crate::engine::physics::damper::DamperParams;
+use crate::engine::physics::hammer::HammerParams;
+use crate::engine::physics::soundboard::{AssetError, SoundboardModes};
+use crate::engine::physics::string::{ModeSet, StringParams};
+use crate::engine::UnisonSpec;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
 /// Built-in presets, by name.
-const BUILTIN_PRESETS: &[(&str, &str)] = &[("c2", include_str!("../presets/c2.toml"))];
+const BUILTIN_PRESETS: &[(&str, &str)] = &[("c2", include_str!("../../presets/c2.toml"))];
 
 /// Built-in soundboard assets, by name.
 const BUILTIN_ASSETS: &[(&str, &str)] = &[(
     "grand",
-    include_str!("../assets/soundboard_modes/grand.txt"),
+    include_str!("../../assets/soundboard_modes/grand.txt"),
 )];
 
 /// The built-in board description that `grand.txt` is generated from.
-pub const GRAND_BOARD_TOML: &str = include_str!("../assets/soundboard_modes/grand.toml");
+pub const GRAND_BOARD_TOML: &str = include_str!("../../assets/soundboard_modes/grand.toml");
 
 /// Read a soundboard description (the generator's input).
 pub fn load_board_spec(path: &Path) -> Result<BoardSpec, PresetError> {
@@ -453,14 +453,14 @@ impl LoadedPreset {
 
     /// The output stage the preset describes: rate, radiation, full scale, and the default
     /// threshold below which a voice stops being simulated.
-    pub fn output_settings(&self) -> crate::audio::synth::OutputSettings {
+    pub fn output_settings(&self) -> crate::config::output::OutputSettings {
         let r = &self.preset.radiation;
-        crate::audio::synth::OutputSettings {
+        crate::config::output::OutputSettings {
             rate_hz: self.output_rate_hz(),
             air_density_kg_m3: r.air_density_kg_m3,
             distance_m: r.distance_m,
             full_scale_pa: r.full_scale_pa,
-            silence_j: crate::audio::synth::SILENCE_J,
+            silence_j: crate::engine::SILENCE_J,
         }
     }
 

@@ -21,7 +21,7 @@
 //! `q^` the two cancel exactly and what stays explicit, at fourth order, is small: the contact
 //! spring in series with the string, the string's mass moving with the bridge and the damping of
 //! that motion, the felt hammer (Eq. 8) and the damper felt. RK4 at the paper's rate stays the
-//! reference ([`super::Instrument`]); `tests/integrators.rs` compares.
+//! reference ([`crate::engine::Instrument`]); `tests/integrators.rs` compares.
 //!
 //! ETDRK4 (Cox & Matthews 2002) for `y' = L y + N(y)`, `E = e^{L h/2}`, `Q = (E - 1) L^-1`:
 //! `a = E y + Q N(y)`, `b = E y + Q N(a)`, `c = E² y + (E - 1) Q N(y) + 2 Q N(b)`,
@@ -35,11 +35,11 @@
 //! modal displacements and velocities (and, once every voice's force is known, accelerations) and
 //! read at each voice's point ([`Board`]).
 
-use super::duplex::duplex_damping_matrix;
-use super::hammer::HammerParams;
-use super::simd::{has_avx2_fma, Real, LANES};
-use super::system::{BuildError, Observation, Strike, UnisonSpec, STEAL_FADE_S};
-use super::MAX_STRINGS;
+use crate::engine::kernels::{has_avx2_fma, Real, LANES};
+use crate::engine::physics::duplex::duplex_damping_matrix;
+use crate::engine::physics::hammer::HammerParams;
+use crate::engine::spec::{BuildError, Observation, Strike, UnisonSpec, MAX_STRINGS, STEAL_FADE_S};
+use crate::engine::Pair;
 use faer::linalg::solvers::{PartialPivLu, Solve};
 use faer::{c64, Mat};
 use std::f64::consts::PI;
@@ -402,7 +402,7 @@ struct Board {
 }
 
 impl Board {
-    fn new(board: &super::soundboard::SoundboardModes, h: f64) -> Board {
+    fn new(board: &crate::engine::physics::soundboard::SoundboardModes, h: f64) -> Board {
         let n = board.len();
         let mut b = Board {
             zr: vec![0.0; n],
@@ -900,18 +900,8 @@ impl Clone for Exchange {
     }
 }
 
-/// Runs two jobs at once, one on another core. The real-time shell implements it with a helper
-/// thread (the engine holds no threads); the live pool uses it to split its voices over two cores.
-pub trait Pair {
-    /// Run `there` on the other core and `here` on this one, the two started together (they may
-    /// wait for each other), and return `true` when both have finished. When the other core
-    /// cannot start `there` promptly, run neither and return `false`: the caller then does the
-    /// work alone, so a late core costs one core's time, not a wait of unknown length.
-    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut()) -> bool;
-}
-
 /// Strings of up to 88 keys on one shared soundboard, advanced by ETDRK4 at the output rate: a
-/// bank of keys and a fixed pool of voices with the same behaviour as [`super::Instrument`] (assign,
+/// bank of keys and a fixed pool of voices with the same behaviour as [`crate::engine::Instrument`] (assign,
 /// steal with a fade, strike in the current motion, dampers, silent voices retired, runaways reset).
 /// Voices `k` live in half `k % 2`; [`ExponentialInstrument::run`] advances the halves on two
 /// cores when given a [`Pair`], in turn on one otherwise, with the same result.
@@ -1070,7 +1060,7 @@ impl ExponentialInstrument {
     }
 
     /// Give voice `k` to `key`, at rest, damper lifted, inactive until struck (as
-    /// [`super::Instrument::assign`]); never allocates.
+    /// [`crate::engine::Instrument::assign`]); never allocates.
     pub fn assign(&mut self, k: usize, key: usize) {
         if let Some(old) = self.voice(k).key {
             self.voice_of_key[old] = None;
@@ -1083,7 +1073,7 @@ impl ExponentialInstrument {
         self.voice_of_key[key] = Some(k);
     }
 
-    /// Hand sounding voice `k` to `key` after a fade (as [`super::Instrument::steal`]).
+    /// Hand sounding voice `k` to `key` after a fade (as [`crate::engine::Instrument::steal`]).
     pub fn steal(&mut self, k: usize, key: usize, strike: Strike) {
         if !self.voice(k).active {
             self.assign(k, key);
@@ -1193,7 +1183,7 @@ impl ExponentialInstrument {
         e
     }
 
-    /// Stop simulating silent voices (as [`super::Instrument::retire_silent`]).
+    /// Stop simulating silent voices (as [`crate::engine::Instrument::retire_silent`]).
     pub fn retire_silent(&mut self, threshold_j: f64) -> usize {
         let mut retired = 0;
         for k in 0..self.n_voices {
@@ -1427,9 +1417,9 @@ impl ExponentialInstrument {
     }
 
     /// The state of the linear part: every active voice's string modes (real and imaginary parts,
-    /// voice by voice) and then the board's (see [`super::LinearState`]).
-    pub fn linear_state(&self) -> super::LinearState {
-        let mut state = super::LinearState::default();
+    /// voice by voice) and then the board's (see [`crate::engine::LinearState`]).
+    pub fn linear_state(&self) -> crate::engine::LinearState {
+        let mut state = crate::engine::LinearState::default();
         for k in 0..self.n_voices {
             let v = self.voice(k);
             let (true, Some(key)) = (v.active, v.key) else {

@@ -1,0 +1,6 @@
+//! Files become specifications: presets and the keyboard scaling (TOML), the soundboard asset, the
+//! output stage's settings.
+
+pub mod output;
+pub mod preset;
+pub mod scaling;

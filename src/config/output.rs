@@ -1,0 +1,16 @@
+//! What the audio stage needs from a preset: the output rate, the listener and the full scale,
+//! and when a voice falls silent.
+
+/// Output stage settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OutputSettings {
+    /// Output sample rate (Hz); the instrument's internal rate must be an integer multiple.
+    pub rate_hz: f64,
+    /// Air density and listener distance give `rho0 / (4 pi r)` (kg/m^4).
+    pub air_density_kg_m3: f64,
+    pub distance_m: f64,
+    /// Sound pressure at digital full scale (Pa).
+    pub full_scale_pa: f64,
+    /// Voices whose strings hold less energy than this stop being simulated (J).
+    pub silence_j: f64,
+}

@@ -1,0 +1,12 @@
+//! Two jobs on two cores: what an engine asks of the shell to split its work (the engine holds
+//! no threads; `audio::helper` implements it).
+
+/// Runs two jobs at once, one on another core. The real-time shell implements it with a helper
+/// thread (the engine holds no threads); the live pool uses it to split its voices over two cores.
+pub trait Pair {
+    /// Run `there` on the other core and `here` on this one, the two started together (they may
+    /// wait for each other), and return `true` when both have finished. When the other core
+    /// cannot start `there` promptly, run neither and return `false`: the caller then does the
+    /// work alone, so a late core costs one core's time, not a wait of unknown length.
+    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut()) -> bool;
+}
