@@ -4,14 +4,13 @@
 use std::path::Path;
 use std::process::Command;
 use unacorda::config::preset::Preset;
-use unacorda::engine::physics::soundboard::SoundboardModes;
 
 fn data(name: &str) -> String {
     format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"))
 }
 
 fn asset_error(name: &str) -> String {
-    let e = SoundboardModes::load_file(Path::new(&data(name)))
+    let e = unacorda::config::asset::load_file(Path::new(&data(name)))
         .unwrap_err()
         .to_string();
     println!("{name}: {e}");

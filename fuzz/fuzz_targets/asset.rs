@@ -2,11 +2,10 @@
 //! are all finite — never a panic.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use unacorda::engine::physics::soundboard::SoundboardModes;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(text) = std::str::from_utf8(data) {
-        if let Ok(board) = SoundboardModes::parse(text, std::path::Path::new("fuzz.txt")) {
+        if let Ok(board) = unacorda::config::asset::parse(text, std::path::Path::new("fuzz.txt")) {
             assert!(board.freq_hz.iter().all(|f| f.is_finite()));
             assert!(board
                 .points

@@ -2,9 +2,11 @@
 //! audio device ([`device`]), the helper thread that lends the callback a second core ([`helper`])
 //! and WAV files.
 
+pub mod clock;
 pub mod decimate;
 pub mod device;
 pub mod helper;
+pub mod radiate;
 pub mod synth;
 pub mod wav;
 

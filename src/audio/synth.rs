@@ -7,7 +7,9 @@
 //! [-1, 1] leaves it: a voice that blows up is reset within the block, and a soft clipper bounds
 //! the output.
 
+use super::clock::Clock;
 use super::helper::Helper;
+use super::radiate::{soft_clip, Monopole, KNEE};
 use super::Decimator;
 use crate::config::output::OutputSettings;
 use crate::engine::Pair;
@@ -55,20 +57,6 @@ pub const GROWTH_BLOCKS: u32 = 8;
 /// ~1e-12 of itself; the slowest physical decay, A0's first partial, loses 2e-5 per block).
 pub const GROWTH_TOLERANCE: f64 = 1e-6;
 
-/// Output level from which the soft clipper bends the signal towards ±1.
-pub const KNEE: f32 = 0.8;
-
-/// Identity below `KNEE`, then a tanh curve that reaches ±1 only asymptotically: no sample leaves
-/// [-1, 1] and loud peaks are rounded rather than cut.
-fn soft_clip(x: f32) -> f32 {
-    let a = x.abs();
-    if a <= KNEE {
-        x
-    } else {
-        (KNEE + (1.0 - KNEE) * ((a - KNEE) / (1.0 - KNEE)).tanh()).copysign(x)
-    }
-}
-
 /// Counters the audio thread publishes (relaxed atomics: readable from any thread at any time).
 #[derive(Debug, Default)]
 pub struct Stats {
@@ -92,60 +80,6 @@ pub struct Stats {
     pub helper_late: AtomicU64,
 }
 
-/// The engine's frame clock as last published by the audio thread, so that other threads can
-/// stamp events with the frame at which they should sound. A sequence lock: the audio thread
-/// never waits, readers retry.
-#[derive(Debug)]
-pub struct Clock {
-    seq: AtomicU64,
-    frame: AtomicU64,
-    at_ns: AtomicU64,
-    block: AtomicU64,
-    origin: Instant,
-    rate_hz: f64,
-}
-
-impl Clock {
-    pub fn new(rate_hz: f64) -> Clock {
-        Clock {
-            seq: AtomicU64::new(0),
-            frame: AtomicU64::new(0),
-            at_ns: AtomicU64::new(0),
-            block: AtomicU64::new(0),
-            origin: Instant::now(),
-            rate_hz,
-        }
-    }
-
-    /// Called by the audio thread at the start of each block of `block` frames.
-    fn publish(&self, frame: u64, now: Instant, block: u64) {
-        let ns = now.saturating_duration_since(self.origin).as_nanos() as u64;
-        self.seq.fetch_add(1, Ordering::AcqRel);
-        self.frame.store(frame, Ordering::Release);
-        self.at_ns.store(ns, Ordering::Release);
-        self.block.store(block, Ordering::Release);
-        self.seq.fetch_add(1, Ordering::AcqRel);
-    }
-
-    /// The frame at which an event arriving at `now` should sound: the frame being played,
-    /// extrapolated from the last block start, plus one block. Stamping live events this way
-    /// turns the callback's jitter into a constant delay of one block.
-    pub fn frame_at(&self, now: Instant) -> u64 {
-        loop {
-            let s0 = self.seq.load(Ordering::Acquire);
-            let frame = self.frame.load(Ordering::Acquire);
-            let ns = self.at_ns.load(Ordering::Acquire);
-            let block = self.block.load(Ordering::Acquire);
-            if s0 % 2 == 0 && self.seq.load(Ordering::Acquire) == s0 {
-                let now_ns = now.saturating_duration_since(self.origin).as_nanos() as u64;
-                let ahead = now_ns.saturating_sub(ns) as f64 * 1e-9 * self.rate_hz;
-                return frame + (ahead as u64).min(block) + block;
-            }
-            std::hint::spin_loop();
-        }
-    }
-}
-
 /// The audio thread's side: owns the piano, reads events and commands.
 pub struct Synth<E: VoicePool = Instrument> {
     piano: Box<Piano<E>>,
@@ -155,9 +89,7 @@ pub struct Synth<E: VoicePool = Instrument> {
     clock: Arc<Clock>,
     stats: Arc<Stats>,
     decimator: Decimator,
-    monopole: f64,
-    internal_rate_hz: f64,
-    last_volume_velocity: f64,
+    radiation: Monopole,
     scale: f64,
     silence_j: f64,
     frame: u64,
@@ -225,9 +157,7 @@ impl<E: VoicePool> Synth<E> {
             clock: clock.clone(),
             stats: stats.clone(),
             decimator: Decimator::new(ratio as usize, 1),
-            monopole: out.air_density_kg_m3 / (4.0 * std::f64::consts::PI * out.distance_m),
-            internal_rate_hz,
-            last_volume_velocity: 0.0,
+            radiation: Monopole::new(out.air_density_kg_m3, out.distance_m, internal_rate_hz),
             scale: 1.0 / out.full_scale_pa,
             silence_j: out.silence_j,
             frame: 0,
@@ -314,7 +244,7 @@ impl<E: VoicePool> Synth<E> {
                 Control::Shutdown => self.running = false,
                 Control::Replace(new) => {
                     let old = std::mem::replace(&mut self.piano, new);
-                    self.last_volume_velocity = 0.0;
+                    self.radiation.restart(0.0);
                     (self.reference_j, self.sounding, self.rising_blocks) = (0.0, 0, 0);
                     if let Err(TrySendError::Full(old) | TrySendError::Disconnected(old)) =
                         self.returned.try_send(old)
@@ -406,8 +336,9 @@ impl<E: VoicePool> Synth<E> {
     /// Reset whatever has blown up, and the output stage's memory with it if anything did.
     fn reset_runaways(&mut self) {
         let n = self.piano.instrument.reset_runaways(RUNAWAY_J);
-        if n > 0 || !self.last_volume_velocity.is_finite() {
-            self.last_volume_velocity = self.piano.instrument.volume_velocity_m3_s();
+        if n > 0 || !self.radiation.is_finite() {
+            self.radiation
+                .restart(self.piano.instrument.volume_velocity_m3_s());
             self.decimator.reset();
             self.stats.resets.fetch_add(n as u64, Ordering::Relaxed);
         }
@@ -434,7 +365,7 @@ impl<E: VoicePool> Synth<E> {
         if self.rising_blocks >= GROWTH_BLOCKS {
             // Every voice holding energy, and the board.
             let n = inst.reset_runaways(0.0);
-            self.last_volume_velocity = inst.volume_velocity_m3_s();
+            self.radiation.restart(inst.volume_velocity_m3_s());
             self.decimator.reset();
             self.stats.resets.fetch_add(n as u64, Ordering::Relaxed);
             self.stats.growth_resets.fetch_add(1, Ordering::Relaxed);
@@ -447,8 +378,7 @@ impl<E: VoicePool> Synth<E> {
         let mut out = [0.0];
         for i in steps {
             let q = self.volume[i];
-            let p = self.monopole * (q - self.last_volume_velocity) * self.internal_rate_hz;
-            self.last_volume_velocity = q;
+            let p = self.radiation.pressure_pa(q);
             self.decimator.push(&[p], &mut out);
         }
         out[0]
@@ -469,7 +399,7 @@ impl<E: VoicePool> SynthHandle<E> {
         mut next: usize,
         start_frame: u64,
     ) -> usize {
-        let rate_hz = self.clock.rate_hz;
+        let rate_hz = self.clock.rate_hz();
         while next < events.len() && self.events.vacant_len() > 0 {
             let e = &events[next];
             let frame = start_frame + (e.time_s * rate_hz).round() as u64;
@@ -493,37 +423,5 @@ impl<E: VoicePool> SynthHandle<E> {
     pub fn replace(&self, piano: Piano<E>) -> Option<Box<Piano<E>>> {
         self.control.send(Control::Replace(Box::new(piano))).ok()?;
         self.returned.recv().ok()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::{soft_clip, KNEE};
-
-    #[test]
-    fn the_soft_clipper_is_odd_increasing_continuous_and_below_one() {
-        // Identity to the knee; there, continuous with slope 1 (tanh'(0) = 1).
-        assert_eq!(soft_clip(0.5), 0.5);
-        assert_eq!(soft_clip(KNEE), KNEE);
-        let slope = (soft_clip(KNEE + 1e-4) - KNEE) / 1e-4;
-        // A known value: 0.8 + 0.2 tanh(0.5) at 0.9.
-        let known = soft_clip(0.9);
-        println!("soft clip: slope just above the knee {slope:.4}, f(0.9) = {known:.7}, f(10) = {}, f(1e30) = {}", soft_clip(10.0), soft_clip(1e30));
-        assert!((slope - 1.0).abs() < 1e-2, "slope {slope}");
-        assert!((known - 0.892_423_4).abs() < 1e-6, "{known}");
-        let mut last = -1.0f32;
-        for i in -2000..=2000 {
-            let x = i as f32 * 0.005;
-            let y = soft_clip(x);
-            assert_eq!(soft_clip(-x), -y, "odd at {x}");
-            assert!(y >= last, "increasing at {x}");
-            // In f32 the curve rounds to 1 from about 0.8 + 0.2 * 8.2 = 2.44 on.
-            assert!(
-                y.abs() < 1.0 || x.abs() > 2.4,
-                "reaches full scale only asymptotically: {x} -> {y}"
-            );
-            last = y;
-        }
-        assert!(soft_clip(1e30) <= 1.0 && soft_clip(f32::INFINITY) <= 1.0);
     }
 }

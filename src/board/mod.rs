@@ -698,18 +698,19 @@ pub fn reduce(
     }
 }
 
-/// Solve, reduce and format the asset, with a header saying how it was made.
+/// Solve and reduce the board, with the header lines that say how the asset was made (the text
+/// itself is `config::asset::to_text`).
 pub fn generate_asset(
     spec: &BoardSpec,
     command: &str,
-) -> Result<(SolvedBoard, SoundboardModes, String), BoardError> {
+) -> Result<(SolvedBoard, SoundboardModes, Vec<String>), BoardError> {
     let solved = spec.solve()?;
     let r = &spec.reduction;
     let points: Vec<&str> = r.points.iter().map(String::as_str).collect();
     let reduced = reduce(&solved.modes, &points, r.f_min_hz, r.f_max_hz);
     let p = &spec.plate;
     let mut header = vec![
-        "unacorda reduced soundboard model (DESIGN.md §1.3, §4; format in src/engine/soundboard.rs)".to_string(),
+        "unacorda reduced soundboard model (DESIGN.md §1.3, §4; format in src/config/asset.rs)".to_string(),
         format!("regenerate with: {command}"),
         format!(
             "{:?} orthotropic plate {} m x {} m x {} m, rho {} kg/m^3, E1 {:.3e} Pa, E2 {:.3e} Pa, nu12 {}, G12 {:.3e} Pa",
@@ -744,6 +745,5 @@ pub fn generate_asset(
         reduced.len(),
         r.points.join(", ")
     ));
-    let text = reduced.to_text(&header);
-    Ok((solved, reduced, text))
+    Ok((solved, reduced, header))
 }

@@ -5,10 +5,11 @@
 //! as a path relative to the preset file.
 
 use crate::board::BoardSpec;
+use crate::config::asset::{self, AssetError};
 use crate::engine::physics::contact::{hertz_stiffness_n_m, Contact};
 use crate::engine::physics::damper::DamperParams;
 use crate::engine::physics::hammer::HammerParams;
-use crate::engine::physics::soundboard::{AssetError, SoundboardModes};
+use crate::engine::physics::soundboard::SoundboardModes;
 use crate::engine::physics::string::{ModeSet, StringParams};
 use crate::engine::UnisonSpec;
 use serde::Deserialize;
@@ -227,14 +228,14 @@ impl Preset {
         {
             Some((name, text)) => {
                 let p = PathBuf::from(format!("assets/soundboard_modes/{name}.txt"));
-                (p.display().to_string(), SoundboardModes::parse(text, &p)?)
+                (p.display().to_string(), asset::parse(text, &p)?)
             }
             None => {
                 let p = path
                     .parent()
                     .unwrap_or(Path::new("."))
                     .join(&preset.soundboard.asset);
-                (p.display().to_string(), SoundboardModes::load_file(&p)?)
+                (p.display().to_string(), asset::load_file(&p)?)
             }
         };
         let bridge_point =

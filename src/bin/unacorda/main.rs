@@ -450,8 +450,9 @@ fn run(cli: Cli) -> Result<()> {
                 input.display(),
                 out.display()
             );
-            let (solved, reduced, text) =
+            let (solved, reduced, header) =
                 generate_asset(&spec, &command).with_context(|| format!("{}", input.display()))?;
+            let text = unacorda::config::asset::to_text(&reduced, &header);
             std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
             eprintln!(
                 "wrote {}: {} modes below {} Hz reduced to {} at {} keys",

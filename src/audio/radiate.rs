@@ -1,0 +1,87 @@
+//! From the board to the listener: the board radiates as a monopole (DESIGN.md §1.7), the sound
+//! pressure at distance `r` being `p = rho0 / (4 pi r) dQ/dt` of its net volume velocity `Q`;
+//! what goes out is bounded by a soft clipper. Used live ([`super::synth`]) and offline
+//! (`render::strike`) alike.
+
+/// The monopole: `Q` sampled at the engine's rate, differentiated step to step.
+#[derive(Debug, Clone)]
+pub struct Monopole {
+    /// `rho0 / (4 pi r)` (kg/m^4).
+    gain: f64,
+    rate_hz: f64,
+    last_m3_s: f64,
+}
+
+impl Monopole {
+    /// Air of density `air_density_kg_m3`, a listener at `distance_m`, `Q` sampled at `rate_hz`.
+    pub fn new(air_density_kg_m3: f64, distance_m: f64, rate_hz: f64) -> Monopole {
+        Monopole {
+            gain: air_density_kg_m3 / (4.0 * std::f64::consts::PI * distance_m),
+            rate_hz,
+            last_m3_s: 0.0,
+        }
+    }
+
+    /// The pressure (Pa) of the step that brought `Q` to `volume_velocity_m3_s`.
+    pub fn pressure_pa(&mut self, volume_velocity_m3_s: f64) -> f64 {
+        let dq = (volume_velocity_m3_s - self.last_m3_s) * self.rate_hz;
+        self.last_m3_s = volume_velocity_m3_s;
+        self.gain * dq
+    }
+
+    /// Start again from `Q` = `volume_velocity_m3_s` (after a reset, a new piano).
+    pub fn restart(&mut self, volume_velocity_m3_s: f64) {
+        self.last_m3_s = volume_velocity_m3_s;
+    }
+
+    /// Whether the last `Q` was finite.
+    pub fn is_finite(&self) -> bool {
+        self.last_m3_s.is_finite()
+    }
+}
+
+/// Output level from which the soft clipper bends the signal towards ±1.
+pub const KNEE: f32 = 0.8;
+
+/// Identity below `KNEE`, then a tanh curve that reaches ±1 only asymptotically: no sample leaves
+/// [-1, 1] and loud peaks are rounded rather than cut.
+pub fn soft_clip(x: f32) -> f32 {
+    let a = x.abs();
+    if a <= KNEE {
+        x
+    } else {
+        (KNEE + (1.0 - KNEE) * ((a - KNEE) / (1.0 - KNEE)).tanh()).copysign(x)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{soft_clip, KNEE};
+
+    #[test]
+    fn the_soft_clipper_is_odd_increasing_continuous_and_below_one() {
+        // Identity to the knee; there, continuous with slope 1 (tanh'(0) = 1).
+        assert_eq!(soft_clip(0.5), 0.5);
+        assert_eq!(soft_clip(KNEE), KNEE);
+        let slope = (soft_clip(KNEE + 1e-4) - KNEE) / 1e-4;
+        // A known value: 0.8 + 0.2 tanh(0.5) at 0.9.
+        let known = soft_clip(0.9);
+        println!("soft clip: slope just above the knee {slope:.4}, f(0.9) = {known:.7}, f(10) = {}, f(1e30) = {}", soft_clip(10.0), soft_clip(1e30));
+        assert!((slope - 1.0).abs() < 1e-2, "slope {slope}");
+        assert!((known - 0.892_423_4).abs() < 1e-6, "{known}");
+        let mut last = -1.0f32;
+        for i in -2000..=2000 {
+            let x = i as f32 * 0.005;
+            let y = soft_clip(x);
+            assert_eq!(soft_clip(-x), -y, "odd at {x}");
+            assert!(y >= last, "increasing at {x}");
+            // In f32 the curve rounds to 1 from about 0.8 + 0.2 * 8.2 = 2.44 on.
+            assert!(
+                y.abs() < 1.0 || x.abs() > 2.4,
+                "reaches full scale only asymptotically: {x} -> {y}"
+            );
+            last = y;
+        }
+        assert!(soft_clip(1e30) <= 1.0 && soft_clip(f32::INFINITY) <= 1.0);
+    }
+}

@@ -1,0 +1,258 @@
+//! The soundboard asset format (`assets/soundboard_modes/*.txt`, version 1): a reduced modal
+//! board ([`SoundboardModes`]) as text, written by `unacorda soundboard` and read by the presets.
+//!
+//! Plain text, one record a line. Lines starting with `#` and blank lines are ignored.
+//! ```text
+//! format: unacorda-soundboard-modes 1
+//! points: C2 C4                      # names of the bridge points, separated by spaces
+//! columns: freq_hz zeta volume_m2_per_sqrt_kg T@C2 L@C2 P@C2 T@C4 L@C4 P@C4
+//! 21.52 0.03 1.23e-2 4.5e-2 -1.2e-3 3.4e-4 ...   # one row per mode
+//! ```
+//! Units: `freq_hz` Hz (> 0), `zeta` damping ratio in [0, 1), `volume_m2_per_sqrt_kg` the mode's
+//! net volume displacement per unit modal coordinate (m^2/sqrt(kg)), `T@X`, `L@X`, `P@X` the
+//! mass-normalised mode shape at point X in each direction (1/sqrt(kg)).
+
+use crate::engine::physics::soundboard::{BridgePoint, SoundboardModes};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Header value of the `format:` line.
+pub const FORMAT_TAG: &str = "unacorda-soundboard-modes 1";
+
+/// What can be wrong with an asset file.
+#[derive(Debug, thiserror::Error)]
+pub enum AssetError {
+    #[error("{path}: cannot read soundboard asset: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}:{line}: {message}")]
+    Syntax {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
+    #[error("{path}: {message}")]
+    Content { path: PathBuf, message: String },
+}
+
+/// Read an asset file (at build time, never from the audio path).
+pub fn load_file(path: &Path) -> Result<SoundboardModes, AssetError> {
+    let text = std::fs::read_to_string(path).map_err(|source| AssetError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    parse(&text, path)
+}
+
+/// Parse asset text; `path` names the source in error messages.
+pub fn parse(text: &str, path: &Path) -> Result<SoundboardModes, AssetError> {
+    let syntax = |line: usize, message: String| AssetError::Syntax {
+        path: path.to_owned(),
+        line,
+        message,
+    };
+    let mut format_seen = false;
+    let mut points: Option<Vec<String>> = None;
+    let mut columns: Option<Vec<String>> = None;
+    let mut rows: Vec<Vec<f64>> = Vec::new();
+    for (idx, raw) in text.lines().enumerate() {
+        let line_no = idx + 1;
+        let line = raw.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        // Each header once, all before the mode rows (the rows' width follows `points:`).
+        for (tag, seen) in [
+            ("format:", format_seen),
+            ("points:", points.is_some()),
+            ("columns:", columns.is_some()),
+        ] {
+            if line.starts_with(tag) && (seen || !rows.is_empty()) {
+                let what = if seen {
+                    "repeated"
+                } else {
+                    "after the mode rows"
+                };
+                return Err(syntax(line_no, format!("header `{tag}` {what}")));
+            }
+        }
+        if let Some(v) = line.strip_prefix("format:") {
+            if v.trim() != FORMAT_TAG {
+                return Err(syntax(
+                    line_no,
+                    format!(
+                        "field `format`: expected `{FORMAT_TAG}`, got `{}`",
+                        v.trim()
+                    ),
+                ));
+            }
+            format_seen = true;
+        } else if let Some(v) = line.strip_prefix("points:") {
+            let names: Vec<String> = v.split_whitespace().map(str::to_owned).collect();
+            if names.is_empty() {
+                return Err(syntax(
+                    line_no,
+                    "field `points`: no bridge point named".into(),
+                ));
+            }
+            points = Some(names);
+        } else if let Some(v) = line.strip_prefix("columns:") {
+            let Some(names) = &points else {
+                return Err(syntax(line_no, "`columns:` must follow `points:`".into()));
+            };
+            let expected = expected_columns(names);
+            let got: Vec<String> = v.split_whitespace().map(str::to_owned).collect();
+            if got != expected {
+                return Err(syntax(
+                    line_no,
+                    format!(
+                        "field `columns`: expected `{}`, got `{}`",
+                        expected.join(" "),
+                        got.join(" ")
+                    ),
+                ));
+            }
+            columns = Some(got);
+        } else {
+            if !format_seen {
+                return Err(syntax(
+                    line_no,
+                    format!("expected the header line `format: {FORMAT_TAG}` first"),
+                ));
+            }
+            let Some(cols) = &columns else {
+                return Err(syntax(
+                    line_no,
+                    "mode row before the `columns:` header".into(),
+                ));
+            };
+            let fields: Vec<&str> = line.split_whitespace().collect();
+            if fields.len() != cols.len() {
+                return Err(syntax(
+                    line_no,
+                    format!("expected {} columns, found {}", cols.len(), fields.len()),
+                ));
+            }
+            let mut row = Vec::with_capacity(cols.len());
+            for (c, (name, s)) in cols.iter().zip(&fields).enumerate() {
+                let value: f64 = s.parse().map_err(|_| {
+                    syntax(
+                        line_no,
+                        format!("field `{name}` (column {}): `{s}` is not a number", c + 1),
+                    )
+                })?;
+                let (ok, range) = match c {
+                    0 => (
+                        value.is_finite() && value > 0.0,
+                        "a finite frequency > 0 Hz",
+                    ),
+                    1 => ((0.0..1.0).contains(&value), "a damping ratio in [0, 1)"),
+                    _ => (value.is_finite(), "a finite number"),
+                };
+                if !ok {
+                    return Err(syntax(
+                        line_no,
+                        format!(
+                            "field `{name}` (column {}): expected {range}, got {s}",
+                            c + 1
+                        ),
+                    ));
+                }
+                row.push(value);
+            }
+            rows.push(row);
+        }
+    }
+    let content = |message: &str| AssetError::Content {
+        path: path.to_owned(),
+        message: message.to_owned(),
+    };
+    if !format_seen {
+        return Err(content(
+            "missing header line `format: unacorda-soundboard-modes 1`",
+        ));
+    }
+    let names = points.ok_or_else(|| content("missing header line `points:`"))?;
+    if columns.is_none() {
+        return Err(content("missing header line `columns:`"));
+    }
+    if rows.is_empty() {
+        return Err(content("no modes: at least one mode row is required"));
+    }
+    let col = |c: usize| rows.iter().map(|r| r[c]).collect::<Vec<f64>>();
+    Ok(SoundboardModes {
+        freq_hz: col(0),
+        damping_ratio: col(1),
+        volume_m2_per_sqrt_kg: col(2),
+        points: names
+            .into_iter()
+            .enumerate()
+            .map(|(p, name)| BridgePoint {
+                name,
+                shape: [col(3 + 3 * p), col(4 + 3 * p), col(5 + 3 * p)],
+            })
+            .collect(),
+    })
+}
+
+/// Write the asset text; `header` lines are written as comments first.
+pub fn to_text(modes: &SoundboardModes, header: &[String]) -> String {
+    let mut out = String::new();
+    for h in header {
+        let _ = writeln!(out, "# {h}");
+    }
+    let names: Vec<String> = modes.points.iter().map(|p| p.name.clone()).collect();
+    let _ = writeln!(out, "format: {FORMAT_TAG}");
+    let _ = writeln!(out, "points: {}", names.join(" "));
+    let _ = writeln!(out, "columns: {}", expected_columns(&names).join(" "));
+    for k in 0..modes.len() {
+        let _ = write!(
+            out,
+            "{:.6} {:.4} {:.9e}",
+            modes.freq_hz[k], modes.damping_ratio[k], modes.volume_m2_per_sqrt_kg[k]
+        );
+        for p in &modes.points {
+            for d in &p.shape {
+                let _ = write!(out, " {:.9e}", d[k]);
+            }
+        }
+        out.push('\n');
+    }
+    out
+}
+
+fn expected_columns(points: &[String]) -> Vec<String> {
+    let mut cols: Vec<String> = ["freq_hz", "zeta", "volume_m2_per_sqrt_kg"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    for p in points {
+        for d in crate::engine::DIRECTIONS {
+            cols.push(format!("{d}@{p}"));
+        }
+    }
+    cols
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_round_trip() {
+        let sb = SoundboardModes {
+            freq_hz: vec![30.0, 45.5],
+            damping_ratio: vec![0.03, 0.03],
+            volume_m2_per_sqrt_kg: vec![1e-2, 0.0],
+            points: vec![BridgePoint {
+                name: "C2".into(),
+                shape: [vec![0.5, -0.25], vec![0.01, 0.02], vec![-0.03, 0.04]],
+            }],
+        };
+        let text = to_text(&sb, &["test".into()]);
+        let back = parse(&text, Path::new("mem")).unwrap();
+        assert_eq!(back, sb);
+    }
+}

@@ -1,0 +1,151 @@
+//! A MIDI performance rendered offline through exactly the live engine's path: the file's events
+//! go through the synth's event queue at their output frames and the audio engine renders block
+//! by block, so the result is what `play` would sound, sample for sample.
+
+use crate::engine::{BuildError, Instrument};
+use std::ops::ControlFlow;
+
+/// Why a MIDI performance cannot be rendered.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    #[error(transparent)]
+    Preset(#[from] crate::config::preset::PresetError),
+    #[error(transparent)]
+    Build(#[from] BuildError),
+    #[error(transparent)]
+    Piano(#[from] crate::play::PianoError),
+    #[error(transparent)]
+    Synth(#[from] crate::audio::synth::SynthError),
+    #[error("the MIDI file plays no key of the piano (notes 21–108)")]
+    NoKeys,
+    #[error("the voice pool needs 1 to {max} voices, got {0}", max = crate::play::MAX_VOICES)]
+    Voices(usize),
+}
+
+/// A MIDI performance rendered offline, its sound in memory.
+#[derive(Debug, Clone)]
+pub struct Performance {
+    pub rate_hz: f64,
+    /// Sound pressure normalised to full scale, one channel.
+    pub samples: Vec<f32>,
+    /// The piano keys (1–88) the file plays.
+    pub keys: Vec<usize>,
+    /// Size of the voice pool used.
+    pub voices: usize,
+}
+
+/// What [`render_midi_into`] rendered.
+#[derive(Debug, Clone)]
+pub struct Rendered {
+    pub rate_hz: f64,
+    /// Frames handed to the sink, and the frames the whole performance lasts.
+    pub frames: u64,
+    pub total_frames: u64,
+    /// The piano keys (1–88) the file plays.
+    pub keys: Vec<usize>,
+    /// Size of the voice pool used.
+    pub voices: usize,
+}
+
+/// Output frames per block of the offline render (the live block sizes give the same samples:
+/// events are applied at their own frame whatever the block).
+pub const OFFLINE_BLOCK: usize = 256;
+
+/// Render a MIDI performance on the keyboard `scaling` through the live engine's path: every key
+/// the file plays in the bank, a pool of at most `voices` voices on one soundboard, events queued
+/// with their output frame and applied by the [`crate::audio::Synth`] block by block, and `tail_s`
+/// of sound after the last event.
+pub fn render_midi(
+    scaling: &crate::config::scaling::LoadedScaling,
+    events: &[crate::midi::file::TimedEvent],
+    tail_s: f64,
+    voices: usize,
+    progress: impl FnMut(f64),
+) -> Result<Performance, RenderError> {
+    render_midi_with(scaling, events, tail_s, voices, progress, |_, _| {})
+}
+
+/// [`render_midi`], with `tap(instrument, frame)` called after every output frame.
+pub fn render_midi_with(
+    scaling: &crate::config::scaling::LoadedScaling,
+    events: &[crate::midi::file::TimedEvent],
+    tail_s: f64,
+    voices: usize,
+    progress: impl FnMut(f64),
+    tap: impl FnMut(&Instrument, u64),
+) -> Result<Performance, RenderError> {
+    let mut samples = Vec::new();
+    let r =
+        render_midi_into::<Instrument>(scaling, events, tail_s, voices, progress, tap, |block| {
+            samples.extend_from_slice(block);
+            ControlFlow::Continue(())
+        })?;
+    Ok(Performance {
+        rate_hz: r.rate_hz,
+        samples,
+        keys: r.keys,
+        voices: r.voices,
+    })
+}
+
+/// [`render_midi_with`] on the engine `E` (RK4 [`Instrument`] or the live integrator,
+/// [`crate::engine::etd::ExponentialInstrument`]), handing each block of samples to `sink`
+/// as it is made (a WAV being written) instead of keeping them; the render stops early when
+/// `sink` breaks (interrupted, or the disk is full).
+pub fn render_midi_into<E: crate::engine::VoicePool>(
+    scaling: &crate::config::scaling::LoadedScaling,
+    events: &[crate::midi::file::TimedEvent],
+    tail_s: f64,
+    voices: usize,
+    mut progress: impl FnMut(f64),
+    mut tap: impl FnMut(&E, u64),
+    mut sink: impl FnMut(&[f32]) -> ControlFlow<()>,
+) -> Result<Rendered, RenderError> {
+    use crate::audio::synth::{Synth, EVENT_QUEUE};
+    use crate::midi::{piano_key, Event};
+    if !(1..=crate::play::MAX_VOICES).contains(&voices) {
+        return Err(RenderError::Voices(voices));
+    }
+    let mut keys: Vec<usize> = events
+        .iter()
+        .filter_map(|e| match e.event {
+            Event::NoteOn { note, .. } => piano_key(note),
+            _ => None,
+        })
+        .collect();
+    keys.sort_unstable();
+    keys.dedup();
+    if keys.is_empty() {
+        return Err(RenderError::NoKeys);
+    }
+    let voices = voices.min(keys.len());
+    let piano = crate::play::Piano::<E>::build(scaling, &keys, voices)?;
+    let settings = scaling.base.output_settings();
+    let fs = settings.rate_hz;
+    let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
+    let end_s = events.last().map_or(0.0, |e| e.time_s) + tail_s;
+    let total_frames = (end_s * fs).round() as u64;
+    let n_blocks = total_frames.div_ceil(OFFLINE_BLOCK as u64).max(1);
+    let mut block = [0f32; OFFLINE_BLOCK];
+    let (mut next, mut frames) = (0, 0u64);
+    for b in 0..n_blocks {
+        let n = (total_frames - frames).min(OFFLINE_BLOCK as u64) as usize;
+        next = handle.schedule_timed(events, next, 0);
+        synth.process_with(&mut block[..n], 1, &mut tap);
+        frames += n as u64;
+        if sink(&block[..n]).is_break() {
+            break;
+        }
+        if b % 64 == 0 {
+            progress(b as f64 / n_blocks as f64);
+        }
+    }
+    progress(1.0);
+    Ok(Rendered {
+        rate_hz: fs,
+        frames,
+        total_frames,
+        keys,
+        voices,
+    })
+}

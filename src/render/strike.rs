@@ -1,0 +1,245 @@
+//! One key struck once, for analysis: from a preset and a strike to frames at the output rate —
+//! forces (Eq. 19) and radiated sound.
+//!
+//! The [`Renderer`] advances the [`Instrument`] at the internal rate, reads the outputs after each step,
+//! turns the board's net volume velocity into pressure at the listener (a monopole,
+//! `p = rho0 / (4 pi r) dQ/dt`, DESIGN.md §1.7) and decimates every channel through the same
+//! anti-alias filter to the output rate.
+
+use crate::audio::radiate::Monopole;
+use crate::audio::Decimator;
+use crate::config::preset::LoadedPreset;
+use crate::engine::etd::ExponentialUnison;
+use crate::engine::MAX_STRINGS;
+use crate::engine::{BuildError, Instrument, Observation, Strike};
+use crate::engine::{Engine, Integrator};
+
+/// Number of decimated channels: hammer (3), bridge (3 × 3), total (3), bridge velocity (3), pressure.
+const CHANNELS: usize = MAX_STRINGS + 3 * MAX_STRINGS + 3 + 3 + 1;
+
+/// One output-rate frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Frame {
+    /// Forces and velocities at the bridge and hammer (Eq. 19), low-passed with the audio.
+    pub obs: Observation,
+    /// Sound pressure at the listener (Pa).
+    pub pressure_pa: f64,
+}
+
+impl Frame {
+    fn pack(&self, out: &mut [f64; CHANNELS]) {
+        let o = &self.obs;
+        let flat = o
+            .hammer_force_n
+            .iter()
+            .chain(o.bridge_force_n.iter().flatten())
+            .chain(&o.total_force_n)
+            .chain(&o.bridge_velocity_m_s)
+            .chain(std::iter::once(&self.pressure_pa));
+        for (slot, v) in out.iter_mut().zip(flat) {
+            *slot = *v;
+        }
+    }
+
+    fn unpack(ch: &[f64; CHANNELS]) -> Frame {
+        let mut f = Frame::default();
+        let mut it = ch.iter().copied();
+        let mut next = || it.next().unwrap_or(0.0);
+        f.obs.hammer_force_n.iter_mut().for_each(|x| *x = next());
+        f.obs
+            .bridge_force_n
+            .iter_mut()
+            .flatten()
+            .for_each(|x| *x = next());
+        f.obs.total_force_n.iter_mut().for_each(|x| *x = next());
+        f.obs
+            .bridge_velocity_m_s
+            .iter_mut()
+            .for_each(|x| *x = next());
+        f.pressure_pa = next();
+        f
+    }
+}
+
+/// An engine (by default the RK4 [`Instrument`]) and its output stage, with analysis channels
+/// (forces of voice 0).
+pub struct Renderer<E: Engine = Instrument> {
+    instrument: E,
+    decimator: Decimator,
+    radiation: Monopole,
+    output_rate_hz: f64,
+    inputs: [f64; CHANNELS],
+    outputs: [f64; CHANNELS],
+}
+
+impl Renderer {
+    pub fn new(preset: &LoadedPreset) -> Result<Renderer, BuildError> {
+        let spec = preset.unison_spec();
+        let instrument = Instrument::new(&spec)?;
+        Ok(Self::from_instrument(instrument, preset))
+    }
+}
+
+impl Renderer<ExponentialUnison> {
+    /// The preset's key on the live integrator, stepping at the output rate.
+    pub fn exponential(preset: &LoadedPreset) -> Result<Self, BuildError> {
+        let mut spec = preset.unison_spec();
+        spec.sample_rate_hz = preset.output_rate_hz();
+        Ok(Self::from_instrument(
+            ExponentialUnison::new(&spec)?,
+            preset,
+        ))
+    }
+}
+
+impl<E: Engine> Renderer<E> {
+    /// The output stage of `preset` (rates, radiation) around a built system; the analysis
+    /// channels follow its first voice.
+    pub fn from_instrument(instrument: E, preset: &LoadedPreset) -> Renderer<E> {
+        let ratio = (preset.output_rate_hz() * instrument.step_s())
+            .recip()
+            .round() as usize;
+        let r = &preset.preset.radiation;
+        let rate_hz = 1.0 / instrument.step_s();
+        Renderer {
+            instrument,
+            decimator: Decimator::new(ratio, CHANNELS),
+            radiation: Monopole::new(r.air_density_kg_m3, r.distance_m, rate_hz),
+            output_rate_hz: preset.output_rate_hz(),
+            inputs: [0.0; CHANNELS],
+            outputs: [0.0; CHANNELS],
+        }
+    }
+
+    pub fn instrument(&self) -> &E {
+        &self.instrument
+    }
+
+    pub fn instrument_mut(&mut self) -> &mut E {
+        &mut self.instrument
+    }
+
+    pub fn output_rate_hz(&self) -> f64 {
+        self.output_rate_hz
+    }
+
+    /// Internal steps per output frame.
+    pub fn oversampling(&self) -> usize {
+        self.decimator.ratio()
+    }
+
+    /// Delay of the anti-alias filter (output samples).
+    pub fn filter_delay_samples(&self) -> f64 {
+        self.decimator.delay_out_samples()
+    }
+
+    pub fn strike(&mut self, strike: Strike) {
+        self.instrument.strike(strike);
+    }
+
+    /// Advance by one output frame.
+    pub fn next_frame(&mut self) -> Frame {
+        loop {
+            self.instrument.step();
+            let obs = self.instrument.observe();
+            Frame {
+                obs,
+                pressure_pa: self.radiation.pressure_pa(obs.volume_velocity_m3_s),
+            }
+            .pack(&mut self.inputs);
+            if self.decimator.push(&self.inputs, &mut self.outputs) {
+                return Frame::unpack(&self.outputs);
+            }
+        }
+    }
+}
+
+/// A whole offline simulation at the output rate.
+#[derive(Debug, Clone)]
+pub struct Recording {
+    pub rate_hz: f64,
+    /// Group delay of the anti-alias filter (s): frame `k` shows the system at `k / rate_hz - delay_s`.
+    pub delay_s: f64,
+    pub frames: Vec<Frame>,
+}
+
+impl Recording {
+    /// Physical time of frame `k` (s), the filter delay removed.
+    pub fn time_s(&self, k: usize) -> f64 {
+        k as f64 / self.rate_hz - self.delay_s
+    }
+
+    /// One channel of the recording, extracted by `f`.
+    pub fn channel(&self, f: impl Fn(&Frame) -> f64) -> Vec<f64> {
+        self.frames.iter().map(f).collect()
+    }
+}
+
+/// Strike the preset's unison, release the key after `release_s` (the damper drops; `None` holds
+/// the key) and record `seconds` of output with RK4; `progress` receives the fraction done.
+pub fn simulate(
+    preset: &LoadedPreset,
+    strike: Strike,
+    release_s: Option<f64>,
+    seconds: f64,
+    progress: impl FnMut(f64),
+) -> Result<Recording, BuildError> {
+    simulate_with(
+        preset,
+        Integrator::Rk4,
+        strike,
+        release_s,
+        seconds,
+        progress,
+    )
+}
+
+/// [`simulate`] with the chosen integrator.
+pub fn simulate_with(
+    preset: &LoadedPreset,
+    integrator: Integrator,
+    strike: Strike,
+    release_s: Option<f64>,
+    seconds: f64,
+    progress: impl FnMut(f64),
+) -> Result<Recording, BuildError> {
+    match integrator {
+        Integrator::Rk4 => record(Renderer::new(preset)?, strike, release_s, seconds, progress),
+        Integrator::Exponential => record(
+            Renderer::exponential(preset)?,
+            strike,
+            release_s,
+            seconds,
+            progress,
+        ),
+    }
+}
+
+fn record<E: Engine>(
+    mut r: Renderer<E>,
+    strike: Strike,
+    release_s: Option<f64>,
+    seconds: f64,
+    mut progress: impl FnMut(f64),
+) -> Result<Recording, BuildError> {
+    r.strike(strike);
+    let n = (seconds * r.output_rate_hz()).round() as usize;
+    let release_frame = release_s.map(|s| (s * r.output_rate_hz()).round() as usize);
+    let mut frames = Vec::with_capacity(n);
+    let every = (r.output_rate_hz() as usize / 20).max(1);
+    for k in 0..n {
+        if Some(k) == release_frame {
+            r.instrument_mut().set_damper(true);
+        }
+        frames.push(r.next_frame());
+        if k % every == 0 {
+            progress(k as f64 / n as f64);
+        }
+    }
+    progress(1.0);
+    Ok(Recording {
+        rate_hz: r.output_rate_hz(),
+        delay_s: r.filter_delay_samples() / r.output_rate_hz(),
+        frames,
+    })
+}
