@@ -5,6 +5,7 @@ use unacorda::analysis::spectral::peak_frequency;
 use unacorda::config::preset::Preset;
 use unacorda::config::scaling::{equal_tempered_hz, parse_key, Scaling, KEYS};
 use unacorda::engine::rk4::Instrument;
+use unacorda::engine::Policy;
 use unacorda::engine::{Strike, VoicePool};
 use unacorda::render::simulate;
 
@@ -204,8 +205,8 @@ fn keys_prepared_on_several_threads_land_in_order() {
     };
     for (bank, key) in keys.iter().enumerate() {
         for pool in [&mut sequential, &mut threaded] {
-            VoicePool::assign(pool, 0, bank);
-            VoicePool::strike_voice(pool, 0, strike);
+            Policy::assign(pool, 0, bank);
+            Policy::strike_voice(pool, 0, strike);
         }
         let (mut a, mut b) = (vec![0.0; 200], vec![0.0; 200]);
         VoicePool::run(&mut sequential, &mut a, None);

@@ -4,6 +4,7 @@ use midly::num::{u15, u28, u4, u7};
 use midly::{Format, Header, MetaMessage, MidiMessage, Smf, Timing, TrackEvent, TrackEventKind};
 use std::process::Command;
 use unacorda::config::scaling::{parse_key, Scaling};
+use unacorda::engine::Policy;
 use unacorda::engine::UnisonSpec;
 use unacorda::engine::{Instrument, Strike};
 use unacorda::midi::file::TimedEvent;

@@ -6,6 +6,7 @@ use assert_no_alloc::{assert_no_alloc, reset_violation_count, violation_count, A
 use std::process::Command;
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::scaling::{parse_key, Scaling};
+use unacorda::engine::Policy;
 use unacorda::engine::{Instrument, Strike};
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Piano;

@@ -18,11 +18,13 @@ pub mod etd;
 pub mod kernels;
 pub mod parallel;
 pub mod physics;
+pub mod pool;
 pub mod rk4;
 pub mod spec;
 pub mod tuning;
 
 pub use parallel::Pair;
+pub use pool::Policy;
 pub use rk4::Instrument;
 pub use spec::{
     BuildError, Energy, LinearState, Observation, Strike, UnisonSpec, DIRECTIONS, MAX_STRINGS,
@@ -31,9 +33,9 @@ pub use spec::{
 
 /// A pool of voices on one shared board, as the player and the audio callback drive it: RK4 at
 /// the paper's rate ([`Instrument`], the reference) or ETDRK4 at the output rate
-/// ([`etd::ExponentialInstrument`], the live integrator). See [`Instrument`] for what each
-/// method does; both behave alike.
-pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
+/// ([`etd::ExponentialInstrument`], the live integrator). The pool policy (assign, steal, strike,
+/// dampers, retire, reset) is [`Policy`], written once for both; this is the rest.
+pub trait VoicePool: Policy + Clone + Send + std::fmt::Debug + 'static {
     /// One key's coefficients, prepared before the pool is built.
     type Key: Send;
     /// `spec` at the rate this engine steps at: unchanged (the internal rate), or `output_rate_hz`
@@ -65,24 +67,11 @@ pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
             .collect::<Result<_, _>>()?;
         Self::from_keys(&specs, keys, voices)
     }
-    fn n_voices(&self) -> usize;
     fn step_s(&self) -> f64;
     fn step(&mut self);
     /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity after
     /// each; an engine that can split its voices over two cores does so through `pair`.
     fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn Pair>);
-    fn is_active(&self, k: usize) -> bool;
-    fn set_active(&mut self, k: usize, active: bool);
-    fn is_fading(&self, k: usize) -> bool;
-    fn key_of_voice(&self, k: usize) -> Option<usize>;
-    fn voice_of_key(&self, key: usize) -> Option<usize>;
-    fn assign(&mut self, k: usize, key: usize);
-    fn steal(&mut self, k: usize, key: usize, strike: Strike);
-    fn strike_voice(&mut self, k: usize, strike: Strike);
-    fn set_damper_voice(&mut self, k: usize, down: bool);
-    fn voice_energy_j(&self, k: usize) -> f64;
-    fn retire_silent(&mut self, threshold_j: f64) -> usize;
-    fn reset_runaways(&mut self, bound_j: f64) -> usize;
     fn volume_velocity_m3_s(&self) -> f64;
     fn observe_voice(&self, k: usize) -> Observation;
     fn bytes_per_voice(&self) -> usize;
@@ -97,7 +86,6 @@ pub trait VoicePool: Clone + Send + std::fmt::Debug + 'static {
     fn is_driven(&self) -> bool {
         (0..self.n_voices()).any(|k| self.hammer_on(k) || self.is_fading(k))
     }
-    fn hammer_on(&self, k: usize) -> bool;
 }
 
 /// Both pools implement [`VoicePool`] with their own inherent methods.
@@ -124,9 +112,6 @@ macro_rules! voice_pool {
             ) -> Result<Self, BuildError> {
                 <$t>::from_keys(specs, keys, voices)
             }
-            fn n_voices(&self) -> usize {
-                <$t>::n_voices(self)
-            }
             fn step_s(&self) -> f64 {
                 <$t>::step_s(self)
             }
@@ -135,42 +120,6 @@ macro_rules! voice_pool {
             }
             fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn Pair>) {
                 <$t>::run(self, volume_velocity, pair)
-            }
-            fn is_active(&self, k: usize) -> bool {
-                <$t>::is_active(self, k)
-            }
-            fn set_active(&mut self, k: usize, active: bool) {
-                <$t>::set_active(self, k, active)
-            }
-            fn is_fading(&self, k: usize) -> bool {
-                <$t>::is_fading(self, k)
-            }
-            fn key_of_voice(&self, k: usize) -> Option<usize> {
-                <$t>::key_of_voice(self, k)
-            }
-            fn voice_of_key(&self, key: usize) -> Option<usize> {
-                <$t>::voice_of_key(self, key)
-            }
-            fn assign(&mut self, k: usize, key: usize) {
-                <$t>::assign(self, k, key)
-            }
-            fn steal(&mut self, k: usize, key: usize, strike: Strike) {
-                <$t>::steal(self, k, key, strike)
-            }
-            fn strike_voice(&mut self, k: usize, strike: Strike) {
-                <$t>::strike_voice(self, k, strike)
-            }
-            fn set_damper_voice(&mut self, k: usize, down: bool) {
-                <$t>::set_damper_voice(self, k, down)
-            }
-            fn voice_energy_j(&self, k: usize) -> f64 {
-                <$t>::voice_energy_j(self, k)
-            }
-            fn retire_silent(&mut self, threshold_j: f64) -> usize {
-                <$t>::retire_silent(self, threshold_j)
-            }
-            fn reset_runaways(&mut self, bound_j: f64) -> usize {
-                <$t>::reset_runaways(self, bound_j)
             }
             fn volume_velocity_m3_s(&self) -> f64 {
                 <$t>::volume_velocity_m3_s(self)
@@ -184,14 +133,11 @@ macro_rules! voice_pool {
             fn linear_state(&self) -> LinearState {
                 <$t>::linear_state(self)
             }
-            fn mechanical_energy_j(&self) -> f64 {
-                <$t>::mechanical_energy_j(self)
-            }
-            fn hammer_on(&self, k: usize) -> bool {
-                <$t>::hammer_on(self, k)
-            }
             fn set_linear_state(&mut self, x: &[f64]) {
                 <$t>::set_linear_state(self, x)
+            }
+            fn mechanical_energy_j(&self) -> f64 {
+                <$t>::mechanical_energy_j(self)
             }
         }
     };

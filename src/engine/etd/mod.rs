@@ -38,6 +38,7 @@
 use crate::engine::kernels::{has_avx2_fma, Real, LANES};
 use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::physics::hammer::HammerParams;
+use crate::engine::pool::{fade_step, hammer_clear, Policy, VoiceState};
 use crate::engine::spec::{BuildError, Observation, Strike, UnisonSpec, MAX_STRINGS, STEAL_FADE_S};
 use crate::engine::Pair;
 use faer::linalg::solvers::{PartialPivLu, Solve};
@@ -806,16 +807,9 @@ const ETDRK4_STAGES: [StagePlan; 4] = [
 /// One voice of the pool: the state of the key it plays.
 #[derive(Debug, Clone)]
 struct Voice {
-    key: Option<usize>,
+    /// The policy's state (`engine::pool`), read and moved along by the step.
+    state: VoiceState,
     z: [[Modes; 3]; MAX_STRINGS],
-    active: bool,
-    hammer_on: bool,
-    struck: [bool; MAX_STRINGS],
-    damper_down: bool,
-    /// Scale of the contact forces (1, or falling to 0 while the voice is stolen).
-    coupling: f64,
-    fade_left: u32,
-    pending: Option<(usize, Strike)>,
     hammer_y: f64,
     hammer_v: f64,
 }
@@ -979,15 +973,8 @@ impl ExponentialInstrument {
                 .unwrap_or(0)
         });
         let voice = Voice {
-            key: None,
+            state: VoiceState::default(),
             z: std::array::from_fn(|_| std::array::from_fn(|d| Modes::zeros(cap[d]))),
-            active: false,
-            hammer_on: false,
-            struck: [false; MAX_STRINGS],
-            damper_down: false,
-            coupling: 1.0,
-            fade_left: 0,
-            pending: None,
             hammer_y: 0.0,
             hammer_v: 0.0,
         };
@@ -1038,104 +1025,9 @@ impl ExponentialInstrument {
         self.h
     }
 
-    pub fn key_of_voice(&self, k: usize) -> Option<usize> {
-        self.voice(k).key
-    }
-
-    pub fn voice_of_key(&self, key: usize) -> Option<usize> {
-        self.voice_of_key[key]
-    }
-
-    pub fn is_active(&self, k: usize) -> bool {
-        self.voice(k).active
-    }
-
-    pub fn is_fading(&self, k: usize) -> bool {
-        self.voice(k).fade_left > 0
-    }
-
-    /// Whether voice `k`'s hammer is in play (from its strike until it is released).
-    pub fn hammer_on(&self, k: usize) -> bool {
-        self.voice(k).hammer_on
-    }
-
-    /// Give voice `k` to `key`, at rest, damper lifted, inactive until struck (as
-    /// [`crate::engine::Instrument::assign`]); never allocates.
-    pub fn assign(&mut self, k: usize, key: usize) {
-        if let Some(old) = self.voice(k).key {
-            self.voice_of_key[old] = None;
-        }
-        let v = self.voice_mut(k);
-        v.key = Some(key);
-        v.z.iter_mut().flatten().for_each(Modes::clear);
-        (v.active, v.hammer_on, v.damper_down) = (false, false, false);
-        (v.coupling, v.fade_left, v.pending) = (1.0, 0, None);
-        self.voice_of_key[key] = Some(k);
-    }
-
-    /// Hand sounding voice `k` to `key` after a fade (as [`crate::engine::Instrument::steal`]).
-    pub fn steal(&mut self, k: usize, key: usize, strike: Strike) {
-        if !self.voice(k).active {
-            self.assign(k, key);
-            self.strike_voice(k, strike);
-            return;
-        }
-        if let Some(old) = self.voice(k).key {
-            if self.voice_of_key[old] == Some(k) {
-                self.voice_of_key[old] = None;
-            }
-        }
-        if let Some((old_pending, _)) = self.voice(k).pending {
-            if old_pending != key {
-                self.voice_of_key[old_pending] = None;
-            }
-        }
-        self.voice_of_key[key] = Some(k);
-        let fade_steps = self.fade_steps;
-        let v = self.voice_mut(k);
-        if v.fade_left == 0 {
-            v.fade_left = fade_steps;
-        }
-        v.pending = Some((key, strike));
-        v.damper_down = false;
-    }
-
-    /// Launch voice `k`'s hammer at its strings from their current displacement.
-    pub fn strike_voice(&mut self, k: usize, strike: Strike) {
-        let Some(key) = self.voice(k).key else {
-            return;
-        };
-        let km = &self.keys[key];
-        let n = strike.strings_struck(km.strings.len());
-        let y = self.halves[0].board.at(&km.board_shape[0]).0;
-        let v = &mut self.halves[k % 2].set.voices[k / 2];
-        v.struck = [false; MAX_STRINGS];
-        v.struck[..n].iter_mut().for_each(|s| *s = true);
-        v.hammer_y = (0..n)
-            .map(|s| strike_point(km, s, &v.z[s][0], y))
-            .fold(f64::NEG_INFINITY, f64::max);
-        v.hammer_v = strike.velocity_m_s;
-        (v.hammer_on, v.active) = (true, true);
-    }
-
     /// Voice 0's strike (one-key use).
     pub fn strike(&mut self, strike: Strike) {
         self.strike_voice(0, strike);
-    }
-
-    /// Include voice `k` in the simulation without striking it, or leave it out.
-    pub fn set_active(&mut self, k: usize, active: bool) {
-        let v = self.voice_mut(k);
-        v.active = v.key.is_some() && (active || v.hammer_on || v.fade_left > 0);
-    }
-
-    /// Lower or lift voice `k`'s damper (keys without one ignore it; a fading voice's applies to
-    /// the key that follows).
-    pub fn set_damper_voice(&mut self, k: usize, down: bool) {
-        let v = self.voice(k);
-        let key = v.pending.map(|(key, _)| key).or(v.key);
-        let has = key.is_some_and(|key| self.keys[key].has_damper);
-        self.voice_mut(k).damper_down = down && has;
     }
 
     /// Voice 0's damper.
@@ -1145,7 +1037,7 @@ impl ExponentialInstrument {
 
     /// Mechanical energy of the strings, their contact springs and the board (J), hammers apart.
     pub fn mechanical_energy_j(&self) -> f64 {
-        let voices: f64 = (0..self.n_voices).map(|k| self.voice_energy_j(k)).sum();
+        let voices: f64 = (0..self.n_voices).map(|k| self.strings_energy_j(k)).sum();
         self.board().energy_j() + voices
     }
 
@@ -1157,14 +1049,14 @@ impl ExponentialInstrument {
     /// contact's share of the last term), `E_K` the energy of its modes on the contact spring
     /// against a fixed bridge and `y` the board's displacement at the key's point: a string at
     /// rest on a moving board holds the energy of following it, and is not silent.
-    pub fn voice_energy_j(&self, k: usize) -> f64 {
+    fn strings_energy_j(&self, k: usize) -> f64 {
         let v = self.voice(k);
-        let (true, Some(key)) = (v.active, v.key) else {
+        let (true, Some(key)) = (v.state.active, v.state.key) else {
             return 0.0;
         };
         let (board, km) = (self.board(), &self.keys[key]);
         let at: [(f64, f64); 3] = std::array::from_fn(|d| board.at(&km.board_shape[d]));
-        let c = v.coupling;
+        let c = v.state.coupling;
         let mut e = 0.0;
         for (s, blocks) in km.strings.iter().enumerate() {
             for (d, b) in blocks.iter().enumerate() {
@@ -1183,53 +1075,6 @@ impl ExponentialInstrument {
         e
     }
 
-    /// Stop simulating silent voices (as [`crate::engine::Instrument::retire_silent`]).
-    pub fn retire_silent(&mut self, threshold_j: f64) -> usize {
-        let mut retired = 0;
-        for k in 0..self.n_voices {
-            let v = self.voice(k);
-            let Some(key) = v.key else {
-                continue;
-            };
-            let undamped = !self.keys[key].has_damper;
-            if v.active
-                && !v.hammer_on
-                && v.fade_left == 0
-                && (v.damper_down || undamped)
-                && self.voice_energy_j(k) < threshold_j
-            {
-                let v = self.voice_mut(k);
-                v.z.iter_mut().flatten().for_each(Modes::clear);
-                v.active = false;
-                retired += 1;
-            }
-        }
-        retired
-    }
-
-    /// Reset voices (and the board) that hold a non-finite value or more than `bound_j`.
-    pub fn reset_runaways(&mut self, bound_j: f64) -> usize {
-        let mut reset = 0;
-        for k in 0..self.n_voices {
-            let e = self.voice_energy_j(k);
-            let v = self.voice_mut(k);
-            let hammer_ok = v.hammer_y.is_finite() && v.hammer_v.is_finite();
-            if v.active && (!e.is_finite() || e > bound_j || !hammer_ok) {
-                v.z.iter_mut().flatten().for_each(Modes::clear);
-                (v.hammer_y, v.hammer_v) = (0.0, 0.0);
-                (v.active, v.hammer_on, v.fade_left, v.pending) = (false, false, 0, None);
-                v.coupling = 1.0;
-                reset += 1;
-            }
-        }
-        let board_j = self.board().energy_j();
-        if !board_j.is_finite() || board_j > bound_j {
-            self.halves.iter_mut().for_each(|h| h.board.clear());
-            reset += 1;
-        }
-        reset
-    }
-
     /// Net volume velocity of the board (m^3/s).
     pub fn volume_velocity_m3_s(&self) -> f64 {
         self.board().volume_velocity()
@@ -1242,7 +1087,7 @@ impl ExponentialInstrument {
             ..Observation::default()
         };
         let v = self.voice(k);
-        let Some(key) = v.key else {
+        let Some(key) = v.state.key else {
             return obs;
         };
         let km = &self.keys[key];
@@ -1256,13 +1101,13 @@ impl ExponentialInstrument {
             for d in 0..3 {
                 let (b, z) = (&blocks[d], &v.z[s][d]);
                 let rest = 1.0 - b.statics.bridge;
-                let f = v.coupling
+                let f = v.state.coupling
                     * (km.contact_k[d] * (read(&b.rows[BRIDGE_Q][0], z) - rest * rb[d][0])
                         + km.contact_c[d] * (read(&b.rows[BRIDGE_V][0], z) - rest * rb[d][1]));
                 obs.bridge_force_n[s][d] = f;
                 obs.total_force_n[d] += f;
             }
-            if v.hammer_on && v.struck[s] {
+            if v.state.hammer_on && v.state.struck[s] {
                 let ye = strike_point(km, s, &v.z[s][0], rb[0][0]);
                 obs.hammer_force_n[s] = km.hammer.felt_force_n(v.hammer_y - ye);
             }
@@ -1289,15 +1134,15 @@ impl ExponentialInstrument {
             // Chunks end where a stolen voice's fade does, so its next key starts between steps.
             let fade = self.halves.iter().flat_map(|h| &h.set.voices);
             let fade = fade
-                .filter(|v| v.fade_left > 0)
-                .map(|v| v.fade_left as usize);
+                .filter(|v| v.state.fade_left > 0)
+                .map(|v| v.state.fade_left as usize);
             let n = fade.min().unwrap_or(usize::MAX);
             let n = n.min(volume_velocity.len() - done);
             for half in &mut self.halves {
                 let set = &mut half.set;
                 set.live.clear();
                 for (i, v) in set.voices.iter().enumerate() {
-                    if v.active && v.key.is_some() {
+                    if v.state.active && v.state.key.is_some() {
                         set.live.push(i);
                     }
                 }
@@ -1403,16 +1248,7 @@ impl ExponentialInstrument {
     /// At the end of a chunk, give every voice whose fade has ended its next key.
     fn finish_fades(&mut self) {
         for k in 0..self.n_voices {
-            let v = self.voice(k);
-            if v.fade_left != 0 || v.pending.is_none() {
-                continue;
-            }
-            if let Some((key, strike)) = self.voice_mut(k).pending.take() {
-                let damper_down = self.voice(k).damper_down;
-                self.assign(k, key);
-                self.strike_voice(k, strike);
-                self.set_damper_voice(k, damper_down);
-            }
+            self.complete_fade(k);
         }
     }
 
@@ -1422,7 +1258,7 @@ impl ExponentialInstrument {
         let mut state = crate::engine::LinearState::default();
         for k in 0..self.n_voices {
             let v = self.voice(k);
-            let (true, Some(key)) = (v.active, v.key) else {
+            let (true, Some(key)) = (v.state.active, v.state.key) else {
                 continue;
             };
             for (s, blocks) in self.keys[key].strings.iter().enumerate() {
@@ -1452,7 +1288,7 @@ impl ExponentialInstrument {
             &x[at - n..at]
         };
         for k in 0..self.n_voices {
-            let (true, Some(key)) = (self.voice(k).active, self.voice(k).key) else {
+            let (true, Some(key)) = (self.voice(k).state.active, self.voice(k).state.key) else {
                 continue;
             };
             let v = &mut self.halves[k % 2].set.voices[k / 2];
@@ -1481,16 +1317,16 @@ impl ExponentialInstrument {
         // term), the stages' accelerations (4 × 4), the update (14).
         let mut flops = nb * (18 + 16 + 16 + 14);
         for v in self.halves.iter().flat_map(|h| &h.set.voices) {
-            let (true, Some(key)) = (v.active, v.key) else {
+            let (true, Some(key)) = (v.state.active, v.state.key) else {
                 continue;
             };
             let km = &self.keys[key];
             for (s, blocks) in km.strings.iter().enumerate() {
                 for (d, b) in blocks.iter().enumerate() {
                     let n = b.e_full[0].len();
-                    let struck = d == 0 && v.hammer_on && v.struck[s];
-                    let damped = d != 1 && v.damper_down;
-                    let fading = v.coupling != 1.0;
+                    let struck = d == 0 && v.state.hammer_on && v.state.struck[s];
+                    let damped = d != 1 && v.state.damper_down;
+                    let fading = v.state.coupling != 1.0;
                     let ports = 2 + usize::from(struck) + usize::from(damped);
                     let inputs =
                         2 + usize::from(struck) + usize::from(damped) + usize::from(fading);
@@ -1516,13 +1352,104 @@ impl ExponentialInstrument {
     }
 }
 
+/// The pool policy ([`Policy`]) on the live integrator's voices, whose strings move in
+/// coordinates relative to the bridge (so a voice enters and leaves the board as it is).
+impl Policy for ExponentialInstrument {
+    fn n_voices(&self) -> usize {
+        self.n_voices
+    }
+
+    fn state(&self, k: usize) -> &VoiceState {
+        &self.voice(k).state
+    }
+
+    fn state_mut(&mut self, k: usize) -> &mut VoiceState {
+        &mut self.voice_mut(k).state
+    }
+
+    fn voice_of_key(&self, key: usize) -> Option<usize> {
+        self.voice_of_key[key]
+    }
+
+    fn set_voice_of_key(&mut self, key: usize, voice: Option<usize>) {
+        self.voice_of_key[key] = voice;
+    }
+
+    fn fade_steps(&self) -> u32 {
+        self.fade_steps
+    }
+
+    fn key_strings(&self, key: usize) -> usize {
+        self.keys[key].strings.len()
+    }
+
+    fn key_has_damper(&self, key: usize) -> bool {
+        self.keys[key].has_damper
+    }
+
+    /// The voice points at the key's precomputed modes; only its state is cleared.
+    fn load_key(&mut self, k: usize, _key: usize) {
+        self.voice_mut(k)
+            .z
+            .iter_mut()
+            .flatten()
+            .for_each(Modes::clear);
+    }
+
+    fn rest_strings(&mut self, k: usize) {
+        self.voice_mut(k)
+            .z
+            .iter_mut()
+            .flatten()
+            .for_each(Modes::clear);
+    }
+
+    fn enter(&mut self, _k: usize) {}
+
+    fn leave(&mut self, _k: usize) {}
+
+    fn strike_contact_m(&self, k: usize, struck: usize) -> f64 {
+        let v = self.voice(k);
+        let Some(key) = v.state.key else {
+            return 0.0;
+        };
+        let km = &self.keys[key];
+        let y = self.board().at(&km.board_shape[0]).0;
+        (0..struck)
+            .map(|s| strike_point(km, s, &v.z[s][0], y))
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    fn set_hammer(&mut self, k: usize, position_m: f64, velocity_m_s: f64) {
+        let v = self.voice_mut(k);
+        (v.hammer_y, v.hammer_v) = (position_m, velocity_m_s);
+    }
+
+    fn hammer_finite(&self, k: usize) -> bool {
+        let v = self.voice(k);
+        v.hammer_y.is_finite() && v.hammer_v.is_finite()
+    }
+
+    fn voice_energy_j(&self, k: usize) -> f64 {
+        self.strings_energy_j(k)
+    }
+
+    fn board_energy_j(&self) -> f64 {
+        self.board().energy_j()
+    }
+
+    fn rest_board(&mut self) {
+        self.halves.iter_mut().for_each(|h| h.board.clear());
+    }
+}
+
 impl VoiceSet {
     /// Every row each live voice reads from the step's start.
     #[inline(always)]
     fn begin<const FMA: bool>(&mut self, keys: &[KeyModes]) {
         for &i in &self.live {
             let v = &self.voices[i];
-            let km = &keys[v.key.expect("live voices have a key")];
+            let km = &keys[v.state.key.expect("live voices have a key")];
             let w = &mut self.work[i];
             w.start = [[[0.0; BLOCKS]; 3]; 4];
             for (s, blocks) in km.strings.iter().enumerate() {
@@ -1533,11 +1460,11 @@ impl VoiceSet {
                         w.start[BRIDGE_Q][which][lane] = q[which];
                         w.start[BRIDGE_V][which][lane] = qd[which];
                     }
-                    if d == 0 && v.hammer_on && v.struck[s] {
+                    if d == 0 && v.state.hammer_on && v.state.struck[s] {
                         let [y] = read_rows::<FMA, 1>([&b.rows[STRIKE_Q]], z);
                         (0..3).for_each(|which| w.start[STRIKE_Q][which][lane] = y[which]);
                     }
-                    if d != 1 && v.damper_down {
+                    if d != 1 && v.state.damper_down {
                         let [y] = read_rows::<FMA, 1>([&b.rows[DAMPER_V]], z);
                         (0..3).for_each(|which| w.start[DAMPER_V][which][lane] = y[which]);
                     }
@@ -1560,7 +1487,7 @@ impl VoiceSet {
     ) {
         for &i in &self.live {
             let v = &self.voices[i];
-            let km = &keys[v.key.expect("live voices have a key")];
+            let km = &keys[v.state.key.expect("live voices have a key")];
             let at = read_point::<FMA>(&km.board_shape, board);
             let f = voice_stage(km, v, &mut self.work[i], stage, which, &terms, at, h);
             drive_point::<FMA>(force, &km.board_shape, f);
@@ -1571,7 +1498,7 @@ impl VoiceSet {
     #[inline(always)]
     fn accel<const FMA: bool>(&mut self, keys: &[KeyModes], stage: usize, acc: &[f64]) {
         for &i in &self.live {
-            let km = &keys[self.voices[i].key.expect("live voices have a key")];
+            let km = &keys[self.voices[i].state.key.expect("live voices have a key")];
             voice_accel(
                 &mut self.work[i],
                 stage,
@@ -1592,10 +1519,10 @@ impl VoiceSet {
     ) {
         for &i in &self.live {
             let v = &mut self.voices[i];
-            let km = &keys[v.key.expect("live voices have a key")];
+            let km = &keys[v.state.key.expect("live voices have a key")];
             let w = &self.work[i];
             let ah = w.hammer_acc;
-            let felt = v.hammer_on;
+            let felt = v.state.hammer_on;
             if felt {
                 let v0 = v.hammer_v;
                 let (v2, v3, v4) = (v0 + 0.5 * h * ah[0], v0 + 0.5 * h * ah[1], v0 + h * ah[2]);
@@ -1612,28 +1539,26 @@ impl VoiceSet {
                     if felt && d == 0 {
                         drive::<FMA>(&b.gains[IN_FELT], u(IN_FELT), z);
                     }
-                    if v.damper_down && d != 1 {
+                    if v.state.damper_down && d != 1 {
                         drive::<FMA>(&b.gains[IN_DAMPER], u(IN_DAMPER), z);
                     }
                 }
             }
-            if v.hammer_on && v.hammer_v < 0.0 {
+            // (The board's displacement is read only for a receding hammer.)
+            if v.state.hammer_on && v.hammer_v < 0.0 {
                 let y = board.at(&km.board_shape[0]).0;
-                let clear = (0..km.strings.len()).filter(|&s| v.struck[s]).all(|s| {
-                    strike_point(km, s, &v.z[s][0], y) - v.hammer_y >= km.hammer.release_gap_m
-                });
-                if clear {
-                    v.hammer_on = false;
+                let (z, struck) = (&v.z, v.state.struck);
+                let points = (0..km.strings.len())
+                    .filter(|&s| struck[s])
+                    .map(|s| strike_point(km, s, &z[s][0], y));
+                if hammer_clear(v.hammer_y, v.hammer_v, km.hammer.release_gap_m, points) {
+                    v.state.hammer_on = false;
                 }
             }
         }
         // Stolen voices fade out along a raised cosine (their next key is given between chunks).
         for v in &mut self.voices {
-            if v.fade_left > 0 {
-                v.fade_left -= 1;
-                let x = f64::from(v.fade_left) / f64::from(fade_steps);
-                v.coupling = 0.5 - 0.5 * (PI * x).cos();
-            }
+            fade_step(&mut v.state, fade_steps);
         }
     }
 }
@@ -1738,7 +1663,11 @@ fn voice_stage(
     board: [[f64; 2]; 3],
     h: f64,
 ) -> [f64; 3] {
-    let (felt, damped, fading) = (v.hammer_on, v.damper_down, v.coupling != 1.0);
+    let (felt, damped, fading) = (
+        v.state.hammer_on,
+        v.state.damper_down,
+        v.state.coupling != 1.0,
+    );
     let out = |o: usize| {
         let mut y = w.start[o][which];
         for &(p, kind, coef) in terms {
@@ -1769,8 +1698,8 @@ fn voice_stage(
         let [by, bv] = board[b % 3];
         let rest = 1.0 - through[b];
         let f = kc[b] * (q[b] - rest * by) + cc[b] * (qd[b] - rest * bv);
-        fade[b] = (1.0 - v.coupling) * f;
-        force[b] = v.coupling * f;
+        fade[b] = (1.0 - v.state.coupling) * f;
+        force[b] = v.state.coupling * f;
         velocity[b] = bv;
     }
     let mut felt_u = [0.0; BLOCKS];
@@ -1778,7 +1707,7 @@ fn voice_stage(
     if felt {
         let y = hammer_stage_y(v, &w.hammer_acc, stage, h);
         let strike = out(STRIKE_Q);
-        for s in (0..km.strings.len()).filter(|&s| v.struck[s]) {
+        for s in (0..km.strings.len()).filter(|&s| v.state.struck[s]) {
             let b = 3 * s;
             let f = km
                 .hammer

@@ -19,6 +19,7 @@ use crate::engine::physics::contact::Contact;
 use crate::engine::physics::duplex::{duplex_damping_matrix, low_rank_factor};
 use crate::engine::physics::hammer::HammerParams;
 use crate::engine::physics::string::ModeSet;
+use crate::engine::pool::{fade_step, hammer_clear, Policy, VoiceState};
 use crate::engine::spec::{
     BuildError, Energy, Observation, Strike, UnisonSpec, MAX_STRINGS, STEAL_FADE_S,
 };
@@ -59,7 +60,6 @@ pub struct KeyModel<T> {
 #[derive(Debug, Clone)]
 struct Voice {
     base: usize,
-    key: Option<usize>,
     /// The key's `ranges` moved to this slot.
     ranges: [[Range<usize>; 3]; MAX_STRINGS],
     n_strings: usize,
@@ -81,22 +81,6 @@ struct Model<T> {
     static_shape: Vec<T>,
     board_volume: Vec<T>,
     h: f64,
-}
-
-/// What each voice is doing, apart from its modes; read by every evaluation.
-#[derive(Debug, Clone)]
-struct VoiceFlags {
-    /// Simulated at all: a voice joins when struck or its damper is lifted, and leaves when it
-    /// falls silent ([`Instrument::retire_silent`]).
-    active: Vec<bool>,
-    hammer_on: Vec<bool>,
-    struck: Vec<[bool; MAX_STRINGS]>,
-    damper_down: Vec<bool>,
-    /// Scale of the voice's contact forces (1, or falling to 0 while the voice is stolen).
-    coupling: Vec<f64>,
-    /// Steps left in the fade of a stolen voice, and the key and strike that follow it.
-    fade_left: Vec<u32>,
-    pending: Vec<Option<(usize, Strike)>>,
 }
 
 /// Strings of up to 88 keys on one shared soundboard (paper Eq. 10, the board coupling every
@@ -121,7 +105,8 @@ pub struct Instrument<T: Real = f64> {
     /// Per voice, the board's displacement and velocity at its point (T, L, P) when it stopped
     /// being simulated (zero once its strings are set at rest): see [`Instrument::set_active`].
     left_at: Vec<[[f64; 2]; 3]>,
-    flags: VoiceFlags,
+    /// Each voice's policy state (`engine::pool`), read by every evaluation.
+    states: Vec<VoiceState>,
     voice_of_key: Vec<Option<usize>>,
     /// Mode ranges simulated in this step: the active voices' and the board's.
     live: Vec<Range<usize>>,
@@ -297,7 +282,7 @@ impl<T: Real> Instrument<T> {
     pub fn unison(spec: &UnisonSpec) -> Result<Self, BuildError> {
         let mut u = Self::pool(std::slice::from_ref(spec), 1)?;
         u.assign(0, 0);
-        u.flags.active[0] = true;
+        u.states[0].active = true;
         Ok(u)
     }
 
@@ -344,7 +329,6 @@ impl<T: Real> Instrument<T> {
         let voice_slots: Vec<Voice> = (0..voices)
             .map(|i| Voice {
                 base: i * capacity,
-                key: None,
                 ranges: Default::default(),
                 n_strings: 0,
                 n_modes: 0,
@@ -385,15 +369,7 @@ impl<T: Real> Instrument<T> {
             hammer_y: vec![0.0; voices],
             hammer_v: vec![0.0; voices],
             left_at: vec![[[0.0; 2]; 3]; voices],
-            flags: VoiceFlags {
-                active: vec![false; voices],
-                hammer_on: vec![false; voices],
-                struck: vec![[false; MAX_STRINGS]; voices],
-                damper_down: vec![false; voices],
-                coupling: vec![1.0; voices],
-                fade_left: vec![0; voices],
-                pending: vec![None; voices],
-            },
+            states: vec![VoiceState::default(); voices],
             qs: vec![T::ZERO; n],
             vs: vec![T::ZERO; n],
             acc: vec![T::ZERO; n],
@@ -467,7 +443,7 @@ impl<T: Real> Instrument<T> {
         let m = &self.model;
         let mut stiffness: Vec<f64> = m.omega2.iter().map(|w| w.to_f64()).collect();
         for (k, voice) in m.voices.iter().enumerate() {
-            let (true, Some(key)) = (self.flags.active[k], voice.key) else {
+            let (true, Some(key)) = (self.states[k].active, self.states[k].key) else {
                 continue;
             };
             let km = &m.keys[key];
@@ -511,7 +487,7 @@ impl<T: Real> Instrument<T> {
     fn linear_ranges(&self) -> Vec<(Range<usize>, Option<usize>)> {
         let voices = self.model.voices.iter().enumerate();
         voices
-            .filter(|&(k, v)| self.flags.active[k] && v.key.is_some())
+            .filter(|&(k, _)| self.states[k].active && self.states[k].key.is_some())
             .map(|(k, v)| (v.base..v.base + v.n_modes, Some(k)))
             .chain([(self.model.board.clone(), None)])
             .collect()
@@ -519,93 +495,7 @@ impl<T: Real> Instrument<T> {
 
     /// Whether voice 0's hammer is still part of the system.
     pub fn hammer_engaged(&self) -> bool {
-        self.flags.hammer_on[0]
-    }
-
-    /// Whether voice `k`'s hammer is in play (from its strike until it is released).
-    pub fn hammer_on(&self, k: usize) -> bool {
-        self.flags.hammer_on[k]
-    }
-
-    /// The key voice `k` plays (an index into the bank), if any.
-    pub fn key_of_voice(&self, k: usize) -> Option<usize> {
-        self.model.voices[k].key
-    }
-
-    /// The voice that plays `key`, or will once its fade ends.
-    pub fn voice_of_key(&self, key: usize) -> Option<usize> {
-        self.voice_of_key[key]
-    }
-
-    /// Give voice `k` to `key`: the previous key loses it, the slot takes the key's coefficients
-    /// and starts at rest, damper lifted, inactive until struck. Copies, never allocates.
-    pub fn assign(&mut self, k: usize, key: usize) {
-        if let Some(old) = self.model.voices[k].key {
-            self.voice_of_key[old] = None;
-        }
-        let km = &self.model.keys[key];
-        let voice = &mut self.model.voices[k];
-        let (base, capacity_end) = (voice.base, voice.base + km.n_modes);
-        let slot_end = self
-            .model
-            .voices
-            .get(k + 1)
-            .map_or(self.model.board.start, |v| v.base);
-        debug_assert!(capacity_end <= slot_end);
-        let voice = &mut self.model.voices[k];
-        voice.key = Some(key);
-        voice.n_strings = km.n_strings;
-        voice.n_modes = km.n_modes;
-        for (s, r) in voice.ranges.iter_mut().enumerate() {
-            for d in 0..3 {
-                let local = &km.ranges[s][d];
-                r[d] = base + local.start..base + local.end;
-            }
-        }
-        self.model.omega2[base..capacity_end].copy_from_slice(&km.omega2);
-        self.model.damp[base..capacity_end].copy_from_slice(&km.damp);
-        self.model.bridge_shape[base..capacity_end].copy_from_slice(&km.bridge_shape);
-        self.model.static_shape[base..capacity_end].copy_from_slice(&km.static_shape);
-        self.q[base..slot_end].fill(T::ZERO);
-        self.v[base..slot_end].fill(T::ZERO);
-        self.left_at[k] = [[0.0; 2]; 3];
-        self.voice_of_key[key] = Some(k);
-        let f = &mut self.flags;
-        (f.active[k], f.hammer_on[k], f.damper_down[k]) = (false, false, false);
-        (f.coupling[k], f.fade_left[k], f.pending[k]) = (1.0, 0, None);
-    }
-
-    /// Hand sounding voice `k` to `key`: over [`STEAL_FADE_S`] its contact forces fall to zero
-    /// with a raised cosine (the board is released smoothly, no click), then the voice takes `key`
-    /// at rest and `strike` hits it. Stealing a voice already fading only replaces what follows.
-    /// A voice that is not active is assigned and struck at once.
-    pub fn steal(&mut self, k: usize, key: usize, strike: Strike) {
-        if !self.flags.active[k] {
-            self.assign(k, key);
-            self.strike_voice(k, strike);
-            return;
-        }
-        if let Some(old) = self.model.voices[k].key {
-            if self.voice_of_key[old] == Some(k) {
-                self.voice_of_key[old] = None;
-            }
-        }
-        if let Some((old_pending, _)) = self.flags.pending[k] {
-            if old_pending != key {
-                self.voice_of_key[old_pending] = None;
-            }
-        }
-        self.voice_of_key[key] = Some(k);
-        if self.flags.fade_left[k] == 0 {
-            self.flags.fade_left[k] = self.fade_steps;
-        }
-        self.flags.pending[k] = Some((key, strike));
-        self.flags.damper_down[k] = false;
-    }
-
-    /// Whether voice `k` is fading out before it changes key.
-    pub fn is_fading(&self, k: usize) -> bool {
-        self.flags.fade_left[k] > 0
+        self.states[0].hammer_on
     }
 
     /// Kinetic and potential energy of the uncoupled modes `r` (J).
@@ -633,21 +523,11 @@ impl<T: Real> Instrument<T> {
         self.v[r].fill(T::ZERO);
     }
 
-    /// Mechanical energy of voice `k`'s strings and contact springs (J; 0 while it is not
-    /// simulated): what decides when a voice has fallen silent and which voice is the quietest. A
-    /// string at rest on a moving board holds the energy of following it, and is not silent.
-    pub fn voice_energy_j(&self, k: usize) -> f64 {
-        if !self.flags.active[k] {
-            return 0.0;
-        }
-        self.modal_energy_j(self.voice_modes(k)) + self.voice_contact_j(k)
-    }
-
     /// Energy in voice `k`'s contact springs (J), `1/2 k (r_s - r_b)^2` per string and direction
     /// (Eq. 6), scaled by the fade of a stolen voice.
     fn voice_contact_j(&self, k: usize) -> f64 {
         let (m, voice) = (&self.model, &self.model.voices[k]);
-        let Some(key) = voice.key else {
+        let Some(key) = self.states[k].key else {
             return 0.0;
         };
         let km = &m.keys[key];
@@ -658,121 +538,22 @@ impl<T: Real> Instrument<T> {
                 let r = voice.ranges[s][d].clone();
                 let rs = T::dot_wide::<false>(&m.bridge_shape[r.clone()], &self.q[r]);
                 let rb = T::dot_wide::<false>(&km.board_shape[d], qb);
-                e += 0.5 * self.flags.coupling[k] * km.contact.stiffness_n_m[d] * (rs - rb).powi(2);
+                e +=
+                    0.5 * self.states[k].coupling * km.contact.stiffness_n_m[d] * (rs - rb).powi(2);
             }
         }
         e
     }
 
-    /// Stop simulating the voices that have fallen silent: strings below `threshold_j`, no hammer,
-    /// no fade, and either the damper down or no damper at all (strings whose damper a key or
-    /// pedal lifts keep ringing in sympathy). Their strings are set to rest; they keep their key
-    /// until another key needs the voice. Returns how many were retired.
-    pub fn retire_silent(&mut self, threshold_j: f64) -> usize {
-        let mut retired = 0;
-        for k in 0..self.n_voices() {
-            let f = &self.flags;
-            let Some(key) = self.model.voices[k].key else {
-                continue;
-            };
-            let undamped = self.model.keys[key].damper_shape.is_empty();
-            if f.active[k]
-                && !f.hammer_on[k]
-                && f.fade_left[k] == 0
-                && (f.damper_down[k] || undamped)
-                && self.voice_energy_j(k) < threshold_j
-            {
-                self.rest(self.voice_modes(k));
-                self.left_at[k] = [[0.0; 2]; 3];
-                self.flags.active[k] = false;
-                retired += 1;
-            }
-        }
-        retired
-    }
-
-    /// Put right what has blown up: a voice whose strings hold a non-finite value or more than
-    /// `bound_j` is set to rest, silent and out of the simulation (its key kept); a non-finite or
-    /// overloaded board is set to rest too. Returns how many parts were reset. O(modes), for once
-    /// per audio block.
-    pub fn reset_runaways(&mut self, bound_j: f64) -> usize {
-        let mut reset = 0;
-        for k in 0..self.n_voices() {
-            let e = self.voice_energy_j(k);
-            let hammer_ok = self.hammer_y[k].is_finite() && self.hammer_v[k].is_finite();
-            if self.flags.active[k] && (!e.is_finite() || e > bound_j || !hammer_ok) {
-                self.rest(self.voice_modes(k));
-                self.left_at[k] = [[0.0; 2]; 3];
-                (self.hammer_y[k], self.hammer_v[k]) = (0.0, 0.0);
-                let f = &mut self.flags;
-                (f.active[k], f.hammer_on[k], f.fade_left[k], f.pending[k]) =
-                    (false, false, 0, None);
-                f.coupling[k] = 1.0;
-                reset += 1;
-            }
-        }
-        let board_j = self.modal_energy_j(self.model.board.clone());
-        if !board_j.is_finite() || board_j > bound_j {
-            self.rest(self.model.board.clone());
-            reset += 1;
-        }
-        reset
-    }
-
-    /// Strike voice 0 (see [`Instrument::strike_voice`]).
+    /// Strike voice 0 (see [`Policy::strike_voice`]).
     pub fn strike(&mut self, strike: Strike) {
         self.strike_voice(0, strike);
-    }
-
-    /// Launch voice `k`'s hammer at its strings (Eq. 14–15): it starts touching the struck strings
-    /// at their current displacement (a sounding key is re-struck in its motion) and moves towards
-    /// them at `velocity_m_s`. A voice without a key ignores it.
-    pub fn strike_voice(&mut self, k: usize, strike: Strike) {
-        let voice = &self.model.voices[k];
-        let Some(key) = voice.key else {
-            return;
-        };
-        if !self.flags.active[k] {
-            self.join(k);
-        }
-        let (voice, km) = (&self.model.voices[k], &self.model.keys[key]);
-        let n_struck = strike.strings_struck(voice.n_strings);
-        let mut struck = [false; MAX_STRINGS];
-        let mut contact_y = f64::NEG_INFINITY;
-        for s in 0..n_struck {
-            struck[s] = true;
-            let r = voice.ranges[s][0].clone();
-            contact_y = contact_y.max(T::dot_wide::<false>(&km.hammer_shape, &self.q[r]));
-        }
-        self.flags.struck[k] = struck;
-        self.hammer_y[k] = contact_y;
-        self.hammer_v[k] = strike.velocity_m_s;
-        self.flags.hammer_on[k] = true;
-        self.flags.active[k] = true;
-    }
-
-    /// Include voice `k` in the simulation without striking it (a key held silently, or every key
-    /// under the sustain pedal, whose strings then ring in sympathy through the board), or leave it
-    /// out. A left-out voice keeps its motion relative to the bridge frozen, and joins again
-    /// following the board: a string at rest enters at its static deflection by the bridge point
-    /// (`g y`, moving with it), not at zero, which would jolt the board through the contact
-    /// spring. A voice without a key stays out.
-    pub fn set_active(&mut self, k: usize, active: bool) {
-        let f = &self.flags;
-        let now =
-            self.model.voices[k].key.is_some() && (active || f.hammer_on[k] || f.fade_left[k] > 0);
-        match (f.active[k], now) {
-            (false, true) => self.join(k),
-            (true, false) => self.left_at[k] = self.board_at(k),
-            _ => {}
-        }
-        self.flags.active[k] = now;
     }
 
     /// The board's displacement and velocity at voice `k`'s point (T, L, P).
     fn board_at(&self, k: usize) -> [[f64; 2]; 3] {
         let m = &self.model;
-        let Some(key) = m.voices[k].key else {
+        let Some(key) = self.states[k].key else {
             return [[0.0; 2]; 3];
         };
         let shape = &m.keys[key].board_shape;
@@ -785,49 +566,14 @@ impl<T: Real> Instrument<T> {
         })
     }
 
-    /// Move voice `k`'s strings with the board since it left: `q += g (y - y_left)`,
-    /// `qdot += g (y' - y'_left)` in each direction.
-    fn join(&mut self, k: usize) {
-        let (now, left) = (self.board_at(k), self.left_at[k]);
-        let voice = &self.model.voices[k];
-        for s in 0..voice.n_strings {
-            for d in 0..3 {
-                let dy = T::from_f64(now[d][0] - left[d][0]);
-                let dv = T::from_f64(now[d][1] - left[d][1]);
-                for i in voice.ranges[s][d].clone() {
-                    let g = self.model.static_shape[i];
-                    self.q[i] += g * dy;
-                    self.v[i] += g * dv;
-                }
-            }
-        }
-        self.left_at[k] = [[0.0; 2]; 3];
-    }
-
-    /// Whether voice `k` is simulated.
-    pub fn is_active(&self, k: usize) -> bool {
-        self.flags.active[k]
-    }
-
-    /// Lower or lift voice 0's damper (see [`Instrument::set_damper_voice`]).
+    /// Lower or lift voice 0's damper (see [`Policy::set_damper_voice`]).
     pub fn set_damper(&mut self, down: bool) {
         self.set_damper_voice(0, down);
     }
 
-    /// Lower (key released) or lift (key down, or a pedal holding it) voice `k`'s damper. Keys
-    /// without a damper ignore it. For a fading voice it applies to the key that follows.
-    pub fn set_damper_voice(&mut self, k: usize, down: bool) {
-        let key = match self.flags.pending[k] {
-            Some((key, _)) => Some(key),
-            None => self.model.voices[k].key,
-        };
-        let has_damper = key.is_some_and(|key| !self.model.keys[key].damper_shape.is_empty());
-        self.flags.damper_down[k] = down && has_damper;
-    }
-
     /// Whether voice 0's damper rests on the strings.
     pub fn damper_down(&self) -> bool {
-        self.flags.damper_down[0]
+        self.states[0].damper_down
     }
 
     /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity (m^3/s)
@@ -843,7 +589,7 @@ impl<T: Real> Instrument<T> {
     pub fn step(&mut self) {
         self.live.clear();
         for (k, voice) in self.model.voices.iter().enumerate() {
-            if self.flags.active[k] {
+            if self.states[k].active {
                 self.live.push(voice.base..voice.base + voice.n_modes);
             }
         }
@@ -872,7 +618,7 @@ impl<T: Real> Instrument<T> {
     #[inline(always)]
     fn step_impl<const SIMD: bool>(&mut self) {
         let h = self.model.h;
-        let (m, flags, live) = (&self.model, &self.flags, &self.live);
+        let (m, states, live) = (&self.model, &self.states, &self.live);
         let z = &mut self.duplex_z;
         let (q0, v0, hy0, hv0) = (&self.q, &self.v, &self.hammer_y, &self.hammer_v);
         let (qs, vs, acc) = (&mut self.qs, &mut self.vs, &mut self.acc);
@@ -887,7 +633,7 @@ impl<T: Real> Instrument<T> {
         let hammers = 0..hy0.len();
         let ch = |c: f64| T::from_f64(c * h);
         // Stage 1 at the current state.
-        evaluate::<T, SIMD>(m, flags, live, q0, v0, hy0, acc, ah, z);
+        evaluate::<T, SIMD>(m, states, live, q0, v0, hy0, acc, ah, z);
         for r in live {
             stage::<T, true>(ch(0.5), r.clone(), q0, v0, acc, qs, vs, sum_q, sum_v);
         }
@@ -904,7 +650,7 @@ impl<T: Real> Instrument<T> {
         );
         // Stages 2 and 3: weights 2, next stage at h/2 then h.
         for c in [0.5, 1.0] {
-            evaluate::<T, SIMD>(m, flags, live, qs, vs, hy_s, acc, ah, z);
+            evaluate::<T, SIMD>(m, states, live, qs, vs, hy_s, acc, ah, z);
             for r in live {
                 stage::<T, false>(ch(c), r.clone(), q0, v0, acc, qs, vs, sum_q, sum_v);
             }
@@ -921,7 +667,7 @@ impl<T: Real> Instrument<T> {
             );
         }
         // Stage 4 and the combination.
-        evaluate::<T, SIMD>(m, flags, live, qs, vs, hy_s, acc, ah, z);
+        evaluate::<T, SIMD>(m, states, live, qs, vs, hy_s, acc, ah, z);
         let w = T::from_f64(h / 6.0);
         let (q, v) = (&mut self.q, &mut self.v);
         for r in live {
@@ -936,13 +682,13 @@ impl<T: Real> Instrument<T> {
         }
         let w = h / 6.0;
         for k in 0..self.hammer_y.len() {
-            if self.flags.hammer_on[k] {
+            if self.states[k].hammer_on {
                 self.hammer_y[k] += w * (sum_hy[k] + hv_s[k]);
                 self.hammer_v[k] += w * (sum_hv[k] + ah[k]);
             }
         }
         for k in 0..self.hammer_y.len() {
-            if self.flags.hammer_on[k] {
+            if self.states[k].hammer_on {
                 self.release_hammer_if_clear(k);
             }
         }
@@ -952,45 +698,26 @@ impl<T: Real> Instrument<T> {
     /// Move every stolen voice one step along its fade; at the end, give it its next key.
     fn advance_fades(&mut self) {
         for k in 0..self.n_voices() {
-            let left = self.flags.fade_left[k];
-            if left == 0 {
-                continue;
-            }
-            let left = left - 1;
-            self.flags.fade_left[k] = left;
-            let x = f64::from(left) / f64::from(self.fade_steps);
-            self.flags.coupling[k] = 0.5 - 0.5 * (PI * x).cos();
-            if left == 0 {
-                if let Some((key, strike)) = self.flags.pending[k] {
-                    let damper_down = self.flags.damper_down[k];
-                    self.assign(k, key);
-                    self.strike_voice(k, strike);
-                    self.set_damper_voice(k, damper_down);
-                }
+            if fade_step(&mut self.states[k], self.fade_steps) {
+                self.complete_fade(k);
             }
         }
     }
 
     /// A hammer leaves the system once it recedes and is clear of every string by the release gap.
     fn release_hammer_if_clear(&mut self, k: usize) {
-        if self.hammer_v[k] >= 0.0 {
-            return;
-        }
-        let voice = &self.model.voices[k];
-        let Some(key) = voice.key else {
+        let (voice, state) = (&self.model.voices[k], &self.states[k]);
+        let Some(key) = state.key else {
             return;
         };
         let km = &self.model.keys[key];
-        for s in 0..voice.n_strings {
-            if self.flags.struck[k][s] {
-                let ye =
-                    T::dot_wide::<false>(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]);
-                if ye - self.hammer_y[k] < km.hammer.release_gap_m {
-                    return;
-                }
-            }
+        let strike_points = (0..voice.n_strings)
+            .filter(|&s| state.struck[s])
+            .map(|s| T::dot_wide::<false>(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]));
+        let gap = km.hammer.release_gap_m;
+        if hammer_clear(self.hammer_y[k], self.hammer_v[k], gap, strike_points) {
+            self.states[k].hammer_on = false;
         }
-        self.flags.hammer_on[k] = false;
     }
 
     /// Voice 0's outputs (see [`Instrument::observe_voice`]).
@@ -1006,11 +733,11 @@ impl<T: Real> Instrument<T> {
             ..Observation::default()
         };
         let (m, voice) = (&self.model, &self.model.voices[k]);
-        let Some(key) = voice.key else {
+        let Some(key) = self.states[k].key else {
             return obs;
         };
         let km = &m.keys[key];
-        let gain = self.flags.coupling[k];
+        let gain = self.states[k].coupling;
         let (q, v) = (&self.q, &self.v);
         let qb = &q[m.board.clone()];
         let vb = &v[m.board.clone()];
@@ -1033,7 +760,7 @@ impl<T: Real> Instrument<T> {
                 obs.bridge_force_n[s][d] = f;
                 obs.total_force_n[d] += f;
             }
-            if self.flags.hammer_on[k] && self.flags.struck[k][s] {
+            if self.states[k].hammer_on && self.states[k].struck[s] {
                 let ye = T::dot_wide::<false>(&km.hammer_shape, &q[voice.ranges[s][0].clone()]);
                 obs.hammer_force_n[s] = km.hammer.felt_force_n(self.hammer_y[k] - ye);
             }
@@ -1050,13 +777,13 @@ impl<T: Real> Instrument<T> {
     /// dampers), counted from the arithmetic of [`evaluate`] and the stage updates: a multiply-add
     /// counts 2. What `unacorda bench` divides by time to report a FLOP rate.
     pub fn flops_per_step(&self) -> f64 {
-        let (m, f) = (&self.model, &self.flags);
+        let (m, f) = (&self.model, &self.states);
         let nb = m.board.len();
         let mut live = nb;
         // Per evaluation: the uncoupled oscillators (3 per mode) of the board ...
         let mut eval = 3 * nb;
         for (k, voice) in m.voices.iter().enumerate() {
-            let (true, Some(key)) = (f.active[k], voice.key) else {
+            let (true, Some(key)) = (f[k].active, f[k].key) else {
                 continue;
             };
             let km = &m.keys[key];
@@ -1068,11 +795,11 @@ impl<T: Real> Instrument<T> {
             // product through its rank-r factor (2 × 2 r per entry of W, T and P of every string).
             let r = km.duplex_rank;
             eval += 3 * n + 6 * n + 18 * nb + 4 * r * voice.n_strings * (nt + np);
-            if f.damper_down[k] && !km.damper_shape.is_empty() {
+            if f[k].damper_down && !km.damper_shape.is_empty() {
                 eval += 4 * voice.n_strings * (nt + np);
             }
-            if f.hammer_on[k] {
-                eval += 4 * nt * f.struck[k].iter().filter(|&&s| s).count();
+            if f[k].hammer_on {
+                eval += 4 * nt * f[k].struck.iter().filter(|&&s| s).count();
             }
         }
         // Four evaluations, and the stage updates: 4 + 8 + 8 + 6 per mode.
@@ -1113,18 +840,18 @@ impl<T: Real> Instrument<T> {
         let board_j = self.modal_energy_j(m.board.clone());
         let (mut contact_j, mut hammer_j) = (0.0, 0.0);
         for (k, voice) in m.voices.iter().enumerate() {
-            let Some(key) = voice.key else {
+            let Some(key) = self.states[k].key else {
                 continue;
             };
-            if !self.flags.active[k] {
+            if !self.states[k].active {
                 continue;
             }
             let km = &m.keys[key];
             contact_j += self.voice_contact_j(k);
-            if self.flags.hammer_on[k] {
+            if self.states[k].hammer_on {
                 hammer_j += 0.5 * km.hammer.mass_kg * self.hammer_v[k].powi(2);
                 for s in 0..voice.n_strings {
-                    if self.flags.struck[k][s] {
+                    if self.states[k].struck[s] {
                         let ye = T::dot_wide::<false>(
                             &km.hammer_shape,
                             &self.q[voice.ranges[s][0].clone()],
@@ -1140,6 +867,135 @@ impl<T: Real> Instrument<T> {
             contact_j,
             hammer_j,
         }
+    }
+}
+
+/// The pool policy ([`Policy`]) on RK4's flat arrays.
+impl<T: Real> Policy for Instrument<T> {
+    fn n_voices(&self) -> usize {
+        self.model.voices.len()
+    }
+
+    fn state(&self, k: usize) -> &VoiceState {
+        &self.states[k]
+    }
+
+    fn state_mut(&mut self, k: usize) -> &mut VoiceState {
+        &mut self.states[k]
+    }
+
+    fn voice_of_key(&self, key: usize) -> Option<usize> {
+        self.voice_of_key[key]
+    }
+
+    fn set_voice_of_key(&mut self, key: usize, voice: Option<usize>) {
+        self.voice_of_key[key] = voice;
+    }
+
+    fn fade_steps(&self) -> u32 {
+        self.fade_steps
+    }
+
+    fn key_strings(&self, key: usize) -> usize {
+        self.model.keys[key].n_strings
+    }
+
+    fn key_has_damper(&self, key: usize) -> bool {
+        !self.model.keys[key].damper_shape.is_empty()
+    }
+
+    /// Copies the key's coefficients into the slot.
+    fn load_key(&mut self, k: usize, key: usize) {
+        let km = &self.model.keys[key];
+        let voice = &mut self.model.voices[k];
+        let (base, capacity_end) = (voice.base, voice.base + km.n_modes);
+        let slot_end = self
+            .model
+            .voices
+            .get(k + 1)
+            .map_or(self.model.board.start, |v| v.base);
+        debug_assert!(capacity_end <= slot_end);
+        let voice = &mut self.model.voices[k];
+        voice.n_strings = km.n_strings;
+        voice.n_modes = km.n_modes;
+        for (s, r) in voice.ranges.iter_mut().enumerate() {
+            for d in 0..3 {
+                let local = &km.ranges[s][d];
+                r[d] = base + local.start..base + local.end;
+            }
+        }
+        self.model.omega2[base..capacity_end].copy_from_slice(&km.omega2);
+        self.model.damp[base..capacity_end].copy_from_slice(&km.damp);
+        self.model.bridge_shape[base..capacity_end].copy_from_slice(&km.bridge_shape);
+        self.model.static_shape[base..capacity_end].copy_from_slice(&km.static_shape);
+        self.q[base..slot_end].fill(T::ZERO);
+        self.v[base..slot_end].fill(T::ZERO);
+        self.left_at[k] = [[0.0; 2]; 3];
+    }
+
+    fn rest_strings(&mut self, k: usize) {
+        self.rest(self.voice_modes(k));
+        self.left_at[k] = [[0.0; 2]; 3];
+    }
+
+    /// A string at rest enters at its static deflection by the bridge point (`g y`, moving with
+    /// it), not at zero, which would jolt the board through the contact spring: `q += g (y -
+    /// y_left)`, `qdot += g (y' - y'_left)` in each direction, `y_left` where the board was when
+    /// the voice left (zero once its strings were set at rest).
+    fn enter(&mut self, k: usize) {
+        let (now, left) = (self.board_at(k), self.left_at[k]);
+        let voice = &self.model.voices[k];
+        for s in 0..voice.n_strings {
+            for d in 0..3 {
+                let dy = T::from_f64(now[d][0] - left[d][0]);
+                let dv = T::from_f64(now[d][1] - left[d][1]);
+                for i in voice.ranges[s][d].clone() {
+                    let g = self.model.static_shape[i];
+                    self.q[i] += g * dy;
+                    self.v[i] += g * dv;
+                }
+            }
+        }
+        self.left_at[k] = [[0.0; 2]; 3];
+    }
+
+    fn leave(&mut self, k: usize) {
+        self.left_at[k] = self.board_at(k);
+    }
+
+    fn strike_contact_m(&self, k: usize, struck: usize) -> f64 {
+        let (voice, key) = (&self.model.voices[k], self.states[k].key);
+        let Some(key) = key else {
+            return 0.0;
+        };
+        let km = &self.model.keys[key];
+        (0..struck)
+            .map(|s| T::dot_wide::<false>(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]))
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    fn set_hammer(&mut self, k: usize, position_m: f64, velocity_m_s: f64) {
+        (self.hammer_y[k], self.hammer_v[k]) = (position_m, velocity_m_s);
+    }
+
+    fn hammer_finite(&self, k: usize) -> bool {
+        self.hammer_y[k].is_finite() && self.hammer_v[k].is_finite()
+    }
+
+    /// A string at rest on a moving board holds the energy of following it, and is not silent.
+    fn voice_energy_j(&self, k: usize) -> f64 {
+        if !self.states[k].active {
+            return 0.0;
+        }
+        self.modal_energy_j(self.voice_modes(k)) + self.voice_contact_j(k)
+    }
+
+    fn board_energy_j(&self) -> f64 {
+        self.modal_energy_j(self.model.board.clone())
+    }
+
+    fn rest_board(&mut self) {
+        self.rest(self.model.board.clone());
     }
 }
 
@@ -1185,7 +1041,7 @@ fn stage<T: Real, const FIRST: bool>(
 #[inline(always)]
 fn evaluate<T: Real, const SIMD: bool>(
     m: &Model<T>,
-    flags: &VoiceFlags,
+    states: &[VoiceState],
     live: &[Range<usize>],
     q: &[T],
     v: &[T],
@@ -1211,11 +1067,11 @@ fn evaluate<T: Real, const SIMD: bool>(
     let vb = &v[m.board.clone()];
     for (k, voice) in m.voices.iter().enumerate() {
         ah[k] = 0.0;
-        let (true, Some(key)) = (flags.active[k], voice.key) else {
+        let (true, Some(key)) = (states[k].active, states[k].key) else {
             continue;
         };
         let km = &m.keys[key];
-        let gain = flags.coupling[k];
+        let gain = states[k].coupling;
         // This voice's bridge point of the board in T, L, P (Eq. 5).
         let mut rb = [0.0; 3];
         let mut rb_dot = [0.0; 3];
@@ -1242,7 +1098,7 @@ fn evaluate<T: Real, const SIMD: bool>(
         duplex_damping::<T, SIMD>(km, &voice.ranges, v, acc, duplex_z);
         // The damper felt, while it is down: a point damper on T and P of every string. The flag
         // may belong to the key that follows a fading voice, so the key's own damper decides.
-        if flags.damper_down[k] && !km.damper_shape.is_empty() {
+        if states[k].damper_down && !km.damper_shape.is_empty() {
             for s in 0..voice.n_strings {
                 for d in [0, 2] {
                     let r = voice.ranges[s][d].clone();
@@ -1258,10 +1114,10 @@ fn evaluate<T: Real, const SIMD: bool>(
             T::axpy::<SIMD>(ab, &km.board_shape[d], T::from_f64(total[d]));
         }
         // Hammer (Eq. 8, 14): felt force on each struck string, reaction on the hammer mass.
-        if flags.hammer_on[k] {
+        if states[k].hammer_on {
             let mut felt_total = 0.0;
             for s in 0..voice.n_strings {
-                if flags.struck[k][s] {
+                if states[k].struck[s] {
                     let r = voice.ranges[s][0].clone();
                     let ye = T::dot::<SIMD>(&km.hammer_shape, &q[r.clone()]).to_f64();
                     let f = km.hammer.felt_force_n(hammer_y[k] - ye);

@@ -1,0 +1,278 @@
+//! The voice pool's policy, written once for every engine: a bank of keys and a fixed pool of
+//! voices on one board; a key takes a free voice or steals the quietest after a fade; a struck
+//! voice enters the simulation, a silent one leaves it; dampers follow the keys and pedals;
+//! whatever blows up is reset. An engine keeps each voice's [`VoiceState`] where its step reads it
+//! and implements the few hooks of [`Policy`] (what its strings and board do); the decisions are
+//! the provided methods.
+
+use super::spec::{Strike, MAX_STRINGS};
+use std::f64::consts::PI;
+
+/// What one voice of a pool is doing, whatever the engine. Written by the policy on the thread
+/// that owns the pool (events, block ends); read by the engine's step, which also moves the fade
+/// ([`fade_step`]) and releases the hammer ([`hammer_clear`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VoiceState {
+    /// The key (bank index) the voice plays.
+    pub key: Option<usize>,
+    /// Simulated at all: a voice joins when struck or its damper is lifted, and leaves when it
+    /// falls silent.
+    pub active: bool,
+    /// The hammer is in play (from the strike until it recedes clear of the strings).
+    pub hammer_on: bool,
+    /// The strings the hammer strikes (the first ones; una corda leaves the last out).
+    pub struck: [bool; MAX_STRINGS],
+    pub damper_down: bool,
+    /// Scale of the contact forces: 1, or falling to 0 along the fade of a stolen voice.
+    pub coupling: f64,
+    /// Steps left in the fade of a stolen voice, and the key and strike that follow it.
+    pub fade_left: u32,
+    pub pending: Option<(usize, Strike)>,
+}
+
+impl Default for VoiceState {
+    fn default() -> VoiceState {
+        VoiceState {
+            key: None,
+            active: false,
+            hammer_on: false,
+            struck: [false; MAX_STRINGS],
+            damper_down: false,
+            coupling: 1.0,
+            fade_left: 0,
+            pending: None,
+        }
+    }
+}
+
+/// One step along a stolen voice's fade: the contact forces fall to zero along a raised cosine
+/// over `fade_steps` steps. Returns whether the fade has just ended (the next key may start).
+#[inline(always)]
+pub fn fade_step(state: &mut VoiceState, fade_steps: u32) -> bool {
+    if state.fade_left == 0 {
+        return false;
+    }
+    state.fade_left -= 1;
+    let x = f64::from(state.fade_left) / f64::from(fade_steps);
+    state.coupling = 0.5 - 0.5 * (PI * x).cos();
+    state.fade_left == 0
+}
+
+/// The hammer leaves the system once it recedes (`velocity_m_s < 0`) and is clear of every struck
+/// string by `gap_m`: `strike_points_m` are their displacements at the striking point.
+#[inline(always)]
+pub fn hammer_clear(
+    position_m: f64,
+    velocity_m_s: f64,
+    gap_m: f64,
+    mut strike_points_m: impl Iterator<Item = f64>,
+) -> bool {
+    velocity_m_s < 0.0 && strike_points_m.all(|y| y - position_m >= gap_m)
+}
+
+/// The pool policy over an engine's hooks. The required methods say where the voices' states
+/// are and what the engine's strings, hammers and board do; the provided ones decide.
+pub trait Policy {
+    fn n_voices(&self) -> usize;
+    fn state(&self, k: usize) -> &VoiceState;
+    fn state_mut(&mut self, k: usize) -> &mut VoiceState;
+    /// Which voice plays `key` (bank index), if any.
+    fn voice_of_key(&self, key: usize) -> Option<usize>;
+    fn set_voice_of_key(&mut self, key: usize, voice: Option<usize>);
+    /// Steps of a stolen voice's fade ([`super::STEAL_FADE_S`] at the engine's rate).
+    fn fade_steps(&self) -> u32;
+    /// Strings of `key`, and whether it has a damper.
+    fn key_strings(&self, key: usize) -> usize;
+    fn key_has_damper(&self, key: usize) -> bool;
+    /// Voice `k` takes `key`'s coefficients, its strings at rest (never allocates).
+    fn load_key(&mut self, k: usize, key: usize);
+    /// Voice `k`'s strings at rest.
+    fn rest_strings(&mut self, k: usize);
+    /// Voice `k` enters the simulation (its strings keep their motion relative to the bridge), or
+    /// leaves it.
+    fn enter(&mut self, k: usize);
+    fn leave(&mut self, k: usize);
+    /// Where the hammer starts on the first `struck` strings of voice `k`: the highest of their
+    /// displacements at the striking point (a sounding key is struck in its motion).
+    fn strike_contact_m(&self, k: usize, struck: usize) -> f64;
+    fn set_hammer(&mut self, k: usize, position_m: f64, velocity_m_s: f64);
+    fn hammer_finite(&self, k: usize) -> bool;
+    /// Mechanical energy of voice `k`'s strings and contact springs (J; 0 while not simulated),
+    /// and of the board.
+    fn voice_energy_j(&self, k: usize) -> f64;
+    fn board_energy_j(&self) -> f64;
+    fn rest_board(&mut self);
+
+    /// The key voice `k` plays.
+    fn key_of_voice(&self, k: usize) -> Option<usize> {
+        self.state(k).key
+    }
+
+    fn is_active(&self, k: usize) -> bool {
+        self.state(k).active
+    }
+
+    /// Whether voice `k` is fading out before it changes key.
+    fn is_fading(&self, k: usize) -> bool {
+        self.state(k).fade_left > 0
+    }
+
+    /// Whether voice `k`'s hammer is in play.
+    fn hammer_on(&self, k: usize) -> bool {
+        self.state(k).hammer_on
+    }
+
+    /// Give voice `k` to `key`: the previous key loses it, the slot takes the key's coefficients
+    /// and starts at rest, damper lifted, inactive until struck. Never allocates.
+    fn assign(&mut self, k: usize, key: usize) {
+        if let Some(old) = self.state(k).key {
+            self.set_voice_of_key(old, None);
+        }
+        self.load_key(k, key);
+        self.set_voice_of_key(key, Some(k));
+        let s = self.state_mut(k);
+        s.key = Some(key);
+        (s.active, s.hammer_on, s.damper_down) = (false, false, false);
+        (s.coupling, s.fade_left, s.pending) = (1.0, 0, None);
+    }
+
+    /// Hand sounding voice `k` to `key`: over [`super::STEAL_FADE_S`] its contact forces fall to
+    /// zero with a raised cosine (the board is released smoothly, no click), then the voice takes
+    /// `key` at rest and `strike` hits it ([`Policy::complete_fade`]). Stealing a voice already
+    /// fading only replaces what follows. A voice that is not active is assigned and struck at once.
+    fn steal(&mut self, k: usize, key: usize, strike: Strike) {
+        if !self.state(k).active {
+            self.assign(k, key);
+            self.strike_voice(k, strike);
+            return;
+        }
+        if let Some(old) = self.state(k).key {
+            if self.voice_of_key(old) == Some(k) {
+                self.set_voice_of_key(old, None);
+            }
+        }
+        if let Some((old_pending, _)) = self.state(k).pending {
+            if old_pending != key {
+                self.set_voice_of_key(old_pending, None);
+            }
+        }
+        self.set_voice_of_key(key, Some(k));
+        let fade_steps = self.fade_steps();
+        let s = self.state_mut(k);
+        if s.fade_left == 0 {
+            s.fade_left = fade_steps;
+        }
+        s.pending = Some((key, strike));
+        s.damper_down = false;
+    }
+
+    /// Once voice `k`'s fade has ended, give it the key that follows and strike it.
+    fn complete_fade(&mut self, k: usize) {
+        let s = self.state(k);
+        if s.fade_left != 0 {
+            return;
+        }
+        if let Some((key, strike)) = s.pending {
+            let damper_down = s.damper_down;
+            self.assign(k, key);
+            self.strike_voice(k, strike);
+            self.set_damper_voice(k, damper_down);
+        }
+    }
+
+    /// Launch voice `k`'s hammer at its strings (Eq. 14–15): it starts touching the struck strings
+    /// at their current displacement and moves towards them at `strike.velocity_m_s`. A voice
+    /// without a key ignores it.
+    fn strike_voice(&mut self, k: usize, strike: Strike) {
+        let Some(key) = self.state(k).key else {
+            return;
+        };
+        if !self.state(k).active {
+            self.enter(k);
+        }
+        let n = strike.strings_struck(self.key_strings(key));
+        let s = self.state_mut(k);
+        s.struck = [false; MAX_STRINGS];
+        s.struck[..n].iter_mut().for_each(|s| *s = true);
+        let contact = self.strike_contact_m(k, n);
+        self.set_hammer(k, contact, strike.velocity_m_s);
+        let s = self.state_mut(k);
+        (s.hammer_on, s.active) = (true, true);
+    }
+
+    /// Include voice `k` in the simulation without striking it (a key held silently, or every key
+    /// under the sustain pedal, whose strings then ring in sympathy through the board), or leave it
+    /// out. A left-out voice keeps its motion relative to the bridge frozen, and joins again
+    /// following the board. A voice without a key stays out.
+    fn set_active(&mut self, k: usize, active: bool) {
+        let s = self.state(k);
+        let now = s.key.is_some() && (active || s.hammer_on || s.fade_left > 0);
+        match (s.active, now) {
+            (false, true) => self.enter(k),
+            (true, false) => self.leave(k),
+            _ => {}
+        }
+        self.state_mut(k).active = now;
+    }
+
+    /// Lower (key released) or lift (key down, or a pedal holding it) voice `k`'s damper. Keys
+    /// without a damper ignore it. For a fading voice it applies to the key that follows.
+    fn set_damper_voice(&mut self, k: usize, down: bool) {
+        let s = self.state(k);
+        let key = s.pending.map(|(key, _)| key).or(s.key);
+        let has = key.is_some_and(|key| self.key_has_damper(key));
+        self.state_mut(k).damper_down = down && has;
+    }
+
+    /// Stop simulating the voices that have fallen silent: strings and contact springs below
+    /// `threshold_j`, no hammer, no fade, and either the damper down or no damper at all (strings
+    /// whose damper a key or pedal lifts keep ringing in sympathy). Their strings are set to rest;
+    /// they keep their key until another key needs the voice. Returns how many were retired.
+    fn retire_silent(&mut self, threshold_j: f64) -> usize {
+        let mut retired = 0;
+        for k in 0..self.n_voices() {
+            let s = *self.state(k);
+            let Some(key) = s.key else {
+                continue;
+            };
+            let undamped = !self.key_has_damper(key);
+            if s.active
+                && !s.hammer_on
+                && s.fade_left == 0
+                && (s.damper_down || undamped)
+                && self.voice_energy_j(k) < threshold_j
+            {
+                self.rest_strings(k);
+                self.state_mut(k).active = false;
+                retired += 1;
+            }
+        }
+        retired
+    }
+
+    /// Put right what has blown up: a voice whose strings hold a non-finite value or more than
+    /// `bound_j`, or whose hammer is not finite, is set to rest, silent and out of the simulation
+    /// (its key kept); a non-finite or overloaded board is set to rest too. Returns how many parts
+    /// were reset. O(modes), for once per audio block.
+    fn reset_runaways(&mut self, bound_j: f64) -> usize {
+        let mut reset = 0;
+        for k in 0..self.n_voices() {
+            let e = self.voice_energy_j(k);
+            let hammer_ok = self.hammer_finite(k);
+            if self.state(k).active && (!e.is_finite() || e > bound_j || !hammer_ok) {
+                self.rest_strings(k);
+                self.set_hammer(k, 0.0, 0.0);
+                let s = self.state_mut(k);
+                (s.active, s.hammer_on, s.fade_left, s.pending) = (false, false, 0, None);
+                s.coupling = 1.0;
+                reset += 1;
+            }
+        }
+        let board_j = self.board_energy_j();
+        if !board_j.is_finite() || board_j > bound_j {
+            self.rest_board();
+            reset += 1;
+        }
+        reset
+    }
+}
