@@ -16,6 +16,10 @@ use unacorda::play::Piano;
 #[global_allocator]
 static ALLOCATOR: AllocDisabler = AllocDisabler;
 
+/// The tests here run threads that spin for each other: one at a time, or on two cores they
+/// only wait for each other's helpers.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 fn piano<E: VoicePool>(voices: usize) -> (Piano<E>, OutputSettings) {
     let scaling = Scaling::resolve("grand").unwrap();
     // Single, double and triple strings, damped and undamped keys.
@@ -89,6 +93,7 @@ fn compare(label: &str, a: &[f32], b: &[f32]) {
 
 #[test]
 fn two_cores_sound_exactly_like_one() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let (piano, settings) = piano::<ExponentialInstrument>(5);
     let one = {
         let (synth, handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
@@ -125,6 +130,7 @@ fn two_cores_sound_exactly_like_one() {
 
 #[test]
 fn the_reference_runs_alike_from_event_to_event() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let (piano, settings) = piano::<Instrument>(5);
     let runs = [false, true].map(|framewise| {
         let (synth, handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
@@ -152,6 +158,7 @@ fn checked(job: &mut dyn FnMut()) {
 
 #[test]
 fn the_callback_on_two_cores_never_allocates() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let (piano, settings) = piano::<ExponentialInstrument>(5);
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
     synth.use_second_core_with(checked).unwrap();
@@ -160,8 +167,12 @@ fn the_callback_on_two_cores_never_allocates() {
     }
     let mut out = vec![0f32; 64];
     reset_violation_count();
-    for _ in 0..400 {
+    // At least 400 blocks, and on until the helper has taken 100 jobs (how often it is on time
+    // depends on what else the machine runs; the checker's verdict does not).
+    let mut blocks = 0;
+    while blocks < 400 || (HELPER_JOBS.load(Ordering::Relaxed) < 100 && blocks < 40_000) {
         assert_no_alloc(|| synth.process(&mut out, 1));
+        blocks += 1;
     }
     let stats = &handle.stats;
     let (splits, late) = (
@@ -173,16 +184,14 @@ fn the_callback_on_two_cores_never_allocates() {
         HELPER_JOBS.load(Ordering::Relaxed),
     );
     println!(
-        "400 two-core callbacks: {} allocations in the callback, {helper} on the helper thread in its {jobs} jobs; {splits} runs split over both cores, {late} run on one because the helper was late",
+        "{blocks} two-core callbacks: {} allocations in the callback, {helper} on the helper thread in its {jobs} jobs; {splits} runs split over both cores, {late} run on one because the helper was late",
         violation_count()
     );
     assert_eq!(violation_count(), 0, "the callback allocated");
     assert_eq!(helper, 0, "the helper's half allocated");
-    // Every split ran the helper's half under the checker. How often the helper is late depends
-    // on what else the machine runs (timings belong to `bench`): only a share of the runs is
-    // asked of it here (296 of 418 with a soak on the other core).
+    // Every split ran the helper's half under the checker.
     assert!(
-        jobs >= 20 && jobs == splits,
+        jobs >= 100 && jobs == splits,
         "the work was not split: {jobs} jobs"
     );
 }
@@ -209,6 +218,7 @@ impl Pair for Alternates {
 
 #[test]
 fn split_and_declined_blocks_interleave_without_a_trace() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let (piano, _) = piano::<ExponentialInstrument>(5);
     let alternates = Alternates::default();
     let runs = [false, true].map(|alternating| {
