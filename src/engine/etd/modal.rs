@@ -1,0 +1,207 @@
+//! A string direction's block `x' = A x + B u` diagonalised into complex modes (conjugate pairs
+//! stored once), with its output rows, input vectors and the ETDRK4 weights of each mode.
+
+use crate::engine::kernels::LANES;
+use crate::engine::spec::BuildError;
+use faer::linalg::solvers::{PartialPivLu, Solve};
+use faer::{c64, Mat};
+
+/// A block `x' = A x + B u` in its complex modes: eigen-decomposition and ETDRK4 weights.
+///
+/// Of each complex-conjugate pair of modes only one is stored (its partner is its conjugate: the
+/// block is real), with weight 2 folded into the output rows; real (overdamped) modes have weight 1.
+pub(super) struct Modal {
+    pub(super) n: usize,
+    /// Kept eigenpairs `(column, weight)`.
+    pub(super) keep: Vec<(usize, f64)>,
+    pub(super) u: Mat<c64>,
+    pub(super) lu: PartialPivLu<c64>,
+    /// Per kept mode: `e^{lambda h/2}`, `e^{lambda h}`, `Q`, `(E - 1) Q`, `f1`, `f2`, `f3`.
+    pub(super) eh: Vec<c64>,
+    pub(super) ef: Vec<c64>,
+    pub(super) etd: [Vec<c64>; 5],
+    pub(super) padded: usize,
+}
+
+impl Modal {
+    /// Diagonalise `qdd = -K q - C qdot + ...` (dense `n × n`, row-major) for step `h`.
+    pub(super) fn new(k: &[f64], c: &[f64], n: usize, h: f64) -> Result<Modal, BuildError> {
+        let a = Mat::<f64>::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
+            (true, true) => 0.0,
+            (true, false) => f64::from(u8::from(j - n == i)),
+            (false, true) => -k[(i - n) * n + j],
+            (false, false) => -c[(i - n) * n + (j - n)],
+        });
+        let eig = a.eigen().map_err(|_| BuildError::Modes)?;
+        let (u, s) = (eig.U().to_owned(), eig.S().column_vector().to_owned());
+        // Representatives: Im > 0 of each pair (weight 2), real eigenvalues (weight 1).
+        let scale = (0..2 * n).map(|i| s[i].norm()).fold(0.0, f64::max).max(1.0);
+        let keep: Vec<(usize, f64)> = (0..2 * n)
+            .filter_map(|i| {
+                let im = s[i].im;
+                if im > 1e-12 * scale {
+                    Some((i, 2.0))
+                } else if im.abs() <= 1e-12 * scale {
+                    Some((i, 1.0))
+                } else {
+                    None
+                }
+            })
+            .collect();
+        let pairs = keep.iter().filter(|(_, w)| *w == 2.0).count();
+        if 2 * pairs + (keep.len() - pairs) != 2 * n || !s.iter().all(|x| x.re.is_finite()) {
+            return Err(BuildError::Modes);
+        }
+        let lam: Vec<c64> = keep.iter().map(|&(i, _)| s[i]).collect();
+        let exp = |t: f64| -> Vec<c64> {
+            lam.iter()
+                .map(|&l| {
+                    let m = (l.re * t).exp();
+                    c64::new(m * (l.im * t).cos(), m * (l.im * t).sin())
+                })
+                .collect()
+        };
+        let weights: Vec<[c64; 5]> = lam.iter().map(|&l| etd_weights(l, h)).collect();
+        let etd = std::array::from_fn(|k| weights.iter().map(|w| w[k]).collect());
+        Ok(Modal {
+            n,
+            padded: keep.len().div_ceil(LANES) * LANES,
+            lu: u.partial_piv_lu(),
+            u,
+            eh: exp(0.5 * h),
+            ef: exp(h),
+            etd,
+            keep,
+        })
+    }
+
+    /// The output row `r = c^T V` (weighted) reading `c^T q`, or `c^T qdot` if `velocity`.
+    pub(super) fn row(&self, c: &[f64], velocity: bool) -> Vec<c64> {
+        let off = if velocity { self.n } else { 0 };
+        self.keep
+            .iter()
+            .map(|&(m, w)| {
+                let mut acc = c64::new(0.0, 0.0);
+                for (i, &ci) in c.iter().enumerate() {
+                    acc += self.u[(off + i, m)] * ci;
+                }
+                acc * w
+            })
+            .collect()
+    }
+
+    /// The input vector `g = V^-1 [0; b]` of a force distribution `b` on the accelerations.
+    pub(super) fn input(&self, b: &[f64]) -> Vec<c64> {
+        let n = self.n;
+        let rhs = Mat::<c64>::from_fn(2 * n, 1, |i, _| {
+            c64::new(if i >= n { b[i - n] } else { 0.0 }, 0.0)
+        });
+        let g = self.lu.solve(&rhs);
+        self.keep.iter().map(|&(m, _)| g[(m, 0)]).collect()
+    }
+
+    /// Real and imaginary parts, padded with zeros to whole SIMD lanes (a zero mode stays zero).
+    pub(super) fn split(&self, v: &[c64]) -> [Vec<f64>; 2] {
+        let mut re: Vec<f64> = v.iter().map(|x| x.re).collect();
+        let mut im: Vec<f64> = v.iter().map(|x| x.im).collect();
+        re.resize(self.padded, 0.0);
+        im.resize(self.padded, 0.0);
+        [re, im]
+    }
+
+    pub(super) fn times(a: &[c64], b: &[c64]) -> Vec<c64> {
+        a.iter().zip(b).map(|(x, y)| x * y).collect()
+    }
+
+    /// A row through the three propagators the stages read: `r`, `r E`, `r E²`.
+    pub(super) fn rows3(&self, r: &[c64]) -> [[Vec<f64>; 2]; 3] {
+        [
+            self.split(r),
+            self.split(&Self::times(r, &self.eh)),
+            self.split(&Self::times(r, &self.ef)),
+        ]
+    }
+
+    /// An input through the final weights: `f1 g`, `f2 g`, `f3 g`.
+    pub(super) fn gains3(&self, g: &[c64]) -> [[Vec<f64>; 2]; 3] {
+        std::array::from_fn(|k| self.split(&Self::times(g, &self.etd[2 + k])))
+    }
+
+    /// What one unit of input `g` adds to the output `r` at the later stages: `[Re r Q g,
+    /// Re r (E - 1) Q g]`.
+    pub(super) fn resp(&self, r: &[c64], g: &[c64]) -> [f64; 2] {
+        let dot = |e: &[c64]| -> f64 { (0..r.len()).map(|m| (r[m] * e[m] * g[m]).re).sum() };
+        [dot(&self.etd[0]), dot(&self.etd[1])]
+    }
+
+    /// Per stored mode, the mechanical energy per `|z|²` (J): the cycle-averaged
+    /// `1/2 (qdot^T qdot + q^T K q)` of `w Re(v z)` for the mode's eigenvector `v`.
+    pub(super) fn energy(&self, k: &[f64]) -> Vec<f64> {
+        let n = self.n;
+        let mut e: Vec<f64> = self
+            .keep
+            .iter()
+            .map(|&(m, w)| {
+                let v = |i: usize| self.u[(i, m)];
+                let kinetic: f64 = (0..n).map(|i| v(n + i).norm_sqr()).sum();
+                let mut potential = 0.0;
+                for i in 0..n {
+                    let mut ki = c64::new(0.0, 0.0);
+                    for j in 0..n {
+                        ki += v(j) * k[i * n + j];
+                    }
+                    potential += (v(i).conj() * ki).re;
+                }
+                0.25 * w * w * (kinetic + potential)
+            })
+            .collect();
+        e.resize(self.padded, 0.0);
+        e
+    }
+
+    pub(super) fn propagator(&self) -> [Vec<f64>; 2] {
+        self.split(&self.ef)
+    }
+}
+
+/// ETDRK4 coefficients of one mode `lambda` for step `h`: `Q = (e^{lambda h/2} - 1)/lambda`,
+/// `(e^{lambda h/2} - 1) Q`, and the final weights `f1`, `f2` (of `N(a) + N(b)`), `f3`:
+/// `h {-4 - z + e^z (4 - 3z + z^2)} / z^3`, `2h {2 + z + e^z (z - 2)} / z^3`,
+/// `h {-4 - 3z - z^2 + e^z (4 - z)} / z^3` with `z = lambda h`. Near `z = 0` these cancel, so
+/// there they are the mean over a circle of radius 1 around `z` (Kassam & Trefethen 2005).
+pub(super) fn etd_weights(lambda: c64, h: f64) -> [c64; 5] {
+    let one = c64::new(1.0, 0.0);
+    let exp = |z: c64| {
+        let m = z.re.exp();
+        c64::new(m * z.im.cos(), m * z.im.sin())
+    };
+    let direct = |z: c64| -> [c64; 4] {
+        let (e, e2) = (exp(z), exp(z * 0.5));
+        let z3 = z * z * z;
+        [
+            (e2 - one) / z,
+            ((-one * 4.0) - z + e * (one * 4.0 - z * 3.0 + z * z)) / z3,
+            ((one * 2.0) + z + e * (z - one * 2.0)) / z3 * 2.0,
+            ((-one * 4.0) - z * 3.0 - z * z + e * (one * 4.0 - z)) / z3,
+        ]
+    };
+    let z = lambda * h;
+    let phi = if z.norm() > 0.5 {
+        direct(z)
+    } else {
+        const POINTS: usize = 64;
+        let mut acc = [c64::new(0.0, 0.0); 4];
+        for k in 0..POINTS {
+            let t = 2.0 * std::f64::consts::PI * (k as f64 + 0.5) / POINTS as f64;
+            let v = direct(z + c64::new(t.cos(), t.sin()));
+            for (a, v) in acc.iter_mut().zip(v) {
+                *a += v;
+            }
+        }
+        acc.map(|a| a / POINTS as f64)
+    };
+    // phi[0] is Q / h; the others are already per unit h.
+    let q = phi[0] * h;
+    let e2 = exp(z * 0.5);
+    [q, (e2 - one) * q, phi[1] * h, phi[2] * h, phi[3] * h]
+}
