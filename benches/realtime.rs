@@ -14,8 +14,8 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::scaling::{Scaling, KEYS};
-use unacorda::engine::etd::ExponentialInstrument;
-use unacorda::engine::{Instrument, VoicePool};
+use unacorda::engine::etd::EtdPool;
+use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::{loaded_synth, percentile};
 use unacorda::midi::Event;
 use unacorda::play::Piano;
@@ -28,9 +28,9 @@ fn keyboard<E: VoicePool>() -> (Piano<E>, unacorda::config::output::OutputSettin
 }
 
 fn callback(c: &mut Criterion) {
-    callback_on::<Instrument>(c, "callback", "RK4 at 96 kHz", false);
-    callback_on::<ExponentialInstrument>(c, "callback_etd", "ETDRK4 at 48 kHz", false);
-    callback_on::<ExponentialInstrument>(
+    callback_on::<Rk4Pool>(c, "callback", "RK4 at 96 kHz", false);
+    callback_on::<EtdPool>(c, "callback_etd", "ETDRK4 at 48 kHz", false);
+    callback_on::<EtdPool>(
         c,
         "callback_etd_2cores",
         "ETDRK4 at 48 kHz, voices split over two cores",
@@ -92,7 +92,7 @@ fn callback_on<E: VoicePool>(c: &mut Criterion, name: &str, label: &str, two_cor
 }
 
 fn latency(c: &mut Criterion) {
-    let (piano, settings) = keyboard::<Instrument>();
+    let (piano, settings) = keyboard::<Rk4Pool>();
     let frames = 64;
     let (silent, _handle) = Synth::new(piano, settings, EVENT_QUEUE).expect("rates match");
     let mut delays = Vec::new();

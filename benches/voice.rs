@@ -9,9 +9,9 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
 use unacorda::config::preset::Preset;
-use unacorda::engine::etd::ExponentialUnison;
+use unacorda::engine::etd::EtdUnison;
 use unacorda::engine::rk4::dense::DenseUnison;
-use unacorda::engine::{Instrument, Strike};
+use unacorda::engine::{Rk4Pool, Strike};
 use unacorda::render::Renderer;
 
 const FRAMES: usize = 480; // 10 ms at 48 kHz
@@ -40,7 +40,7 @@ fn c2_voice(c: &mut Criterion) {
     // The integrator alone: RK4 steps of the state-space system.
     let spec = preset.unison_spec();
     let steps = FRAMES * preset.oversampling(&spec);
-    let mut instrument = Instrument::new(&spec).expect("c2 builds");
+    let mut instrument = Rk4Pool::new(&spec).expect("c2 builds");
     instrument.strike(strike);
     group.bench_function("rk4_steps_10ms", |b| {
         b.iter(|| {
@@ -52,7 +52,7 @@ fn c2_voice(c: &mut Criterion) {
     });
 
     // The same RK4 steps in f32 (tests/precision.rs bounds its drift from f64).
-    let mut single = Instrument::<f32>::unison(&spec).expect("c2 builds");
+    let mut single = Rk4Pool::<f32>::unison(&spec).expect("c2 builds");
     single.strike(strike);
     group.bench_function("rk4_f32_steps_10ms", |b| {
         b.iter(|| {
@@ -66,7 +66,7 @@ fn c2_voice(c: &mut Criterion) {
     // The live integrator: exponential RK4 (ETDRK4) on complex modes at the output rate.
     let mut live_spec = spec.clone();
     live_spec.sample_rate_hz = preset.output_rate_hz();
-    let mut live = ExponentialUnison::new(&live_spec).expect("c2 builds");
+    let mut live = EtdUnison::new(&live_spec).expect("c2 builds");
     live.set_damper(false);
     live.strike(strike);
     group.bench_function("exponential_10ms", |b| {

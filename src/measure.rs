@@ -4,10 +4,10 @@
 
 use crate::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use crate::config::output::OutputSettings;
-use crate::engine::etd::ExponentialUnison;
+use crate::engine::etd::EtdUnison;
 use crate::engine::kernels::Real;
 use crate::engine::rk4::dense::DenseUnison;
-use crate::engine::{Instrument, Strike, UnisonSpec, VoicePool};
+use crate::engine::{Rk4Pool, Strike, UnisonSpec, VoicePool};
 use crate::midi::{Event, Pedal};
 use crate::play::Piano;
 use std::time::Instant;
@@ -72,7 +72,7 @@ pub struct VoiceSpeed {
 
 /// Run `spec` struck normally for `seconds` of sound (RK4 steps only, in precision `T`) and time it.
 pub fn voice_speed<T: Real>(spec: &UnisonSpec, seconds: f64) -> VoiceSpeed {
-    let mut inst = Instrument::<T>::unison(spec).expect("the preset builds");
+    let mut inst = Rk4Pool::<T>::unison(spec).expect("the preset builds");
     inst.strike(Strike {
         velocity_m_s: 2.5,
         una_corda: false,
@@ -94,12 +94,12 @@ pub fn voice_speed<T: Real>(spec: &UnisonSpec, seconds: f64) -> VoiceSpeed {
     }
 }
 
-/// Run `spec` on the live integrator ([`ExponentialUnison`], ETDRK4 on complex modes) at
+/// Run `spec` on the live integrator ([`EtdUnison`], ETDRK4 on complex modes) at
 /// `rate_hz`, struck normally, for `seconds` of sound and time it (steps only).
 pub fn exponential_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> VoiceSpeed {
     let mut spec = spec.clone();
     spec.sample_rate_hz = rate_hz;
-    let mut voice = ExponentialUnison::new(&spec).expect("the preset builds");
+    let mut voice = EtdUnison::new(&spec).expect("the preset builds");
     voice.set_damper(false);
     voice.strike(Strike {
         velocity_m_s: 2.5,
@@ -126,7 +126,7 @@ pub fn exponential_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> Voice
 /// after minutes of decay) — with flush-to-zero/denormals-are-zero set (as in the audio thread),
 /// without, and of the same voice sounding: `(sounding, tail_ftz, tail_plain)`.
 pub fn denormal_tail_step_s(spec: &UnisonSpec, steps: usize) -> (f64, f64, f64) {
-    let mut sounding = Instrument::new(spec).expect("the preset builds");
+    let mut sounding = Rk4Pool::new(spec).expect("the preset builds");
     sounding.set_damper(false);
     sounding.strike(Strike {
         velocity_m_s: 2.5,
@@ -140,7 +140,7 @@ pub fn denormal_tail_step_s(spec: &UnisonSpec, steps: usize) -> (f64, f64, f64) 
     let largest = q.iter().chain(v.iter()).fold(0f64, |m, x| m.max(x.abs()));
     let scale = 1e-305 / largest;
     q.iter_mut().chain(v.iter_mut()).for_each(|x| *x *= scale);
-    let time = |inst: &mut Instrument| {
+    let time = |inst: &mut Rk4Pool| {
         let t = Instant::now();
         for _ in 0..steps {
             inst.step();

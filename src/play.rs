@@ -2,7 +2,7 @@
 //! one soundboard, with the pedals' logic and the voice pool's allocation. A key struck again is
 //! struck in its current motion; a key without a voice takes a free one, or steals the quietest.
 
-use crate::engine::{Instrument, Strike, VoicePool};
+use crate::engine::{Strike, VoicePool};
 use crate::midi::{hammer_speed_m_s, piano_key, Event, Pedal};
 
 /// The performer's state: which keys are down and what the pedals do.
@@ -183,7 +183,7 @@ pub enum PianoError {
 
 /// An instrument with its player: what the audio thread owns.
 #[derive(Debug, Clone)]
-pub struct Piano<E: VoicePool = Instrument> {
+pub struct Piano<E: VoicePool> {
     pub instrument: E,
     pub player: Player,
     /// Piano key (1–88) of each bank index.

@@ -3,7 +3,7 @@
 
 use unacorda::config::preset::Preset;
 use unacorda::engine::rk4::dense::DenseUnison;
-use unacorda::engine::{Instrument, Strike};
+use unacorda::engine::{Rk4Pool, Strike};
 
 #[test]
 fn optimised_engine_matches_the_dense_state_space_form() {
@@ -15,7 +15,7 @@ fn optimised_engine_matches_the_dense_state_space_form() {
             velocity_m_s: 2.5,
             una_corda,
         };
-        let mut fast = Instrument::new(&spec).unwrap();
+        let mut fast = Rk4Pool::new(&spec).unwrap();
         let mut dense = DenseUnison::new(&spec);
         fast.strike(strike);
         dense.strike(strike);

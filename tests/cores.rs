@@ -7,9 +7,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::output::OutputSettings;
 use unacorda::config::scaling::{parse_key, Scaling};
-use unacorda::engine::etd::ExponentialInstrument;
+use unacorda::engine::etd::EtdPool;
 use unacorda::engine::Pair;
-use unacorda::engine::{Instrument, VoicePool};
+use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Piano;
 
@@ -94,7 +94,7 @@ fn compare(label: &str, a: &[f32], b: &[f32]) {
 #[test]
 fn two_cores_sound_exactly_like_one() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let (piano, settings) = piano::<ExponentialInstrument>(5);
+    let (piano, settings) = piano::<EtdPool>(5);
     let one = {
         let (synth, handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
         play(synth, handle, 200, 64, false)
@@ -131,7 +131,7 @@ fn two_cores_sound_exactly_like_one() {
 #[test]
 fn the_reference_runs_alike_from_event_to_event() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let (piano, settings) = piano::<Instrument>(5);
+    let (piano, settings) = piano::<Rk4Pool>(5);
     let runs = [false, true].map(|framewise| {
         let (synth, handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
         play(synth, handle, 40, 256, framewise)
@@ -159,7 +159,7 @@ fn checked(job: &mut dyn FnMut()) {
 #[test]
 fn the_callback_on_two_cores_never_allocates() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let (piano, settings) = piano::<ExponentialInstrument>(5);
+    let (piano, settings) = piano::<EtdPool>(5);
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
     synth.use_second_core_with(checked).unwrap();
     for (frame, event) in script() {
@@ -219,7 +219,7 @@ impl Pair for Alternates {
 #[test]
 fn split_and_declined_blocks_interleave_without_a_trace() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let (piano, _) = piano::<ExponentialInstrument>(5);
+    let (piano, _) = piano::<EtdPool>(5);
     let alternates = Alternates::default();
     let runs = [false, true].map(|alternating| {
         let mut piano = piano.clone();

@@ -6,8 +6,8 @@
 use realfft::RealFftPlanner;
 use unacorda::analysis::spectral::{partial_envelope, peak_frequency};
 use unacorda::config::preset::Preset;
-use unacorda::engine::etd::ExponentialUnison;
-use unacorda::engine::{Instrument, Observation, Strike};
+use unacorda::engine::etd::EtdUnison;
+use unacorda::engine::{Observation, Rk4Pool, Strike};
 
 const FS: f64 = 48_000.0;
 
@@ -34,7 +34,7 @@ fn run(integrator: Integrator, una_corda: bool, seconds: f64) -> Run {
     };
     let mut step: Box<dyn FnMut() -> Observation> = match integrator {
         Integrator::Rk4 => {
-            let mut inst = Instrument::new(&spec).unwrap();
+            let mut inst = Rk4Pool::new(&spec).unwrap();
             inst.set_damper(false);
             inst.strike(strike);
             Box::new(move || {
@@ -44,7 +44,7 @@ fn run(integrator: Integrator, una_corda: bool, seconds: f64) -> Run {
         }
         Integrator::Exponential => {
             spec.sample_rate_hz = FS;
-            let mut inst = ExponentialUnison::new(&spec).unwrap();
+            let mut inst = EtdUnison::new(&spec).unwrap();
             inst.set_damper(false);
             inst.strike(strike);
             Box::new(move || {
@@ -263,7 +263,7 @@ fn keys_couple_through_the_shared_board_alike() {
     // only through the board. Its bridge force over 0.3–0.6 s, and C2's, must agree between RK4
     // at 96 kHz and ETDRK4 at 48 kHz.
     use unacorda::config::scaling::{parse_key, Scaling};
-    use unacorda::engine::etd::ExponentialInstrument;
+    use unacorda::engine::etd::EtdPool;
     use unacorda::engine::VoicePool;
     let scaling = Scaling::resolve("grand").unwrap();
     let specs: Vec<_> = ["C2", "C3"]
@@ -297,8 +297,8 @@ fn keys_couple_through_the_shared_board_alike() {
         }
         power.map(|p| 10.0 * (p / (steps - from) as f64).log10())
     }
-    let rk4 = run::<Instrument>(&specs, strike);
-    let etd = run::<ExponentialInstrument>(&specs, strike);
+    let rk4 = run::<Rk4Pool>(&specs, strike);
+    let etd = run::<EtdPool>(&specs, strike);
     for (v, name) in ["C2 (struck)", "C3 (held, through the board)"]
         .iter()
         .enumerate()

@@ -4,7 +4,7 @@
 use unacorda::analysis::spectral::peak_frequency;
 use unacorda::config::preset::Preset;
 use unacorda::config::scaling::{equal_tempered_hz, parse_key, Scaling, KEYS};
-use unacorda::engine::rk4::Instrument;
+use unacorda::engine::rk4::Rk4Pool;
 use unacorda::engine::Policy;
 use unacorda::engine::{Strike, VoicePool};
 use unacorda::render::simulate;
@@ -33,7 +33,7 @@ fn every_key_builds_with_the_documented_layout() {
         let lp = keyboard.key_preset(k).unwrap();
         let s = &lp.preset.strings;
         let spec = lp.unison_spec();
-        let unison = Instrument::new(&spec).unwrap_or_else(|e| panic!("key {k}: {e}"));
+        let unison = Rk4Pool::new(&spec).unwrap_or_else(|e| panic!("key {k}: {e}"));
         let string = &spec.strings[0];
         let f_speaking = (s.tension_n / s.linear_density_kg_m).sqrt() / (2.0 * s.speaking_length_m);
         let cents = 1200.0 * (f_speaking / equal_tempered_hz(k)).log2();
@@ -133,13 +133,10 @@ fn strike_every_key<E: VoicePool>() -> (f64, usize) {
 
 #[test]
 fn every_key_struck_fortissimo_stays_finite_and_decays() {
-    use unacorda::engine::etd::ExponentialInstrument;
+    use unacorda::engine::etd::EtdPool;
     for (engine, (worst, released)) in [
-        ("RK4", strike_every_key::<Instrument>()),
-        (
-            "live integrator",
-            strike_every_key::<ExponentialInstrument>(),
-        ),
+        ("RK4", strike_every_key::<Rk4Pool>()),
+        ("live integrator", strike_every_key::<EtdPool>()),
     ] {
         println!("{engine}: all 88 keys struck at 6 m/s for 20 ms: finite; {released} hammers released, after which the energy changed by at most {worst:+.2e} per step");
         assert!(released > 80, "{engine}: only {released} hammers released");
@@ -184,7 +181,7 @@ fn keys_sound_near_their_pitch() {
 /// order asked for, exactly as built one after another.
 #[test]
 fn keys_prepared_on_several_threads_land_in_order() {
-    use unacorda::engine::etd::ExponentialInstrument;
+    use unacorda::engine::etd::EtdPool;
     use unacorda::engine::BuildError;
     use unacorda::engine::VoicePool;
     use unacorda::play::Piano;
@@ -195,8 +192,8 @@ fn keys_prepared_on_several_threads_land_in_order() {
         .iter()
         .map(|&k| keyboard.key_preset(k).unwrap().unison_spec())
         .collect();
-    let mut sequential = ExponentialInstrument::build_pool(&specs, 2, rate).unwrap();
-    let mut threaded = Piano::<ExponentialInstrument>::build(&keyboard, &keys, 2)
+    let mut sequential = EtdPool::build_pool(&specs, 2, rate).unwrap();
+    let mut threaded = Piano::<EtdPool>::build(&keyboard, &keys, 2)
         .unwrap()
         .instrument;
     let strike = Strike {
@@ -219,8 +216,8 @@ fn keys_prepared_on_several_threads_land_in_order() {
         keys.len()
     );
     // Prepared keys and their specs must pair up.
-    let one = vec![Instrument::prepare_key(&specs[0]).unwrap()];
-    let err = Instrument::<f64>::from_keys(&specs[..2], one, 1).unwrap_err();
+    let one = vec![Rk4Pool::prepare_key(&specs[0]).unwrap()];
+    let err = Rk4Pool::<f64>::from_keys(&specs[..2], one, 1).unwrap_err();
     println!("{err}");
     assert_eq!(err, BuildError::PreparedKeys { specs: 2, keys: 1 });
 }

@@ -6,7 +6,7 @@ use std::process::Command;
 use unacorda::config::scaling::{parse_key, Scaling};
 use unacorda::engine::Policy;
 use unacorda::engine::UnisonSpec;
-use unacorda::engine::{Instrument, Strike};
+use unacorda::engine::{Rk4Pool, Strike};
 use unacorda::midi::file::TimedEvent;
 use unacorda::midi::{Event, Pedal};
 use unacorda::render::render_midi_with;
@@ -28,8 +28,8 @@ fn a_damped_second_key_on_the_board_barely_changes_the_first() {
     // little, and only a little.
     let (_, c2) = key_spec("C2");
     let (_, c3) = key_spec("C3");
-    let mut one = Instrument::new(&c2).unwrap();
-    let mut two = Instrument::with_keys(&[c2, c3]).unwrap();
+    let mut one = Rk4Pool::new(&c2).unwrap();
+    let mut two = Rk4Pool::with_keys(&[c2, c3]).unwrap();
     two.set_active(1, true);
     two.set_damper_voice(1, true);
     let strike = Strike {
@@ -62,7 +62,7 @@ fn undamped_strings_ring_in_sympathy_through_the_board() {
     let (_, c2) = key_spec("C2");
     let (_, c3) = key_spec("C3");
     let run = |c3_damper_up: bool| -> f64 {
-        let mut u = Instrument::with_keys(&[c2.clone(), c3.clone()]).unwrap();
+        let mut u = Rk4Pool::with_keys(&[c2.clone(), c3.clone()]).unwrap();
         u.set_active(1, true);
         u.set_damper_voice(1, !c3_damper_up);
         u.strike_voice(

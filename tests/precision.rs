@@ -6,7 +6,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use unacorda::config::preset::Preset;
-use unacorda::engine::{Instrument, Strike};
+use unacorda::engine::{Rk4Pool, Strike};
 
 /// The system allocator, counting the bytes each thread holds (tests run on several threads).
 struct Counting;
@@ -39,8 +39,8 @@ fn drift(una_corda: bool, seconds: f64) -> (f64, f64, f64) {
         velocity_m_s: 2.5,
         una_corda,
     };
-    let mut reference = Instrument::new(&spec).unwrap();
-    let mut single = Instrument::<f32>::unison(&spec).unwrap();
+    let mut reference = Rk4Pool::new(&spec).unwrap();
+    let mut single = Rk4Pool::<f32>::unison(&spec).unwrap();
     reference.strike(strike);
     single.strike(strike);
     let mut worst = [0f64; 3];
@@ -100,7 +100,7 @@ fn measured_bytes_per_voice<T: unacorda::engine::kernels::Real>() -> (f64, usize
     let spec = Preset::resolve("c2").unwrap().unison_spec();
     let held = |voices: usize| {
         let before = HELD.with(Cell::get);
-        let pool = Instrument::<T>::pool(std::slice::from_ref(&spec), voices).unwrap();
+        let pool = Rk4Pool::<T>::pool(std::slice::from_ref(&spec), voices).unwrap();
         let after = HELD.with(Cell::get);
         (after - before, pool.bytes_per_voice())
     };

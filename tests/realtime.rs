@@ -7,7 +7,7 @@ use std::process::Command;
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::scaling::{parse_key, Scaling};
 use unacorda::engine::Policy;
-use unacorda::engine::{Instrument, Strike};
+use unacorda::engine::{Rk4Pool, Strike};
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Piano;
 use unacorda::render::Renderer;
@@ -15,7 +15,10 @@ use unacorda::render::Renderer;
 #[global_allocator]
 static ALLOCATOR: AllocDisabler = AllocDisabler;
 
-fn piano(names: &[&str], voices: usize) -> (Piano, unacorda::config::output::OutputSettings) {
+fn piano(
+    names: &[&str],
+    voices: usize,
+) -> (Piano<Rk4Pool>, unacorda::config::output::OutputSettings) {
     let scaling = Scaling::resolve("grand").unwrap();
     let keys: Vec<usize> = names.iter().map(|n| parse_key(n).unwrap()).collect();
     (
@@ -131,7 +134,7 @@ fn a_full_pool_steals_the_quietest_voice() {
     }
     let mut out = vec![0f32; 64];
     // Which key each voice plays: before G4 (at 0.08 s), and at the end.
-    let keys_of_voices = |synth: &Synth| -> Vec<usize> {
+    let keys_of_voices = |synth: &Synth<Rk4Pool>| -> Vec<usize> {
         let (inst, keys) = (&synth.piano().instrument, &synth.piano().keys);
         (0..inst.n_voices())
             .map(|v| inst.key_of_voice(v).map_or(0, |b| keys[b]))
@@ -159,7 +162,7 @@ fn a_full_pool_steals_the_quietest_voice() {
 }
 
 /// Sound pressure of `renderer` over `frames` output frames.
-fn pressure(r: &mut Renderer, frames: usize) -> Vec<f64> {
+fn pressure(r: &mut Renderer<Rk4Pool>, frames: usize) -> Vec<f64> {
     (0..frames).map(|_| r.next_frame().pressure_pa).collect()
 }
 
@@ -194,7 +197,7 @@ fn stealing_fades_the_voice_off_the_board_without_a_click() {
         Cut,
     }
     let window = |then: Then| -> Vec<f64> {
-        let mut inst = Instrument::with_pool(&specs, 1).unwrap();
+        let mut inst = Rk4Pool::with_pool(&specs, 1).unwrap();
         inst.assign(0, 0);
         inst.strike_voice(0, hit);
         let mut r = Renderer::from_instrument(inst, &scaling.base);

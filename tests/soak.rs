@@ -15,8 +15,8 @@ use assert_no_alloc::{assert_no_alloc, reset_violation_count, violation_count, A
 use std::sync::atomic::Ordering;
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::scaling::{Scaling, KEYS};
-use unacorda::engine::etd::ExponentialInstrument;
-use unacorda::engine::{Instrument, VoicePool};
+use unacorda::engine::etd::EtdPool;
+use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::resident_bytes;
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Piano;
@@ -202,8 +202,8 @@ fn soak<E: VoicePool>(seconds: f64, engine: &str, two_cores: bool) {
 
 #[test]
 fn soak_short() {
-    soak::<Instrument>(10.0, "RK4 at 96 kHz", false);
-    soak::<ExponentialInstrument>(10.0, "ETDRK4 at 48 kHz on two cores", true);
+    soak::<Rk4Pool>(10.0, "RK4 at 96 kHz", false);
+    soak::<EtdPool>(10.0, "ETDRK4 at 48 kHz on two cores", true);
 }
 
 fn long_seconds() -> f64 {
@@ -216,11 +216,11 @@ fn long_seconds() -> f64 {
 #[test]
 #[ignore = "long: 10 minutes of sound (UNACORDA_SOAK_S to change)"]
 fn soak_ten_minutes_rk4() {
-    soak::<Instrument>(long_seconds(), "RK4 at 96 kHz", false);
+    soak::<Rk4Pool>(long_seconds(), "RK4 at 96 kHz", false);
 }
 
 #[test]
 #[ignore = "long: 10 minutes of sound (UNACORDA_SOAK_S to change)"]
 fn soak_ten_minutes_etd() {
-    soak::<ExponentialInstrument>(long_seconds(), "ETDRK4 at 48 kHz on two cores", true);
+    soak::<EtdPool>(long_seconds(), "ETDRK4 at 48 kHz on two cores", true);
 }

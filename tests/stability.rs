@@ -21,8 +21,8 @@ use std::path::Path;
 use unacorda::analysis::stability::{one_step_map, step_eigenvalues, StepEigen};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::scaling::{parse_key, Scaling, KEYS};
-use unacorda::engine::etd::ExponentialInstrument;
-use unacorda::engine::{Instrument, VoicePool};
+use unacorda::engine::etd::EtdPool;
+use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::midi::file::{parse, TimedEvent};
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Piano;
@@ -105,32 +105,32 @@ fn chord_keys() -> Vec<usize> {
 
 #[test]
 fn the_live_integrators_step_is_stable_with_32_keys_dampers_up() {
-    stable::<ExponentialInstrument>("ETDRK4", &stability_keys(), false);
+    stable::<EtdPool>("ETDRK4", &stability_keys(), false);
 }
 
 #[test]
 fn the_live_integrators_step_is_stable_with_32_keys_dampers_down() {
-    stable::<ExponentialInstrument>("ETDRK4", &stability_keys(), true);
+    stable::<EtdPool>("ETDRK4", &stability_keys(), true);
 }
 
 #[test]
 fn the_live_integrators_step_is_stable_with_the_chord() {
-    stable::<ExponentialInstrument>("ETDRK4", &chord_keys(), false);
+    stable::<EtdPool>("ETDRK4", &chord_keys(), false);
 }
 
 #[test]
 fn rk4s_step_is_stable_with_32_keys_dampers_up() {
-    stable::<Instrument>("RK4", &stability_keys(), false);
+    stable::<Rk4Pool>("RK4", &stability_keys(), false);
 }
 
 #[test]
 fn rk4s_step_is_stable_with_32_keys_dampers_down() {
-    stable::<Instrument>("RK4", &stability_keys(), true);
+    stable::<Rk4Pool>("RK4", &stability_keys(), true);
 }
 
 #[test]
 fn rk4s_step_is_stable_with_the_chord() {
-    stable::<Instrument>("RK4", &chord_keys(), false);
+    stable::<Rk4Pool>("RK4", &chord_keys(), false);
 }
 
 /// A standard MIDI file (format 0, 480 ticks per beat at 120 bpm: 960 ticks per second) of
@@ -231,8 +231,8 @@ fn quarter_seconds<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> Vec<f64>
 /// rises to full scale), falling from `silenced_s` on (when the dampers drop) by at least
 /// `fall_db` to the end, and the live integrator within 1 dB of RK4 in every quarter second.
 fn chord_decays(what: &str, events: &[TimedEvent], silenced_s: f64, tail_s: f64, fall_db: f64) {
-    let rk4 = quarter_seconds::<Instrument>(events, tail_s);
-    let etd = quarter_seconds::<ExponentialInstrument>(events, tail_s);
+    let rk4 = quarter_seconds::<Rk4Pool>(events, tail_s);
+    let etd = quarter_seconds::<EtdPool>(events, tail_s);
     let from = (silenced_s / 0.25).ceil() as usize;
     println!("{what}: level per quarter second (dBFS), RK4 / live integrator:");
     for (i, (r, e)) in rk4.iter().zip(&etd).enumerate() {
@@ -368,11 +368,8 @@ fn energy_stress<E: VoicePool>(seconds: f64) -> (u64, u64, f64) {
 #[test]
 fn undriven_energy_never_rises() {
     for (engine, (undriven, rises, worst)) in [
-        ("RK4", energy_stress::<Instrument>(3.0)),
-        (
-            "live integrator",
-            energy_stress::<ExponentialInstrument>(3.0),
-        ),
+        ("RK4", energy_stress::<Rk4Pool>(3.0)),
+        ("live integrator", energy_stress::<EtdPool>(3.0)),
     ] {
         println!(
             "{engine}: random playing on 24 keys, 3 s: {undriven} frames sounding with nothing driving the pool; the energy rose above rounding (1e-12) in {rises}; largest relative change {worst:+.2e} per frame"
@@ -431,13 +428,13 @@ fn the_growth_guard_resets_a_slow_runaway() {
     for (engine, unstable, stable) in [
         (
             "RK4",
-            growth_guard::<Instrument>(-0.01),
-            growth_guard::<Instrument>(0.03),
+            growth_guard::<Rk4Pool>(-0.01),
+            growth_guard::<Rk4Pool>(0.03),
         ),
         (
             "live integrator",
-            growth_guard::<ExponentialInstrument>(-0.01),
-            growth_guard::<ExponentialInstrument>(0.03),
+            growth_guard::<EtdPool>(-0.01),
+            growth_guard::<EtdPool>(0.03),
         ),
     ] {
         println!(

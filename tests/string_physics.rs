@@ -5,7 +5,7 @@ use std::f64::consts::PI;
 use unacorda::analysis::spectral::{dtft_magnitude, peak_frequency};
 use unacorda::config::preset::{LoadedPreset, Preset};
 use unacorda::engine::Strike;
-use unacorda::engine::{Instrument, UnisonSpec};
+use unacorda::engine::{Rk4Pool, UnisonSpec};
 
 fn c2() -> LoadedPreset {
     Preset::resolve("c2").unwrap()
@@ -25,7 +25,7 @@ fn uncoupled(zeta: f64) -> UnisonSpec {
 /// Free vibration of string 1 from a smooth initial shape, sampled at every other step:
 /// transverse displacement at 0.37 L.
 fn free_vibration(spec: &UnisonSpec, seconds: f64) -> (f64, Vec<f64>) {
-    let mut u = Instrument::new(spec).unwrap();
+    let mut u = Rk4Pool::new(spec).unwrap();
     let t = u.string_range(0, 0);
     let s = &spec.strings[0];
     let x_obs = 0.37 * s.length_m();
@@ -135,7 +135,7 @@ fn linear_subproblem(rate_hz: f64, damped: bool) -> UnisonSpec {
 }
 
 /// Start with the string moving in a smooth shape whose bridge point is at rest.
-fn set_initial_velocity(u: &mut Instrument) {
+fn set_initial_velocity(u: &mut Rk4Pool) {
     let t = u.string_range(0, 0);
     let p = u.string_range(0, 2);
     let (_, v) = u.state_mut();
@@ -151,7 +151,7 @@ fn set_initial_velocity(u: &mut Instrument) {
 fn rk4_converges_with_order_four() {
     let t_end = 0.01;
     let run = |rate: f64| -> Vec<f64> {
-        let mut u = Instrument::new(&linear_subproblem(rate, true)).unwrap();
+        let mut u = Rk4Pool::new(&linear_subproblem(rate, true)).unwrap();
         set_initial_velocity(&mut u);
         for _ in 0..(t_end * rate).round() as usize {
             u.step();
@@ -194,7 +194,7 @@ fn rk4_converges_with_order_four() {
 
 /// Worst relative drift of the total energy over 1 s, and the largest energy held by board + springs.
 fn undamped_drift(rate_hz: f64) -> (f64, f64, f64) {
-    let mut u = Instrument::new(&linear_subproblem(rate_hz, false)).unwrap();
+    let mut u = Rk4Pool::new(&linear_subproblem(rate_hz, false)).unwrap();
     set_initial_velocity(&mut u);
     let e0 = u.energy().total_j();
     let steps = (1.0 / u.step_s()).round() as usize;
@@ -233,7 +233,7 @@ fn energy_is_conserved_without_damping() {
 #[test]
 fn energy_never_increases_with_damping_and_hammer() {
     let preset = c2();
-    let mut u = Instrument::new(&preset.unison_spec()).unwrap();
+    let mut u = Rk4Pool::new(&preset.unison_spec()).unwrap();
     u.strike(Strike {
         velocity_m_s: 2.5,
         una_corda: false,
@@ -315,7 +315,7 @@ fn both_engines_match_the_linearised_systems_eigenvalues() {
     // state matrix of Eq. 10–11 with the contact forces folded in (independent of both engines'
     // code), against the one-step maps of RK4 at 96 kHz and the live integrator at 48 kHz.
     use unacorda::analysis::modes::linear_modes;
-    use unacorda::engine::etd::ExponentialInstrument;
+    use unacorda::engine::etd::EtdPool;
     let spec = c2().unison_spec();
     let exact: Vec<_> = linear_modes(&spec)
         .unwrap()
@@ -341,13 +341,13 @@ fn both_engines_match_the_linearised_systems_eigenvalues() {
         (
             "RK4",
             96_000.0,
-            map_modes::<Instrument>(&spec, 96_000.0),
+            map_modes::<Rk4Pool>(&spec, 96_000.0),
             (2e-3, 0.1),
         ),
         (
             "live integrator",
             48_000.0,
-            map_modes::<ExponentialInstrument>(&spec, 48_000.0),
+            map_modes::<EtdPool>(&spec, 48_000.0),
             (1e-3, 0.1),
         ),
     ] {

@@ -8,7 +8,7 @@
 use super::mobility::{mobility_curves, TERM_NAMES};
 use super::spectral::spectrogram;
 use crate::engine::physics::soundboard::SoundboardModes;
-use crate::engine::DIRECTIONS;
+use crate::engine::Direction;
 use crate::render::Recording;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -375,7 +375,7 @@ fn band_grid(
 ) -> Result<Vec<PathBuf>, FigureError> {
     let mut csv = String::from("time_s");
     for (_, tag, _) in columns {
-        for d in DIRECTIONS {
+        for d in Direction::ALL.map(Direction::name) {
             let _ = write!(csv, ",{tag}_{d}_min_n,{tag}_{d}_max_n");
         }
     }
@@ -404,14 +404,14 @@ fn band_grid(
                     .collect::<Vec<_>>(),
             );
             for (c, (label, _, bins)) in columns.iter().enumerate() {
-                let caption = format!("{label} — {}", DIRECTIONS[d]);
+                let caption = format!("{label} — {}", Direction::ALL[d].name());
                 draw_band(
                     &panels[d * columns.len() + c],
                     &caption,
                     &bins[d],
                     y,
                     COLORS[d],
-                    d == 2,
+                    Direction::ALL[d] == Direction::P,
                 )?;
             }
         }

@@ -138,7 +138,7 @@ pub struct CallbackStats {
 pub type Refused<E> = (DeviceError, Option<Box<Synth<E>>>);
 
 /// A running output stream.
-pub struct Output<E: VoicePool = crate::engine::Instrument> {
+pub struct Output<E: VoicePool = crate::engine::Rk4Pool> {
     /// Dropping the stream stops it; the synth then comes back through `synth_back`.
     stream: cpal::Stream,
     pub device: String,

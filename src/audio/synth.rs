@@ -13,7 +13,7 @@ use super::radiate::{soft_clip, Monopole, KNEE};
 use super::Decimator;
 use crate::config::output::OutputSettings;
 use crate::engine::Pair;
-use crate::engine::{Instrument, VoicePool};
+use crate::engine::VoicePool;
 use crate::midi::Event;
 use crate::play::Piano;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
@@ -33,7 +33,7 @@ pub struct Scheduled {
 
 /// Commands from the controlling thread.
 #[derive(Debug)]
-pub enum Control<E: VoicePool = Instrument> {
+pub enum Control<E: VoicePool> {
     /// Output silence from now on and stop simulating.
     Shutdown,
     /// Play another piano (a preset or keyboard change), built off the audio thread; the old
@@ -81,7 +81,7 @@ pub struct Stats {
 }
 
 /// The audio thread's side: owns the piano, reads events and commands.
-pub struct Synth<E: VoicePool = Instrument> {
+pub struct Synth<E: VoicePool> {
     piano: Box<Piano<E>>,
     events: HeapCons<Scheduled>,
     control: Receiver<Control<E>>,
@@ -108,7 +108,7 @@ pub struct Synth<E: VoicePool = Instrument> {
 const RUN_FRAMES: usize = 1024;
 
 /// The other threads' side: schedule events, send commands, read the clock and the counters.
-pub struct SynthHandle<E: VoicePool = Instrument> {
+pub struct SynthHandle<E: VoicePool> {
     pub events: HeapProd<Scheduled>,
     control: Sender<Control<E>>,
     returned: Receiver<Box<Piano<E>>>,

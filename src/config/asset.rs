@@ -229,8 +229,8 @@ fn expected_columns(points: &[String]) -> Vec<String> {
         .map(|s| s.to_string())
         .collect();
     for p in points {
-        for d in crate::engine::DIRECTIONS {
-            cols.push(format!("{d}@{p}"));
+        for d in crate::engine::Direction::ALL {
+            cols.push(format!("{}@{p}", d.name()));
         }
     }
     cols

@@ -1,4 +1,4 @@
-//! Pure physics: no I/O, no threads, no allocation after a [`Instrument`] is built.
+//! Pure physics: no I/O, no threads, no allocation after a [`Rk4Pool`] is built.
 //!
 //! One module per physical part of the paper's model, one for their assembly:
 //! - [`string`]: stiff-string modes in T, P and L (Eq. 1–3),
@@ -25,15 +25,15 @@ pub mod tuning;
 
 pub use parallel::Pair;
 pub use pool::Policy;
-pub use rk4::Instrument;
+pub use rk4::Rk4Pool;
 pub use spec::{
-    BuildError, Energy, LinearState, Observation, Strike, UnisonSpec, DIRECTIONS, MAX_STRINGS,
+    BuildError, Direction, Energy, LinearState, Observation, Strike, UnisonSpec, MAX_STRINGS,
     SILENCE_J, STEAL_FADE_S,
 };
 
 /// A pool of voices on one shared board, as the player and the audio callback drive it: RK4 at
-/// the paper's rate ([`Instrument`], the reference) or ETDRK4 at the output rate
-/// ([`etd::ExponentialInstrument`], the live integrator). The pool policy (assign, steal, strike,
+/// the paper's rate ([`Rk4Pool`], the reference) or ETDRK4 at the output rate
+/// ([`etd::EtdPool`], the live integrator). The pool policy (assign, steal, strike,
 /// dampers, retire, reset) is [`Policy`], written once for both; this is the rest.
 pub trait VoicePool: Policy + Clone + Send + std::fmt::Debug + 'static {
     /// One key's coefficients, prepared before the pool is built.
@@ -143,11 +143,11 @@ macro_rules! voice_pool {
     };
 }
 
-voice_pool!(Instrument, rk4::KeyModel<f64>, |_| None::<f64>);
-voice_pool!(etd::ExponentialInstrument, etd::PreparedKey, Some::<f64>);
+voice_pool!(Rk4Pool, rk4::Rk4Key<f64>, |_| None::<f64>);
+voice_pool!(etd::EtdPool, etd::PreparedKey, Some::<f64>);
 
-/// What the offline renderer needs of a one-key engine: RK4 on [`Instrument`] (the reference, at
-/// the paper's rate) or ETDRK4 on [`etd::ExponentialUnison`] (at the output rate).
+/// What the offline renderer needs of a one-key engine: RK4 on [`Rk4Pool`] (the reference, at
+/// the paper's rate) or ETDRK4 on [`etd::EtdUnison`] (at the output rate).
 pub trait Engine {
     /// Advance one internal step.
     fn step(&mut self);
@@ -159,39 +159,39 @@ pub trait Engine {
     fn step_s(&self) -> f64;
 }
 
-impl Engine for Instrument {
+impl Engine for Rk4Pool {
     fn step(&mut self) {
-        Instrument::step(self)
+        Rk4Pool::step(self)
     }
     fn observe(&self) -> Observation {
-        Instrument::observe(self)
+        Rk4Pool::observe(self)
     }
     fn strike(&mut self, strike: Strike) {
-        Instrument::strike(self, strike)
+        Rk4Pool::strike(self, strike)
     }
     fn set_damper(&mut self, down: bool) {
-        Instrument::set_damper(self, down)
+        Rk4Pool::set_damper(self, down)
     }
     fn step_s(&self) -> f64 {
-        Instrument::step_s(self)
+        Rk4Pool::step_s(self)
     }
 }
 
-impl Engine for etd::ExponentialUnison {
+impl Engine for etd::EtdUnison {
     fn step(&mut self) {
-        etd::ExponentialUnison::step(self)
+        etd::EtdUnison::step(self)
     }
     fn observe(&self) -> Observation {
-        etd::ExponentialUnison::observe(self)
+        etd::EtdUnison::observe(self)
     }
     fn strike(&mut self, strike: Strike) {
-        etd::ExponentialUnison::strike(self, strike)
+        etd::EtdUnison::strike(self, strike)
     }
     fn set_damper(&mut self, down: bool) {
-        etd::ExponentialUnison::set_damper(self, down)
+        etd::EtdUnison::set_damper(self, down)
     }
     fn step_s(&self) -> f64 {
-        etd::ExponentialUnison::step_s(self)
+        etd::EtdUnison::step_s(self)
     }
 }
 

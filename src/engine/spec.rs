@@ -9,9 +9,7 @@ use crate::engine::physics::soundboard::SoundboardModes;
 use crate::engine::physics::string::{ModeSet, StringParams};
 use std::f64::consts::PI;
 
-/// Directions at the bridge, in the paper's order (Eq. 5–6): transverse to the
-/// board (T), longitudinal along the string (L), parallel to the board (P).
-pub const DIRECTIONS: [&str; 3] = ["T", "L", "P"];
+pub use crate::engine::physics::Direction;
 
 /// The most strings a unison can hold (a treble trichord).
 pub const MAX_STRINGS: usize = 3;

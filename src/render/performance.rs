@@ -2,7 +2,7 @@
 //! go through the synth's event queue at their output frames and the audio engine renders block
 //! by block, so the result is what `play` would sound, sample for sample.
 
-use crate::engine::{BuildError, Instrument};
+use crate::engine::{BuildError, Rk4Pool};
 use std::ops::ControlFlow;
 
 /// Why a MIDI performance cannot be rendered.
@@ -72,14 +72,13 @@ pub fn render_midi_with(
     tail_s: f64,
     voices: usize,
     progress: impl FnMut(f64),
-    tap: impl FnMut(&Instrument, u64),
+    tap: impl FnMut(&Rk4Pool, u64),
 ) -> Result<Performance, RenderError> {
     let mut samples = Vec::new();
-    let r =
-        render_midi_into::<Instrument>(scaling, events, tail_s, voices, progress, tap, |block| {
-            samples.extend_from_slice(block);
-            ControlFlow::Continue(())
-        })?;
+    let r = render_midi_into::<Rk4Pool>(scaling, events, tail_s, voices, progress, tap, |block| {
+        samples.extend_from_slice(block);
+        ControlFlow::Continue(())
+    })?;
     Ok(Performance {
         rate_hz: r.rate_hz,
         samples,
@@ -88,8 +87,8 @@ pub fn render_midi_with(
     })
 }
 
-/// [`render_midi_with`] on the engine `E` (RK4 [`Instrument`] or the live integrator,
-/// [`crate::engine::etd::ExponentialInstrument`]), handing each block of samples to `sink`
+/// [`render_midi_with`] on the engine `E` (RK4 [`Rk4Pool`] or the live integrator,
+/// [`crate::engine::etd::EtdPool`]), handing each block of samples to `sink`
 /// as it is made (a WAV being written) instead of keeping them; the render stops early when
 /// `sink` breaks (interrupted, or the disk is full).
 pub fn render_midi_into<E: crate::engine::VoicePool>(

@@ -1,7 +1,7 @@
 //! One key struck once, for analysis: from a preset and a strike to frames at the output rate —
 //! forces (Eq. 19) and radiated sound.
 //!
-//! The [`Renderer`] advances the [`Instrument`] at the internal rate, reads the outputs after each step,
+//! The [`Renderer`] advances the [`Rk4Pool`] at the internal rate, reads the outputs after each step,
 //! turns the board's net volume velocity into pressure at the listener (a monopole,
 //! `p = rho0 / (4 pi r) dQ/dt`, DESIGN.md §1.7) and decimates every channel through the same
 //! anti-alias filter to the output rate.
@@ -9,9 +9,9 @@
 use crate::audio::radiate::Monopole;
 use crate::audio::Decimator;
 use crate::config::preset::LoadedPreset;
-use crate::engine::etd::ExponentialUnison;
+use crate::engine::etd::EtdUnison;
 use crate::engine::MAX_STRINGS;
-use crate::engine::{BuildError, Instrument, Observation, Strike};
+use crate::engine::{BuildError, Observation, Rk4Pool, Strike};
 use crate::engine::{Engine, Integrator};
 
 /// Number of decimated channels: hammer (3), bridge (3 × 3), total (3), bridge velocity (3), pressure.
@@ -61,9 +61,9 @@ impl Frame {
     }
 }
 
-/// An engine (by default the RK4 [`Instrument`]) and its output stage, with analysis channels
+/// An engine (by default the RK4 [`Rk4Pool`]) and its output stage, with analysis channels
 /// (forces of voice 0).
-pub struct Renderer<E: Engine = Instrument> {
+pub struct Renderer<E: Engine> {
     instrument: E,
     decimator: Decimator,
     radiation: Monopole,
@@ -72,23 +72,20 @@ pub struct Renderer<E: Engine = Instrument> {
     outputs: [f64; CHANNELS],
 }
 
-impl Renderer {
-    pub fn new(preset: &LoadedPreset) -> Result<Renderer, BuildError> {
+impl Renderer<Rk4Pool> {
+    pub fn new(preset: &LoadedPreset) -> Result<Renderer<Rk4Pool>, BuildError> {
         let spec = preset.unison_spec();
-        let instrument = Instrument::new(&spec)?;
+        let instrument = Rk4Pool::new(&spec)?;
         Ok(Self::from_instrument(instrument, preset))
     }
 }
 
-impl Renderer<ExponentialUnison> {
+impl Renderer<EtdUnison> {
     /// The preset's key on the live integrator, stepping at the output rate.
     pub fn exponential(preset: &LoadedPreset) -> Result<Self, BuildError> {
         let mut spec = preset.unison_spec();
         spec.sample_rate_hz = preset.output_rate_hz();
-        Ok(Self::from_instrument(
-            ExponentialUnison::new(&spec)?,
-            preset,
-        ))
+        Ok(Self::from_instrument(EtdUnison::new(&spec)?, preset))
     }
 }
 

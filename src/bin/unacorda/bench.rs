@@ -5,8 +5,8 @@ use anyhow::{bail, Result};
 use std::sync::atomic::Ordering;
 use unacorda::config::preset::Preset;
 use unacorda::config::scaling::{LoadedScaling, Scaling, KEYS};
-use unacorda::engine::etd::ExponentialInstrument;
-use unacorda::engine::{Instrument, VoicePool};
+use unacorda::engine::etd::EtdPool;
+use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::{
     block_times_s, denormal_tail_step_s, dense_real_time_factor, exponential_speed, loaded_synth,
     nominal_f64_peak, percentile, resident_bytes, voice_speed,
@@ -96,21 +96,21 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
     );
 
     let scaling = Scaling::resolve("grand")?;
-    callback::<Instrument>(
+    callback::<Rk4Pool>(
         &scaling,
         seconds,
         max_voices,
         1,
         "RK4 at 96 kHz, the reference",
     )?;
-    callback::<ExponentialInstrument>(
+    callback::<EtdPool>(
         &scaling,
         seconds,
         max_voices,
         1,
         "ETDRK4 at 48 kHz, the live integrator",
     )?;
-    callback::<ExponentialInstrument>(
+    callback::<EtdPool>(
         &scaling,
         seconds,
         max_voices,

@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 use unacorda::audio::device::{self, midi_input, output_devices, CallbackStats, Fault};
 use unacorda::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use unacorda::config::scaling::{Scaling, KEYS};
-use unacorda::engine::etd::ExponentialInstrument;
-use unacorda::engine::{Instrument, VoicePool};
+use unacorda::engine::etd::EtdPool;
+use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::midi::live::LiveParser;
 use unacorda::play::{Piano, MAX_VOICES};
 
@@ -117,8 +117,8 @@ const FILE_TAIL_S: f64 = 2.0;
 
 pub fn play(args: PlayArgs) -> Result<()> {
     match args.integrator {
-        IntegratorArg::Rk4 => play_on::<Instrument>(args),
-        IntegratorArg::Exponential => play_on::<ExponentialInstrument>(args),
+        IntegratorArg::Rk4 => play_on::<Rk4Pool>(args),
+        IntegratorArg::Exponential => play_on::<EtdPool>(args),
     }
 }
 

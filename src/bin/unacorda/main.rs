@@ -318,11 +318,11 @@ fn run(cli: Cli) -> Result<()> {
                     );
                 }
                 return match integrator {
-                    IntegratorArg::Rk4 => render_midi_file::<unacorda::engine::Instrument>(
+                    IntegratorArg::Rk4 => render_midi_file::<unacorda::engine::Rk4Pool>(
                         &scaling, &events, tail, voices, &path, &out, length_s,
                     ),
                     IntegratorArg::Exponential => {
-                        render_midi_file::<unacorda::engine::etd::ExponentialInstrument>(
+                        render_midi_file::<unacorda::engine::etd::EtdPool>(
                             &scaling, &events, tail, voices, &path, &out, length_s,
                         )
                     }

@@ -3,7 +3,6 @@
 use super::kernels::*;
 use super::modal::*;
 use faer::c64;
-use std::f64::consts::PI;
 
 /// The board in its own complex modes, known in closed form: each mode `qdd = -w² q - 2 zeta w
 /// qdot + f` is `q = 2 Re z`, `qdot = 2 Re(lambda z)`, `z' = lambda z + f / (2 i Im lambda)`. The
@@ -63,8 +62,8 @@ impl Board {
             total: std::array::from_fn(|_| vec![0.0; n]),
         };
         for i in 0..n {
-            let w = 2.0 * PI * board.freq_hz[i];
-            let zeta = board.damping_ratio[i];
+            let mode = board.oscillator(i);
+            let (w, zeta) = (mode.omega_rad_s, mode.damping_ratio);
             let lam = c64::new(-zeta * w, w * (1.0 - zeta * zeta).max(0.0).sqrt());
             let gamma = c64::new(1.0, 0.0) / c64::new(0.0, 2.0 * lam.im.max(f64::MIN_POSITIVE));
             let [q, eq, f1, f2, f3] = etd_weights(lam, h);

@@ -6,14 +6,14 @@ use crate::engine::kernels::{Real, LANES};
 
 /// Complex-mode state of one block (re, im), sized for the largest key's block.
 #[derive(Debug, Clone, Default)]
-pub(super) struct Modes {
+pub(super) struct ComplexState {
     pub(super) re: Vec<f64>,
     pub(super) im: Vec<f64>,
 }
 
-impl Modes {
-    pub(super) fn zeros(n: usize) -> Modes {
-        Modes {
+impl ComplexState {
+    pub(super) fn zeros(n: usize) -> ComplexState {
+        ComplexState {
             re: vec![0.0; n],
             im: vec![0.0; n],
         }
@@ -25,7 +25,7 @@ impl Modes {
 }
 
 /// `Re(r z)` through `row` over the first `row.len()` modes.
-pub(super) fn read(row: &[Vec<f64>; 2], z: &Modes) -> f64 {
+pub(super) fn read(row: &[Vec<f64>; 2], z: &ComplexState) -> f64 {
     let n = row[0].len();
     (0..n)
         .map(|m| row[0][m] * z.re[m] - row[1][m] * z.im[m])
@@ -36,7 +36,7 @@ pub(super) fn read(row: &[Vec<f64>; 2], z: &Modes) -> f64 {
 #[inline(always)]
 pub(super) fn read_rows<const FMA: bool, const R: usize>(
     rows: [&[[Vec<f64>; 2]; 3]; R],
-    z: &Modes,
+    z: &ComplexState,
 ) -> [[f64; 3]; R] {
     let n = rows[0][0][0].len();
     let (zr, zi) = (&z.re[..n], &z.im[..n]);
@@ -59,7 +59,7 @@ pub(super) fn propagate_drive<const FMA: bool>(
     e: &[Vec<f64>; 2],
     gains: [&[[Vec<f64>; 2]; 3]; 2],
     u: [[f64; 4]; 2],
-    z: &mut Modes,
+    z: &mut ComplexState,
 ) {
     let n = e[0].len();
     let (er, ei) = (&e[0][..n], &e[1][..n]);
@@ -83,7 +83,7 @@ pub(super) fn propagate_drive<const FMA: bool>(
 
 /// `z += f1 g a + f2 g (b + c) + f3 g d` for one input with stage values `[a, b, c, d]`.
 #[inline(always)]
-pub(super) fn drive<const FMA: bool>(gain: &[[Vec<f64>; 2]; 3], u: [f64; 4], z: &mut Modes) {
+pub(super) fn drive<const FMA: bool>(gain: &[[Vec<f64>; 2]; 3], u: [f64; 4], z: &mut ComplexState) {
     let n = gain[0][0].len();
     let (zr, zi) = (&mut z.re[..n], &mut z.im[..n]);
     for (g, s) in gain.iter().zip([u[0], u[1] + u[2], u[3]]) {
@@ -98,7 +98,7 @@ pub(super) fn drive<const FMA: bool>(gain: &[[Vec<f64>; 2]; 3], u: [f64; 4], z: 
 }
 
 /// `sum |z|² e` over a block's modes (J).
-pub(super) fn energy_j(e: &[f64], z: &Modes) -> f64 {
+pub(super) fn energy_j(e: &[f64], z: &ComplexState) -> f64 {
     e.iter()
         .zip(z.re.iter().zip(&z.im))
         .map(|(e, (r, i))| e * (r * r + i * i))

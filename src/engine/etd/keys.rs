@@ -3,8 +3,10 @@
 //! ([`Statics`]).
 
 use super::modal::*;
+use crate::engine::physics::contact::Contact;
 use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::physics::hammer::HammerParams;
+use crate::engine::spec::Direction;
 use crate::engine::spec::{BuildError, UnisonSpec, MAX_STRINGS};
 use faer::c64;
 
@@ -74,10 +76,9 @@ pub(super) const IN_FADE: usize = 4;
 /// One key's coefficients: its string directions in complex modes, and the board's mode shapes
 /// at its bridge point.
 #[derive(Debug, Clone)]
-pub(super) struct KeyModes {
+pub(super) struct EtdKey {
     pub(super) strings: Vec<[Block; 3]>,
-    pub(super) contact_k: [f64; 3],
-    pub(super) contact_c: [f64; 3],
+    pub(super) contact: Contact,
     pub(super) hammer: HammerParams,
     pub(super) has_damper: bool,
     pub(super) damper_n_s_m: f64,
@@ -96,15 +97,14 @@ pub(super) struct KeyModes {
     pub(super) resp: [[[Lanes; 2]; INPUTS]; 4],
 }
 
-impl KeyModes {
+impl EtdKey {
     pub(super) fn new(
         strings: Vec<[Block; 3]>,
         spec: &UnisonSpec,
         board_shape: &[Vec<f64>; 3],
-    ) -> KeyModes {
-        let mut key = KeyModes {
-            contact_k: spec.contact.stiffness_n_m,
-            contact_c: spec.contact.damping_n_s_m,
+    ) -> EtdKey {
+        let mut key = EtdKey {
+            contact: spec.contact,
             hammer: spec.hammer,
             has_damper: spec.damper.is_some(),
             damper_n_s_m: spec.damper.map_or(0.0, |d| d.damping_n_s_m),
@@ -121,9 +121,9 @@ impl KeyModes {
         for (s, blocks) in key.strings.iter().enumerate() {
             for (d, block) in blocks.iter().enumerate() {
                 let b = 3 * s + d;
-                key.lane_k[b] = key.contact_k[d];
-                key.lane_c[b] = key.contact_c[d];
-                if d != 1 {
+                key.lane_k[b] = key.contact.stiffness_n_m[d];
+                key.lane_c[b] = key.contact.damping_n_s_m[d];
+                if Direction::ALL[d].is_transverse() {
                     key.lane_damper[b] = key.damper_n_s_m;
                 }
                 key.lane_through[b] = block.statics.bridge;
@@ -141,7 +141,7 @@ impl KeyModes {
     }
 }
 
-/// One key's string blocks, prepared ([`ExponentialInstrument::prepare_key`]) and waiting to be
+/// One key's string blocks, prepared ([`EtdPool::prepare_key`]) and waiting to be
 /// placed on the board.
 #[derive(Debug, Clone)]
 pub struct PreparedKey(pub(super) Vec<[Block; 3]>);
@@ -168,19 +168,9 @@ pub(super) fn key_strings(spec: &UnisonSpec, h: f64) -> Result<Vec<[Block; 3]>, 
             string.linear_density_kg_m,
         );
         let mut blocks = Vec::with_capacity(3);
-        // Directions T = 0, L = 1, P = 2.
-        for (d, n, zeta, transverse) in [
-            (0, m.modes_t, m.damping_ratio_t, true),
-            (1, m.modes_l, m.damping_ratio_l, false),
-            (2, m.modes_p, m.damping_ratio_p, true),
-        ] {
-            let omega = |k: usize| {
-                if transverse {
-                    string.transverse_omega(k + 1)
-                } else {
-                    string.longitudinal_omega(k + 1)
-                }
-            };
+        for dir in Direction::ALL {
+            let (d, n, transverse) = (dir.index(), m.count(dir), dir.is_transverse());
+            let mode = |k: usize| string.oscillator(dir, k + 1, m);
             let psi: Vec<f64> = (0..n).map(|k| string.mode_shape(k + 1, ls)).collect();
             let (kc, cc) = (spec.contact.stiffness_n_m[d], spec.contact.damping_n_s_m[d]);
             let mut kk = vec![0.0; n * n];
@@ -191,9 +181,8 @@ pub(super) fn key_strings(spec: &UnisonSpec, h: f64) -> Result<Vec<[Block; 3]>, 
                     ck[i * n + j] =
                         cc * psi[i] * psi[j] + if transverse { duplex[i * nd + j] } else { 0.0 };
                 }
-                let w = omega(i);
-                kk[i * n + i] += w * w;
-                ck[i * n + i] += 2.0 * zeta * w;
+                kk[i * n + i] += mode(i).omega2();
+                ck[i * n + i] += mode(i).damping_per_s();
             }
             // Uniform ports, zero where a direction has no hammer or no damper.
             let at = |x: Option<f64>| -> Vec<f64> {
@@ -202,11 +191,11 @@ pub(super) fn key_strings(spec: &UnisonSpec, h: f64) -> Result<Vec<[Block; 3]>, 
                     None => vec![0.0; n],
                 }
             };
-            let hammer = at((d == 0).then_some(strike_x));
+            let hammer = at(dir.is_struck().then_some(strike_x));
             let damper = at(damper_x.filter(|_| transverse));
             // The static deflection `K g = k psi` (Sherman–Morrison on `K = Omega^2 + k psi psi^T`)
             // and `C_0 g`, `C_0` the damping without the contact damper.
-            let flex: Vec<f64> = (0..n).map(|i| psi[i] / omega(i).powi(2)).collect();
+            let flex: Vec<f64> = (0..n).map(|i| psi[i] / mode(i).omega2()).collect();
             let compliance: f64 = (0..n).map(|i| psi[i] * flex[i]).sum();
             let g: Vec<f64> = flex
                 .iter()

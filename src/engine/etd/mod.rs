@@ -21,7 +21,7 @@
 //! `q^` the two cancel exactly and what stays explicit, at fourth order, is small: the contact
 //! spring in series with the string, the string's mass moving with the bridge and the damping of
 //! that motion, the felt hammer (Eq. 8) and the damper felt. RK4 at the paper's rate stays the
-//! reference ([`crate::engine::Instrument`]); `tests/integrators.rs` compares.
+//! reference ([`crate::engine::Rk4Pool`]); `tests/integrators.rs` compares.
 //!
 //! ETDRK4 (Cox & Matthews 2002) for `y' = L y + N(y)`, `E = e^{L h/2}`, `Q = (E - 1) L^-1`:
 //! `a = E y + Q N(y)`, `b = E y + Q N(a)`, `c = E² y + (E - 1) Q N(y) + 2 Q N(b)`,
@@ -37,6 +37,7 @@
 
 use crate::engine::kernels::has_avx2_fma;
 use crate::engine::pool::{Policy, VoiceState};
+use crate::engine::spec::Direction;
 use crate::engine::spec::{BuildError, Observation, Strike, UnisonSpec, STEAL_FADE_S};
 use crate::engine::Pair;
 use std::panic::AssertUnwindSafe;
@@ -56,13 +57,13 @@ use split::*;
 use voices::*;
 
 /// Strings of up to 88 keys on one shared soundboard, advanced by ETDRK4 at the output rate: a
-/// bank of keys and a fixed pool of voices with the same behaviour as [`crate::engine::Instrument`] (assign,
+/// bank of keys and a fixed pool of voices with the same behaviour as [`crate::engine::Rk4Pool`] (assign,
 /// steal with a fade, strike in the current motion, dampers, silent voices retired, runaways reset).
-/// Voices `k` live in half `k % 2`; [`ExponentialInstrument::run`] advances the halves on two
+/// Voices `k` live in half `k % 2`; [`EtdPool::run`] advances the halves on two
 /// cores when given a [`Pair`], in turn on one otherwise, with the same result.
 #[derive(Debug, Clone)]
-pub struct ExponentialInstrument {
-    keys: Vec<KeyModes>,
+pub struct EtdPool {
+    keys: Vec<EtdKey>,
     halves: [Half; 2],
     exchange: Exchange,
     voice_of_key: Vec<Option<usize>>,
@@ -72,13 +73,10 @@ pub struct ExponentialInstrument {
     fast_path: bool,
 }
 
-impl ExponentialInstrument {
+impl EtdPool {
     /// Several keys on one shared soundboard and a pool of `voices` voices, stepping at each
     /// spec's `sample_rate_hz` (the output rate).
-    pub fn with_pool(
-        specs: &[UnisonSpec],
-        voices: usize,
-    ) -> Result<ExponentialInstrument, BuildError> {
+    pub fn with_pool(specs: &[UnisonSpec], voices: usize) -> Result<EtdPool, BuildError> {
         let strings = specs
             .iter()
             .map(Self::prepare_key)
@@ -88,17 +86,17 @@ impl ExponentialInstrument {
 
     /// One key's strings diagonalised and their propagators formed at `spec.sample_rate_hz`: the
     /// costly part of building, independent from key to key (a caller may prepare keys on
-    /// several threads, then call [`ExponentialInstrument::from_keys`]).
+    /// several threads, then call [`EtdPool::from_keys`]).
     pub fn prepare_key(spec: &UnisonSpec) -> Result<PreparedKey, BuildError> {
         key_strings(spec, 1.0 / spec.sample_rate_hz).map(PreparedKey)
     }
 
-    /// The pool of [`ExponentialInstrument::with_pool`] from keys already prepared, one per spec.
+    /// The pool of [`EtdPool::with_pool`] from keys already prepared, one per spec.
     pub fn from_keys(
         specs: &[UnisonSpec],
         strings: Vec<PreparedKey>,
         voices: usize,
-    ) -> Result<ExponentialInstrument, BuildError> {
+    ) -> Result<EtdPool, BuildError> {
         let first = specs.first().ok_or(BuildError::NoVoice)?;
         if voices == 0 {
             return Err(BuildError::NoVoice);
@@ -123,7 +121,7 @@ impl ExponentialInstrument {
                 .points
                 .get(spec.bridge_point)
                 .ok_or(BuildError::BridgePoint(spec.bridge_point))?;
-            keys.push(KeyModes::new(strings, spec, &point.shape));
+            keys.push(EtdKey::new(strings, spec, &point.shape));
         }
         let nk = keys.len();
         // Voice state sized for the largest key in each direction.
@@ -135,7 +133,7 @@ impl ExponentialInstrument {
         });
         let voice = Voice {
             state: VoiceState::default(),
-            z: std::array::from_fn(|_| std::array::from_fn(|d| Modes::zeros(cap[d]))),
+            z: std::array::from_fn(|_| std::array::from_fn(|d| ComplexState::zeros(cap[d]))),
             hammer_y: 0.0,
             hammer_v: 0.0,
         };
@@ -152,7 +150,7 @@ impl ExponentialInstrument {
                 steps: 0,
             }
         });
-        Ok(ExponentialInstrument {
+        Ok(EtdPool {
             exchange: Exchange::new(board.zr.len()),
             halves,
             keys,
@@ -222,7 +220,7 @@ impl ExponentialInstrument {
         for (s, blocks) in km.strings.iter().enumerate() {
             for (d, b) in blocks.iter().enumerate() {
                 let (z, (y, yv)) = (&v.z[s][d], at[d]);
-                let (st, kc) = (&b.statics, km.contact_k[d]);
+                let (st, kc) = (&b.statics, km.contact.stiffness_n_m[d]);
                 let rest = 1.0 - st.bridge;
                 let psi_q = read(&b.rows[BRIDGE_Q][0], z);
                 e += energy_j(&b.energy, z)
@@ -263,8 +261,11 @@ impl ExponentialInstrument {
                 let (b, z) = (&blocks[d], &v.z[s][d]);
                 let rest = 1.0 - b.statics.bridge;
                 let f = v.state.coupling
-                    * (km.contact_k[d] * (read(&b.rows[BRIDGE_Q][0], z) - rest * rb[d][0])
-                        + km.contact_c[d] * (read(&b.rows[BRIDGE_V][0], z) - rest * rb[d][1]));
+                    * km.contact.force_n(
+                        d,
+                        read(&b.rows[BRIDGE_Q][0], z) - rest * rb[d][0],
+                        read(&b.rows[BRIDGE_V][0], z) - rest * rb[d][1],
+                    );
                 obs.bridge_force_n[s][d] = f;
                 obs.total_force_n[d] += f;
             }
@@ -441,7 +442,7 @@ impl ExponentialInstrument {
         state
     }
 
-    /// Set the state that [`ExponentialInstrument::linear_state`] reads, in the same layout.
+    /// Set the state that [`EtdPool::linear_state`] reads, in the same layout.
     pub fn set_linear_state(&mut self, x: &[f64]) {
         let mut at = 0;
         let mut take = |n: usize| {
@@ -485,8 +486,9 @@ impl ExponentialInstrument {
             for (s, blocks) in km.strings.iter().enumerate() {
                 for (d, b) in blocks.iter().enumerate() {
                     let n = b.e_full[0].len();
-                    let struck = d == 0 && v.state.hammer_on && v.state.struck[s];
-                    let damped = d != 1 && v.state.damper_down;
+                    let struck =
+                        Direction::ALL[d].is_struck() && v.state.hammer_on && v.state.struck[s];
+                    let damped = Direction::ALL[d].is_transverse() && v.state.damper_down;
                     let fading = v.state.coupling != 1.0;
                     let ports = 2 + usize::from(struck) + usize::from(damped);
                     let inputs =
@@ -515,7 +517,7 @@ impl ExponentialInstrument {
 
 /// The pool policy ([`Policy`]) on the live integrator's voices, whose strings move in
 /// coordinates relative to the bridge (so a voice enters and leaves the board as it is).
-impl Policy for ExponentialInstrument {
+impl Policy for EtdPool {
     fn n_voices(&self) -> usize {
         self.n_voices
     }
@@ -554,7 +556,7 @@ impl Policy for ExponentialInstrument {
             .z
             .iter_mut()
             .flatten()
-            .for_each(Modes::clear);
+            .for_each(ComplexState::clear);
     }
 
     fn rest_strings(&mut self, k: usize) {
@@ -562,7 +564,7 @@ impl Policy for ExponentialInstrument {
             .z
             .iter_mut()
             .flatten()
-            .for_each(Modes::clear);
+            .for_each(ComplexState::clear);
     }
 
     fn enter(&mut self, _k: usize) {}
@@ -606,15 +608,15 @@ impl Policy for ExponentialInstrument {
 
 /// One unison on its bridge point advanced by ETDRK4 (the pool with one key and one voice).
 #[derive(Debug, Clone)]
-pub struct ExponentialUnison(ExponentialInstrument);
+pub struct EtdUnison(EtdPool);
 
-impl ExponentialUnison {
+impl EtdUnison {
     /// Diagonalise every string direction and the board for the step `1 / spec.sample_rate_hz`.
-    pub fn new(spec: &UnisonSpec) -> Result<ExponentialUnison, BuildError> {
-        let mut pool = ExponentialInstrument::with_pool(std::slice::from_ref(spec), 1)?;
+    pub fn new(spec: &UnisonSpec) -> Result<EtdUnison, BuildError> {
+        let mut pool = EtdPool::with_pool(std::slice::from_ref(spec), 1)?;
         pool.assign(0, 0);
         pool.set_active(0, true);
-        Ok(ExponentialUnison(pool))
+        Ok(EtdUnison(pool))
     }
 
     pub fn step_s(&self) -> f64 {

@@ -73,7 +73,7 @@ impl Half {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn run_part(
         &mut self,
-        keys: &[KeyModes],
+        keys: &[EtdKey],
         ex: &Exchange,
         half: usize,
         (h, fade, fast): (f64, u32, bool),
@@ -101,7 +101,7 @@ impl Half {
     #[target_feature(enable = "avx2,fma")]
     pub(super) unsafe fn split_step_avx2(
         &mut self,
-        keys: &[KeyModes],
+        keys: &[EtdKey],
         ex: &Exchange,
         half: usize,
         h: f64,
@@ -113,7 +113,7 @@ impl Half {
     #[inline(always)]
     pub(super) fn split_step<const FMA: bool>(
         &mut self,
-        keys: &[KeyModes],
+        keys: &[EtdKey],
         ex: &Exchange,
         half: usize,
         h: f64,

@@ -4,7 +4,9 @@
 use super::board::*;
 use super::kernels::*;
 use super::keys::*;
+use crate::engine::physics::contact::spring_damper_n;
 use crate::engine::pool::{fade_step, hammer_clear, VoiceState};
+use crate::engine::spec::Direction;
 use crate::engine::spec::MAX_STRINGS;
 
 /// Per stage: the row read from the start state (0: `r`, 1: `r E`, 2: `r E²`) and the terms
@@ -23,7 +25,7 @@ pub(super) const ETDRK4_STAGES: [StagePlan; 4] = [
 pub(super) struct Voice {
     /// The policy's state (`engine::pool`), read and moved along by the step.
     pub(super) state: VoiceState,
-    pub(super) z: [[Modes; 3]; MAX_STRINGS],
+    pub(super) z: [[ComplexState; 3]; MAX_STRINGS],
     pub(super) hammer_y: f64,
     pub(super) hammer_v: f64,
 }
@@ -50,7 +52,7 @@ pub(super) struct VoiceSet {
 impl VoiceSet {
     /// Every row each live voice reads from the step's start.
     #[inline(always)]
-    pub(super) fn begin<const FMA: bool>(&mut self, keys: &[KeyModes]) {
+    pub(super) fn begin<const FMA: bool>(&mut self, keys: &[EtdKey]) {
         for &i in &self.live {
             let v = &self.voices[i];
             let km = &keys[v.state.key.expect("live voices have a key")];
@@ -64,11 +66,11 @@ impl VoiceSet {
                         w.start[BRIDGE_Q][which][lane] = q[which];
                         w.start[BRIDGE_V][which][lane] = qd[which];
                     }
-                    if d == 0 && v.state.hammer_on && v.state.struck[s] {
+                    if Direction::ALL[d].is_struck() && v.state.hammer_on && v.state.struck[s] {
                         let [y] = read_rows::<FMA, 1>([&b.rows[STRIKE_Q]], z);
                         (0..3).for_each(|which| w.start[STRIKE_Q][which][lane] = y[which]);
                     }
-                    if d != 1 && v.state.damper_down {
+                    if Direction::ALL[d].is_transverse() && v.state.damper_down {
                         let [y] = read_rows::<FMA, 1>([&b.rows[DAMPER_V]], z);
                         (0..3).for_each(|which| w.start[DAMPER_V][which][lane] = y[which]);
                     }
@@ -82,7 +84,7 @@ impl VoiceSet {
     #[inline(always)]
     pub(super) fn stage<const FMA: bool>(
         &mut self,
-        keys: &[KeyModes],
+        keys: &[EtdKey],
         stage: usize,
         &(which, terms): &StagePlan,
         h: f64,
@@ -100,7 +102,7 @@ impl VoiceSet {
 
     /// The stage's bridge accelerations of these voices, from the board's modal acceleration.
     #[inline(always)]
-    pub(super) fn accel<const FMA: bool>(&mut self, keys: &[KeyModes], stage: usize, acc: &[f64]) {
+    pub(super) fn accel<const FMA: bool>(&mut self, keys: &[EtdKey], stage: usize, acc: &[f64]) {
         for &i in &self.live {
             let km = &keys[self.voices[i].state.key.expect("live voices have a key")];
             voice_accel(
@@ -116,7 +118,7 @@ impl VoiceSet {
     #[inline(always)]
     pub(super) fn finish<const FMA: bool>(
         &mut self,
-        keys: &[KeyModes],
+        keys: &[EtdKey],
         h: f64,
         fade_steps: u32,
         board: &Board,
@@ -140,10 +142,10 @@ impl VoiceSet {
                     let gains = [&b.gains[IN_VEL], &b.gains[IN_ACCEL]];
                     propagate_drive::<FMA>(&b.e_full, gains, [u(IN_VEL), u(IN_ACCEL)], z);
                     drive::<FMA>(&b.gains[IN_FADE], u(IN_FADE), z);
-                    if felt && d == 0 {
+                    if felt && Direction::ALL[d].is_struck() {
                         drive::<FMA>(&b.gains[IN_FELT], u(IN_FELT), z);
                     }
-                    if v.state.damper_down && d != 1 {
+                    if v.state.damper_down && Direction::ALL[d].is_transverse() {
                         drive::<FMA>(&b.gains[IN_DAMPER], u(IN_DAMPER), z);
                     }
                 }
@@ -179,7 +181,7 @@ impl VoiceSet {
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(super) fn voice_stage(
-    km: &KeyModes,
+    km: &EtdKey,
     v: &Voice,
     w: &mut Work,
     stage: usize,
@@ -222,7 +224,7 @@ pub(super) fn voice_stage(
     for b in 0..BLOCKS {
         let [by, bv] = board[b % 3];
         let rest = 1.0 - through[b];
-        let f = kc[b] * (q[b] - rest * by) + cc[b] * (qd[b] - rest * bv);
+        let f = spring_damper_n(kc[b], cc[b], q[b] - rest * by, qd[b] - rest * bv);
         fade[b] = (1.0 - v.state.coupling) * f;
         force[b] = v.state.coupling * f;
         velocity[b] = bv;
@@ -278,7 +280,7 @@ pub(super) fn hammer_stage_y(v: &Voice, acc: &[f64; 4], stage: usize, h: f64) ->
 
 /// The displacement of string `s` at the strike point: its motion `q^` plus its static deflection
 /// by the board's displacement `y` (T) at the key's point.
-pub(super) fn strike_point(km: &KeyModes, s: usize, z: &Modes, y: f64) -> f64 {
+pub(super) fn strike_point(km: &EtdKey, s: usize, z: &ComplexState, y: f64) -> f64 {
     let b = &km.strings[s][0];
     read(&b.rows[STRIKE_Q][0], z) + b.statics.strike * y
 }

@@ -15,6 +15,38 @@ pub struct Contact {
     pub damping_n_s_m: [f64; 3],
 }
 
+impl Contact {
+    /// Eq. 6 in direction `d` (0 = T, 1 = L, 2 = P): the force (N) on the board from a string
+    /// whose bridge end is `stretch_m` from the bridge and moves at `rate_m_s` relative to it.
+    #[inline]
+    pub fn force_n(&self, d: usize, stretch_m: f64, rate_m_s: f64) -> f64 {
+        spring_damper_n(
+            self.stiffness_n_m[d],
+            self.damping_n_s_m[d],
+            stretch_m,
+            rate_m_s,
+        )
+    }
+
+    /// The contact spring's potential energy in direction `d` at `stretch_m` (J).
+    #[inline]
+    pub fn energy_j(&self, d: usize, stretch_m: f64) -> f64 {
+        0.5 * self.stiffness_n_m[d] * stretch_m * stretch_m
+    }
+}
+
+/// Eq. 6 for one direction, `k s + c sdot` (N): the one place the contact force is written, for
+/// the engines' scalar loops ([`Contact::force_n`]) and the live integrator's lanes alike.
+#[inline]
+pub fn spring_damper_n(
+    stiffness_n_m: f64,
+    damping_n_s_m: f64,
+    stretch_m: f64,
+    rate_m_s: f64,
+) -> f64 {
+    stiffness_n_m * stretch_m + damping_n_s_m * rate_m_s
+}
+
 /// Hertzian line-contact stiffness of a steel string on a wooden bridge (Eq. 7):
 /// `k = (pi L_c / 4) E_s E_w / (E_s (1 - nu_w^2) + E_w (1 - nu_s^2))` (N/m).
 pub fn hertz_stiffness_n_m(

@@ -1,10 +1,11 @@
-//! The reduced modal soundboard (paper Eq. 4–5) and its asset format.
+//! The reduced modal soundboard (paper Eq. 4–5).
 //!
 //! The board is a set of mass-normalised modes with natural frequency, damping ratio, net volume
 //! (for radiation, DESIGN.md §1.7) and, at each named bridge point, the three mode-shape components
 //! T, L, P. The driving-point mobility at a point is
 //! `Y_ij(omega) = sum_k i omega phi_i,k phi_j,k / (omega_k^2 - omega^2 + 2 i zeta_k omega_k omega)`.
 
+use super::Oscillator;
 use std::f64::consts::PI;
 
 /// A reduced modal soundboard, structure-of-arrays.
@@ -27,6 +28,14 @@ pub struct BridgePoint {
 }
 
 impl SoundboardModes {
+    /// Board mode `k` (0-based) as an oscillator (Eq. 4).
+    pub fn oscillator(&self, k: usize) -> Oscillator {
+        Oscillator {
+            omega_rad_s: 2.0 * PI * self.freq_hz[k],
+            damping_ratio: self.damping_ratio[k],
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.freq_hz.len()
     }

@@ -4,6 +4,7 @@
 //! mass-normalised, `psi_n(x) = sqrt(2 / (mu L)) sin(n pi x / L)`, so that the modal mass is 1 and
 //! the modal stiffness is `omega_n^2`.
 
+use super::{Direction, Oscillator};
 use std::f64::consts::PI;
 
 /// Physical description of one string of a unison.
@@ -70,6 +71,23 @@ impl StringParams {
         n as f64 * PI * self.longitudinal_speed_m_s() / self.length_m()
     }
 
+    /// Natural frequency of mode `n` (1-based) in direction `dir`: Eq. 2 for T and P, Eq. 3 for L.
+    pub fn omega(&self, dir: Direction, n: usize) -> f64 {
+        if dir.is_transverse() {
+            self.transverse_omega(n)
+        } else {
+            self.longitudinal_omega(n)
+        }
+    }
+
+    /// Mode `n` (1-based) of direction `dir` as an oscillator, damped as `modes` says.
+    pub fn oscillator(&self, dir: Direction, n: usize, modes: &ModeSet) -> Oscillator {
+        Oscillator {
+            omega_rad_s: self.omega(dir, n),
+            damping_ratio: modes.damping_ratio(dir),
+        }
+    }
+
     /// Mass-normalised mode shape `psi_n(x)` (1/sqrt(kg)), the same for T, P and L.
     pub fn mode_shape(&self, n: usize, x_m: f64) -> f64 {
         let l = self.length_m();
@@ -94,6 +112,25 @@ pub struct ModeSet {
     pub damping_ratio_t: f64,
     pub damping_ratio_p: f64,
     pub damping_ratio_l: f64,
+}
+
+impl ModeSet {
+    /// How many modes direction `dir` keeps.
+    pub fn count(&self, dir: Direction) -> usize {
+        match dir {
+            Direction::T => self.modes_t,
+            Direction::L => self.modes_l,
+            Direction::P => self.modes_p,
+        }
+    }
+
+    pub fn damping_ratio(&self, dir: Direction) -> f64 {
+        match dir {
+            Direction::T => self.damping_ratio_t,
+            Direction::L => self.damping_ratio_l,
+            Direction::P => self.damping_ratio_p,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -8,10 +8,10 @@
 //! is the baseline the optimised engine's speed is reported against.
 
 use crate::engine::physics::duplex::duplex_damping_matrix;
+use crate::engine::spec::Direction;
 use crate::engine::spec::{Strike, UnisonSpec, MAX_STRINGS};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
-use std::f64::consts::PI;
 use std::ops::Range;
 
 /// One unison in the paper's dense state-space form.
@@ -91,21 +91,13 @@ impl DenseUnison {
         a[(2 * nq, 2 * nq + 1)] = 1.0;
         for (s, string) in spec.strings.iter().enumerate().take(ns) {
             let ls = string.speaking_length_m;
-            let zeta = [
-                spec.modes.damping_ratio_t,
-                spec.modes.damping_ratio_l,
-                spec.modes.damping_ratio_p,
-            ];
-            for d in 0..3 {
+            for dir in Direction::ALL {
+                let d = dir.index();
                 for (k, i) in ranges[s][d].clone().enumerate() {
-                    let w = if d == 1 {
-                        string.longitudinal_omega(k + 1)
-                    } else {
-                        string.transverse_omega(k + 1)
-                    };
+                    let mode = string.oscillator(dir, k + 1, &spec.modes);
                     // -K and -C (Eq. 11, 12).
-                    a[(nq + i, i)] = -w * w;
-                    a[(nq + i, nq + i)] = -2.0 * zeta[d] * w;
+                    a[(nq + i, i)] = -mode.omega2();
+                    a[(nq + i, nq + i)] = -mode.damping_per_s();
                     let phi = string.mode_shape(k + 1, ls);
                     // B2 (Eq. 17): the string's bridge forces on its own modes.
                     b2[(nq + i, 3 * s + d)] = phi;
@@ -142,9 +134,9 @@ impl DenseUnison {
             b[(2 * nq + 1, s)] = -1.0 / spec.hammer.mass_kg;
         }
         for (k, i) in board.clone().enumerate() {
-            let w = 2.0 * PI * spec.board.freq_hz[k];
-            a[(nq + i, i)] = -w * w;
-            a[(nq + i, nq + i)] = -2.0 * spec.board.damping_ratio[k] * w;
+            let mode = spec.board.oscillator(k);
+            a[(nq + i, i)] = -mode.omega2();
+            a[(nq + i, nq + i)] = -mode.damping_per_s();
             for d in 0..3 {
                 let phi = point.shape[d][k];
                 b2[(nq + i, 3 * ns + d)] = phi;
@@ -211,7 +203,7 @@ impl DenseUnison {
         (self.ranges.clone(), self.board.clone())
     }
 
-    /// Launch the hammer as [`crate::engine::Instrument::strike_voice`] does: in contact with the struck
+    /// Launch the hammer as [`crate::engine::Rk4Pool::strike_voice`] does: in contact with the struck
     /// strings' current displacement, moving at the strike's speed.
     pub fn strike(&mut self, strike: Strike) {
         let ns = self.n_strings;
@@ -317,8 +309,11 @@ impl DenseUnison {
 
     /// Force of string `s` on the bridge in direction `d` (Eq. 6), from the outputs `y`.
     fn contact_force_n(&self, s: usize, d: usize) -> f64 {
-        let (y, ct) = (&self.y, &self.spec.contact);
-        ct.stiffness_n_m[d] * (y[(out_rs(s, d), 0)] - y[(out_rb(d), 0)])
-            + ct.damping_n_s_m[d] * (y[(out_vs(s, d), 0)] - y[(out_vb(d), 0)])
+        let y = &self.y;
+        self.spec.contact.force_n(
+            d,
+            y[(out_rs(s, d), 0)] - y[(out_rb(d), 0)],
+            y[(out_vs(s, d), 0)] - y[(out_vb(d), 0)],
+        )
     }
 }

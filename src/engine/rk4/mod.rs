@@ -20,6 +20,7 @@ use crate::engine::physics::duplex::{duplex_damping_matrix, low_rank_factor};
 use crate::engine::physics::hammer::HammerParams;
 use crate::engine::physics::string::ModeSet;
 use crate::engine::pool::{fade_step, hammer_clear, Policy, VoiceState};
+use crate::engine::spec::Direction;
 use crate::engine::spec::{
     BuildError, Energy, Observation, Strike, UnisonSpec, MAX_STRINGS, STEAL_FADE_S,
 };
@@ -27,10 +28,10 @@ use std::f64::consts::PI;
 use std::ops::Range;
 
 /// Coefficients of one key: its strings' modes (laid out from 0), hammer, damper and bridge point.
-/// Built once ([`Instrument::prepare_key`]); a voice playing the key copies the per-mode arrays
+/// Built once ([`Rk4Pool::prepare_key`]); a voice playing the key copies the per-mode arrays
 /// into its own slot.
 #[derive(Debug, Clone)]
-pub struct KeyModel<T> {
+pub struct Rk4Key<T> {
     n_strings: usize,
     /// `ranges[s][d]`: modes of string `s` in direction `d` (T, L, P), from the key's first mode.
     ranges: [[Range<usize>; 3]; MAX_STRINGS],
@@ -69,7 +70,7 @@ struct Voice {
 /// Coefficients of the system: the key bank, where each voice sits and what it plays, the board.
 #[derive(Debug, Clone)]
 struct Model<T> {
-    keys: Vec<KeyModel<T>>,
+    keys: Vec<Rk4Key<T>>,
     voices: Vec<Voice>,
     board: Range<usize>,
     omega2: Vec<T>,
@@ -87,23 +88,23 @@ struct Model<T> {
 /// string of every sounding key), with their hammers and dampers.
 ///
 /// The instrument holds a bank of keys and a fixed pool of voices. A voice is a slot in the flat
-/// state arrays that plays one key at a time at that key's bridge point; [`Instrument::assign`]
-/// gives a free voice a key (copying coefficients, no allocation) and [`Instrument::steal`] fades a
+/// state arrays that plays one key at a time at that key's bridge point; [`Rk4Pool::assign`]
+/// gives a free voice a key (copying coefficients, no allocation) and [`Rk4Pool::steal`] fades a
 /// sounding voice off the board before handing it to another key. Built for one key with
-/// [`Instrument::new`] (the paper's system), one voice per key with [`Instrument::with_keys`], or
-/// with a pool of any size with [`Instrument::with_pool`]. Only active voices are simulated.
+/// [`Rk4Pool::new`] (the paper's system), one voice per key with [`Rk4Pool::with_keys`], or
+/// with a pool of any size with [`Rk4Pool::with_pool`]. Only active voices are simulated.
 ///
 /// Modes are held and advanced in `T`: `f64`, the reference, or `f32` (twice the SIMD lanes;
-/// [`Instrument::pool`] builds either); hammers, forces and energies are computed in `f64`.
+/// [`Rk4Pool::pool`] builds either); hammers, forces and energies are computed in `f64`.
 #[derive(Debug, Clone)]
-pub struct Instrument<T: Real = f64> {
+pub struct Rk4Pool<T: Real = f64> {
     model: Model<T>,
     q: Vec<T>,
     v: Vec<T>,
     hammer_y: Vec<f64>,
     hammer_v: Vec<f64>,
     /// Per voice, the board's displacement and velocity at its point (T, L, P) when it stopped
-    /// being simulated (zero once its strings are set at rest): see [`Instrument::set_active`].
+    /// being simulated (zero once its strings are set at rest): see [`Rk4Pool::set_active`].
     left_at: Vec<[[f64; 2]; 3]>,
     /// Each voice's policy state (`engine::pool`), read by every evaluation.
     states: Vec<VoiceState>,
@@ -129,7 +130,7 @@ pub struct Instrument<T: Real = f64> {
 }
 
 /// One key's coefficients, its modes laid out from 0.
-fn build_key<T: Real>(spec: &UnisonSpec) -> Result<KeyModel<T>, BuildError> {
+fn build_key<T: Real>(spec: &UnisonSpec) -> Result<Rk4Key<T>, BuildError> {
     let ns = spec.strings.len();
     if ns == 0 || ns > MAX_STRINGS {
         return Err(BuildError::StringCount(ns));
@@ -155,20 +156,11 @@ fn build_key<T: Real>(spec: &UnisonSpec) -> Result<KeyModel<T>, BuildError> {
         // Flat layout [T | P | L]; direction index d is T = 0, L = 1, P = 2.
         ranges[s] = [b..b + nt, b + nt + np..b + per_string, b + nt..b + nt + np];
         let ls = string.speaking_length_m;
-        let blocks: [(usize, f64, bool); 3] = [
-            (0, spec.modes.damping_ratio_t, true),
-            (2, spec.modes.damping_ratio_p, true),
-            (1, spec.modes.damping_ratio_l, false),
-        ];
-        for (d, zeta, transverse) in blocks {
-            for (k, i) in ranges[s][d].clone().enumerate() {
-                let w = if transverse {
-                    string.transverse_omega(k + 1)
-                } else {
-                    string.longitudinal_omega(k + 1)
-                };
-                omega2[i] = w * w;
-                damp[i] = 2.0 * zeta * w;
+        for dir in Direction::ALL {
+            for (k, i) in ranges[s][dir.index()].clone().enumerate() {
+                let mode = string.oscillator(dir, k + 1, &spec.modes);
+                omega2[i] = mode.omega2();
+                damp[i] = mode.damping_per_s();
                 bridge_shape[i] = string.mode_shape(k + 1, ls);
             }
         }
@@ -227,7 +219,7 @@ fn build_key<T: Real>(spec: &UnisonSpec) -> Result<KeyModel<T>, BuildError> {
             rate_hz: spec.sample_rate_hz,
         });
     }
-    Ok(KeyModel {
+    Ok(Rk4Key {
         n_strings: ns,
         ranges,
         n_modes,
@@ -254,16 +246,16 @@ fn cast<T: Real>(x: &[f64]) -> Vec<T> {
     x.iter().map(|&v| T::from_f64(v)).collect()
 }
 
-impl Instrument {
+impl Rk4Pool {
     /// One unison on its bridge point (the paper's system), active from the start; precomputes
     /// every coefficient and allocates all state and scratch.
-    pub fn new(spec: &UnisonSpec) -> Result<Instrument, BuildError> {
+    pub fn new(spec: &UnisonSpec) -> Result<Rk4Pool, BuildError> {
         Self::unison(spec)
     }
 
     /// Several keys on one shared soundboard, one voice each: voice `k` plays `specs[k]` at its
     /// own bridge point. A voice is simulated once struck or its damper lifted.
-    pub fn with_keys(specs: &[UnisonSpec]) -> Result<Instrument, BuildError> {
+    pub fn with_keys(specs: &[UnisonSpec]) -> Result<Rk4Pool, BuildError> {
         let mut u = Self::pool(specs, specs.len())?;
         for k in 0..specs.len() {
             u.assign(k, k);
@@ -271,14 +263,14 @@ impl Instrument {
         Ok(u)
     }
 
-    /// A bank of keys and a pool of voices (see [`Instrument::pool`]), in `f64`.
-    pub fn with_pool(specs: &[UnisonSpec], voices: usize) -> Result<Instrument, BuildError> {
+    /// A bank of keys and a pool of voices (see [`Rk4Pool::pool`]), in `f64`.
+    pub fn with_pool(specs: &[UnisonSpec], voices: usize) -> Result<Rk4Pool, BuildError> {
         Self::pool(specs, voices)
     }
 }
 
-impl<T: Real> Instrument<T> {
-    /// [`Instrument::new`] in precision `T`.
+impl<T: Real> Rk4Pool<T> {
+    /// [`Rk4Pool::new`] in precision `T`.
     pub fn unison(spec: &UnisonSpec) -> Result<Self, BuildError> {
         let mut u = Self::pool(std::slice::from_ref(spec), 1)?;
         u.assign(0, 0);
@@ -298,15 +290,15 @@ impl<T: Real> Instrument<T> {
 
     /// One key's coefficients (modes, duplex factor, hammer, damper, stability check), independent
     /// from key to key (a caller may prepare keys on several threads, then call
-    /// [`Instrument::from_keys`]).
-    pub fn prepare_key(spec: &UnisonSpec) -> Result<KeyModel<T>, BuildError> {
+    /// [`Rk4Pool::from_keys`]).
+    pub fn prepare_key(spec: &UnisonSpec) -> Result<Rk4Key<T>, BuildError> {
         build_key(spec)
     }
 
-    /// The pool of [`Instrument::pool`] from keys already prepared, one per spec.
+    /// The pool of [`Rk4Pool::pool`] from keys already prepared, one per spec.
     pub fn from_keys(
         specs: &[UnisonSpec],
-        keys: Vec<KeyModel<T>>,
+        keys: Vec<Rk4Key<T>>,
         voices: usize,
     ) -> Result<Self, BuildError> {
         let first = specs.first().ok_or(BuildError::NoVoice)?;
@@ -341,9 +333,9 @@ impl<T: Real> Instrument<T> {
         let (mut omega2, mut damp) = (vec![T::ZERO; n], vec![T::ZERO; n]);
         let (bridge_shape, static_shape) = (vec![T::ZERO; n], vec![T::ZERO; strings_end]);
         for (k, i) in board.clone().enumerate() {
-            let w = 2.0 * PI * first.board.freq_hz[k];
-            omega2[i] = T::from_f64(w * w);
-            damp[i] = T::from_f64(2.0 * first.board.damping_ratio[k] * w);
+            let mode = first.board.oscillator(k);
+            omega2[i] = T::from_f64(mode.omega2());
+            damp[i] = T::from_f64(mode.damping_per_s());
         }
         let h = 1.0 / first.sample_rate_hz;
         let model = Model {
@@ -358,7 +350,7 @@ impl<T: Real> Instrument<T> {
             h,
         };
         let max_rank = model.keys.iter().map(|k| k.duplex_rank).max().unwrap_or(0);
-        Ok(Instrument {
+        Ok(Rk4Pool {
             duplex_z: vec![T::ZERO; 2 * MAX_STRINGS * max_rank],
             voice_of_key: vec![None; specs.len()],
             live: Vec::with_capacity(voices + 1),
@@ -470,7 +462,7 @@ impl<T: Real> Instrument<T> {
         state
     }
 
-    /// Set the state that [`Instrument::linear_state`] reads, in the same layout.
+    /// Set the state that [`Rk4Pool::linear_state`] reads, in the same layout.
     pub fn set_linear_state(&mut self, x: &[f64]) {
         let mut at = 0;
         for (r, _) in self.linear_ranges() {
@@ -538,8 +530,7 @@ impl<T: Real> Instrument<T> {
                 let r = voice.ranges[s][d].clone();
                 let rs = T::dot_wide::<false>(&m.bridge_shape[r.clone()], &self.q[r]);
                 let rb = T::dot_wide::<false>(&km.board_shape[d], qb);
-                e +=
-                    0.5 * self.states[k].coupling * km.contact.stiffness_n_m[d] * (rs - rb).powi(2);
+                e += self.states[k].coupling * km.contact.energy_j(d, rs - rb);
             }
         }
         e
@@ -720,7 +711,7 @@ impl<T: Real> Instrument<T> {
         }
     }
 
-    /// Voice 0's outputs (see [`Instrument::observe_voice`]).
+    /// Voice 0's outputs (see [`Rk4Pool::observe_voice`]).
     pub fn observe(&self) -> Observation {
         self.observe_voice(0)
     }
@@ -755,8 +746,8 @@ impl<T: Real> Instrument<T> {
                     T::dot_wide::<false>(shape, &v[r]),
                 );
                 let f = gain
-                    * (km.contact.stiffness_n_m[d] * (rs - rb[d])
-                        + km.contact.damping_n_s_m[d] * (rs_dot - obs.bridge_velocity_m_s[d]));
+                    * km.contact
+                        .force_n(d, rs - rb[d], rs_dot - obs.bridge_velocity_m_s[d]);
                 obs.bridge_force_n[s][d] = f;
                 obs.total_force_n[d] += f;
             }
@@ -871,7 +862,7 @@ impl<T: Real> Instrument<T> {
 }
 
 /// The pool policy ([`Policy`]) on RK4's flat arrays.
-impl<T: Real> Policy for Instrument<T> {
+impl<T: Real> Policy for Rk4Pool<T> {
     fn n_voices(&self) -> usize {
         self.model.voices.len()
     }
@@ -1087,9 +1078,7 @@ fn evaluate<T: Real, const SIMD: bool>(
                 let shape = &m.bridge_shape[r.clone()];
                 let rs = T::dot_wide::<SIMD>(shape, &q[r.clone()]);
                 let rs_dot = T::dot::<SIMD>(shape, &v[r.clone()]).to_f64();
-                let f = gain
-                    * (km.contact.stiffness_n_m[d] * (rs - rb[d])
-                        + km.contact.damping_n_s_m[d] * (rs_dot - rb_dot[d]));
+                let f = gain * km.contact.force_n(d, rs - rb[d], rs_dot - rb_dot[d]);
                 total[d] += f;
                 T::axpy::<SIMD>(&mut acc[r], shape, T::from_f64(-f));
             }
@@ -1135,7 +1124,7 @@ fn evaluate<T: Real, const SIMD: bool>(
 /// loaded once for all of them (when they have one length).
 #[inline(always)]
 fn duplex_damping<T: Real, const SIMD: bool>(
-    m: &KeyModel<T>,
+    m: &Rk4Key<T>,
     ranges: &[[Range<usize>; 3]; MAX_STRINGS],
     v: &[T],
     acc: &mut [T],
@@ -1175,7 +1164,7 @@ mod tests {
         let spec = crate::config::preset::Preset::resolve("c2")
             .unwrap()
             .unison_spec();
-        let mut fast = Instrument::<T>::unison(&spec).unwrap();
+        let mut fast = Rk4Pool::<T>::unison(&spec).unwrap();
         let mut portable = fast.clone();
         portable.fast_path = false;
         let strike = Strike {
