@@ -10,7 +10,7 @@ use std::f64::consts::PI;
 
 /// What one voice of a pool is doing, whatever the engine. Written by the policy on the thread
 /// that owns the pool (events, block ends); read by the engine's step, which also moves the fade
-/// ([`fade_step`]) and releases the hammer ([`hammer_clear`]).
+/// ([`fade_step`]) and releases the hammer ([`HammerParams::is_clear`](crate::engine::physics::hammer::HammerParams::is_clear)).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VoiceState {
     /// The key (bank index) the voice plays.
@@ -56,18 +56,6 @@ pub fn fade_step(state: &mut VoiceState, fade_steps: u32) -> bool {
     let x = f64::from(state.fade_left) / f64::from(fade_steps);
     state.coupling = 0.5 - 0.5 * (PI * x).cos();
     state.fade_left == 0
-}
-
-/// The hammer leaves the system once it recedes (`velocity_m_s < 0`) and is clear of every struck
-/// string by `gap_m`: `strike_points_m` are their displacements at the striking point.
-#[inline(always)]
-pub fn hammer_clear(
-    position_m: f64,
-    velocity_m_s: f64,
-    gap_m: f64,
-    mut strike_points_m: impl Iterator<Item = f64>,
-) -> bool {
-    velocity_m_s < 0.0 && strike_points_m.all(|y| y - position_m >= gap_m)
 }
 
 /// The pool policy over an engine's hooks. The required methods say where the voices' states

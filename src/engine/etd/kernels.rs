@@ -244,3 +244,58 @@ pub(super) fn fma<const FMA: bool>(a: f64, b: f64, c: f64) -> f64 {
         a * b + c
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::kernels::has_avx2_fma;
+
+    /// Deterministic values in [-1, 1).
+    fn values(n: usize, seed: u64) -> Vec<f64> {
+        let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        (0..n)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                (x >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn avx2_reads_agree_with_the_portable_ones() {
+        if !has_avx2_fma() {
+            println!("skipped: this CPU has no AVX2 + FMA");
+            return;
+        }
+        let mut worst: f64 = 0.0;
+        for n in (LANES..=48).step_by(LANES) {
+            let z = ComplexState {
+                re: values(n, 1),
+                im: values(n, 2),
+            };
+            let rows: [[[Vec<f64>; 2]; 3]; 2] = std::array::from_fn(|r| {
+                std::array::from_fn(|w| [values(n, 10 + 6 * r as u64 + w as u64), values(n, 40)])
+            });
+            let refs = [&rows[0], &rows[1]];
+            let fast = unsafe { read_rows_avx2(&z.re, &z.im, refs) };
+            let slow = read_rows::<false, 2>(refs, &z);
+            for (f, s) in fast.iter().flatten().zip(slow.iter().flatten()) {
+                worst = worst.max((f - s).abs());
+            }
+        }
+        // read_point takes any length: every tail.
+        for n in 0..=23 {
+            let phi: [Vec<f64>; 3] = std::array::from_fn(|d| values(n, 70 + d as u64));
+            let qv = [values(n, 80), values(n, 81)];
+            let fast = unsafe { read_point_avx2(&phi, &qv) };
+            let slow = read_point::<false>(&phi, &qv);
+            for (f, s) in fast.iter().flatten().zip(slow.iter().flatten()) {
+                worst = worst.max((f - s).abs());
+            }
+        }
+        println!("AVX2 vs portable reads: largest difference {worst:.1e} (values of order 1)");
+        assert!(worst < 1e-12, "{worst:e}");
+    }
+}

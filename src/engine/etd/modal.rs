@@ -205,3 +205,75 @@ pub(super) fn etd_weights(lambda: c64, h: f64) -> [c64; 5] {
     let e2 = exp(z * 0.5);
     [q, (e2 - one) * q, phi[1] * h, phi[2] * h, phi[3] * h]
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Unit velocity kick of `qdd + c qdot + k q = 0` read through the complex modes, against the
+    /// closed form (weights 2 for a conjugate pair, 1 for a real mode).
+    fn kick_response(k: f64, c: f64, exact: impl Fn(f64) -> f64) -> f64 {
+        let h = 1e-4;
+        let modal = Modal::new(&[k], &[c], 1, h).unwrap();
+        let (row, g) = (modal.row(&[1.0], false), modal.input(&[1.0]));
+        let mut worst: f64 = 0.0;
+        let mut peak: f64 = 0.0;
+        for step in 0..2000 {
+            let t = step as f64 * h;
+            let y: f64 = (0..row.len())
+                .map(|m| {
+                    let l = modal.ef[m].ln() / h; // lambda, from the stored propagator
+                    (row[m] * (l * t).exp() * g[m]).re
+                })
+                .sum();
+            worst = worst.max((y - exact(t)).abs());
+            peak = peak.max(exact(t).abs());
+        }
+        worst / peak
+    }
+
+    #[test]
+    fn complex_modes_give_the_oscillators_kick_response() {
+        let (w, zeta): (f64, f64) = (2.0 * std::f64::consts::PI * 200.0, 0.05);
+        let wd = w * (1.0 - zeta * zeta).sqrt();
+        let under = kick_response(w * w, 2.0 * zeta * w, |t| {
+            (-zeta * w * t).exp() * (wd * t).sin() / wd
+        });
+        // Overdamped: two real modes.
+        let (l1, l2) = (-300.0_f64, -2000.0_f64);
+        let over = kick_response(l1 * l2, -(l1 + l2), |t| {
+            ((l1 * t).exp() - (l2 * t).exp()) / (l1 - l2)
+        });
+        println!("kick response vs closed form: underdamped {under:.1e}, overdamped {over:.1e}");
+        assert!(under < 1e-9 && over < 1e-9);
+    }
+
+    #[test]
+    fn etd_weights_sum_to_phi1_and_tend_to_rk4() {
+        let h = 1e-3;
+        // For a constant nonlinear term the step is exact: f1 + 2 f2 + f3 = (e^z - 1) / lambda.
+        let mut worst: f64 = 0.0;
+        for z in [
+            c64::new(-0.3, 0.2),
+            c64::new(-0.49, 0.0),
+            c64::new(-0.51, 0.0),
+            c64::new(-0.01, 2.5),
+            c64::new(-4.0, 1.0),
+        ] {
+            let lambda = z / h;
+            let [_, _, f1, f2, f3] = etd_weights(lambda, h);
+            let m = z.re.exp();
+            let phi1 = (c64::new(m * z.im.cos() - 1.0, m * z.im.sin())) / lambda;
+            worst = worst.max(((f1 + f2 * 2.0 + f3 - phi1) / phi1).norm());
+        }
+        // As lambda h -> 0 the weights become classical RK4's h/6, h/3, h/6 (f2 weighs a + b).
+        let [q, _, f1, f2, f3] = etd_weights(c64::new(-1e-6, 1e-6) / h, h);
+        let rk4 = [(q, 0.5 * h), (f1, h / 6.0), (f2, h / 3.0), (f3, h / 6.0)]
+            .map(|(x, y)| ((x.re - y) / y).abs())
+            .into_iter()
+            .fold(0.0, f64::max);
+        println!("ETDRK4 weights: sum vs phi1 {worst:.1e}; small z vs RK4 {rk4:.1e}");
+        assert!(worst < 1e-12, "f1 + 2 f2 + f3 != phi1: {worst:e}");
+        assert!(rk4 < 1e-5, "weights at z -> 0 differ from RK4's: {rk4:e}");
+    }
+}

@@ -5,7 +5,7 @@ use super::board::*;
 use super::kernels::*;
 use super::keys::*;
 use crate::engine::physics::contact::spring_damper_n;
-use crate::engine::pool::{fade_step, hammer_clear, VoiceState};
+use crate::engine::pool::{fade_step, VoiceState};
 use crate::engine::spec::Direction;
 use crate::engine::spec::MAX_STRINGS;
 
@@ -157,7 +157,7 @@ impl VoiceSet {
                 let points = (0..km.strings.len())
                     .filter(|&s| struck[s])
                     .map(|s| strike_point(km, s, &z[s][0], y));
-                if hammer_clear(v.hammer_y, v.hammer_v, km.hammer.release_gap_m, points) {
+                if km.hammer.is_clear(v.hammer_y, v.hammer_v, points) {
                     v.state.hammer_on = false;
                 }
             }

@@ -30,6 +30,19 @@ impl HammerParams {
         }
     }
 
+    /// The release rule: the hammer leaves the system once it recedes (`velocity_m_s < 0`) and is
+    /// clear of every struck string by the release gap; `strike_points_m` are their displacements
+    /// at the striking point.
+    #[inline(always)]
+    pub fn is_clear(
+        &self,
+        position_m: f64,
+        velocity_m_s: f64,
+        mut strike_points_m: impl Iterator<Item = f64>,
+    ) -> bool {
+        velocity_m_s < 0.0 && strike_points_m.all(|y| y - position_m >= self.release_gap_m)
+    }
+
     /// Potential energy stored in the felt at compression `xi_m` (J).
     pub fn felt_energy_j(&self, xi_m: f64) -> f64 {
         if xi_m > 0.0 {

@@ -282,14 +282,13 @@ impl DenseUnison {
         for i in 0..n {
             self.x[(i, 0)] += h / 6.0 * self.sum[(i, 0)];
         }
-        if self.hammer_on && self.x[(2 * self.nq + 1, 0)] < 0.0 {
+        let (yh, vh) = (self.x[(2 * self.nq, 0)], self.x[(2 * self.nq + 1, 0)]);
+        if self.hammer_on && vh < 0.0 {
             self.outputs_of_x();
-            let yh = self.x[(2 * self.nq, 0)];
-            let gap = self.spec.hammer.release_gap_m;
-            if (0..self.n_strings)
+            let points = (0..self.n_strings)
                 .filter(|&s| self.struck[s])
-                .all(|s| self.y[(out_ye(s), 0)] - yh >= gap)
-            {
+                .map(|s| self.y[(out_ye(s), 0)]);
+            if self.spec.hammer.is_clear(yh, vh, points) {
                 self.hammer_on = false;
             }
         }
