@@ -102,7 +102,9 @@ fn cli_rejects_bad_input_without_writing() {
     let wav = dir.path().join("out.wav");
     let wav = wav.to_str().unwrap();
     let bad_preset = data("bad_preset_range.toml");
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 9] = [
+        (&["modes", "--max-hz", "0"], "--max-hz 0"),
+        (&["modes", "--key", "H9"], "--key H9"),
         (
             &["render", "--offline", "--midi-velocity", "0", "--out", wav],
             "--midi-velocity 0",
@@ -155,6 +157,43 @@ fn cli_renders_a_short_wav() {
     let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
     println!("0.2 s una corda render: peak {peak:.3} of full scale");
     assert!(samples.iter().all(|s| s.is_finite()) && peak > 1e-3 && peak <= 1.0);
+}
+
+#[test]
+fn cli_lists_a_keys_modes() {
+    // C4 (three strings near 261.6 Hz): the table names the strings' modes, and the CSV holds
+    // every listed one.
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("c4.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_unacorda"))
+        .args(["modes", "--key", "C4", "--max-hz", "600", "--csv"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    let table = String::from_utf8_lossy(&out.stdout);
+    println!("{table}");
+    let rows: Vec<Vec<String>> = std::fs::read_to_string(&csv)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect();
+    assert_eq!(
+        table.lines().count(),
+        rows.len() + 2,
+        "a table line per CSV row"
+    );
+    let near = |f: f64| {
+        rows.iter()
+            .filter(|r| {
+                let hz: f64 = r[0].parse().unwrap();
+                (hz / f - 1.0).abs() < 0.01 && r[4].starts_with("string")
+            })
+            .count()
+    };
+    // Partials 1 and 2: T and P of each of the three strings.
+    assert_eq!((near(261.6), near(523.3)), (6, 6));
 }
 
 /// A one-note MIDI file whose note-off comes `beats` quarter notes later at 120 bpm.

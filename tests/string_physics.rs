@@ -393,3 +393,34 @@ fn string_2_sounds_its_mistuning_above_string_1_on_the_bridge() {
     println!("c2 on the bridge and board: string 1 {f1:.4} Hz, string 2 {f2:.4} Hz: {cents:+.3} cents (preset +1.5)");
     assert!((cents - 1.5).abs() < 0.1);
 }
+
+#[test]
+fn the_duplex_felt_damps_its_segments_resonance_as_uniform_damping_would() {
+    // A string segment with damping c_d per unit length over its whole length, mu per unit
+    // length, decays at sigma = c_d / (2 mu) in every mode (damping proportional to mass). The
+    // duplex segment's first resonance (one per string and transverse direction) should sit
+    // near that rate, a little below it (some of the mode's energy is outside the segment).
+    use unacorda::analysis::modes::linear_modes;
+    let spec = c2().unison_spec();
+    let uniform = spec.duplex_damping_n_s_m2 / (2.0 * spec.strings[0].linear_density_kg_m);
+    let duplex: Vec<_> = linear_modes(&spec)
+        .unwrap()
+        .into_iter()
+        .filter(|m| m.freq_hz < 1000.0 && m.decay_per_s > 0.5 * uniform)
+        .collect();
+    for m in &duplex {
+        let zeta = m.decay_per_s / m.decay_per_s.hypot(2.0 * PI * m.freq_hz);
+        println!(
+            "duplex resonance {:.1} Hz: sigma {:.1} /s (uniform c_d/2mu {uniform:.1} /s), zeta {zeta:.3}",
+            m.freq_hz, m.decay_per_s
+        );
+        assert!((0.95..=1.0).contains(&(m.decay_per_s / uniform)), "{m:?}");
+        // presets/c2.toml quotes zeta = 0.21 for this resonance.
+        assert!((zeta - 0.21).abs() < 0.005, "zeta {zeta}");
+    }
+    assert_eq!(
+        duplex.len(),
+        2 * spec.strings.len(),
+        "one per string and transverse direction"
+    );
+}

@@ -1,4 +1,4 @@
-//! `unacorda`: command-line front end (render, play, devices, bench, figures, soundboard).
+//! `unacorda`: command-line front end (render, play, devices, modes, bench, figures, soundboard).
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
@@ -73,7 +73,7 @@ enum Command {
         una_corda: bool,
         /// `rk4`, the paper's RK4 at 10 × f_max (the reference), or `exponential`, ETDRK4 on
         /// complex modes at the output rate (the live integrator: several times faster, within
-        /// 0.06 cents and 2 % decay of RK4 on c2).
+        /// 0.001 cents and 0.1 % decay of RK4 on c2).
         #[arg(long, value_enum, default_value_t = IntegratorArg::Rk4)]
         integrator: IntegratorArg,
         /// Hammer speed at the strings (m/s), 0.01–10; default: the preset's.
@@ -102,6 +102,9 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// The modes of one key's linearised system (hammer out of play): frequency, decay rate, T60,
+    /// and which string and direction, or the board, holds each.
+    Modes(modes::ModesArgs),
     /// Play live: MIDI input (or a MIDI file in real time) on all 88 keys through an audio device.
     Play(live::PlayArgs),
     /// List audio outputs and MIDI inputs.
@@ -143,6 +146,7 @@ enum Command {
 
 mod bench;
 mod live;
+mod modes;
 
 /// `--integrator` values.
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -442,6 +446,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Play(args) => live::play(args)?,
         Command::Devices => live::devices()?,
+        Command::Modes(args) => modes::modes(args)?,
         Command::Bench { seconds, voices } => bench::bench(seconds, voices)?,
         Command::Soundboard { input, out } => {
             let spec = unacorda::config::preset::load_board_spec(&input)?;
