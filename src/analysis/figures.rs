@@ -170,7 +170,27 @@ fn plot_err(path: &Path) -> impl Fn(Box<dyn std::error::Error + '_>) -> FigureEr
 
 type Result2<T> = Result<T, Box<dyn std::error::Error>>;
 
-/// Minimum and maximum of a signal in consecutive bins of `BIN_S`.
+/// One recorded channel with each sample's physical time ([`Recording::time_s`]).
+struct Trace {
+    t_s: Vec<f64>,
+    x: Vec<f64>,
+}
+
+impl Trace {
+    fn new(rec: &Recording, x: Vec<f64>) -> Trace {
+        Trace {
+            t_s: (0..x.len()).map(|k| rec.time_s(k)).collect(),
+            x,
+        }
+    }
+
+    fn end_s(&self) -> f64 {
+        self.t_s.last().copied().unwrap_or(1.0)
+    }
+}
+
+/// Minimum and maximum of a trace in consecutive bins of `width_s` from t = 0 (a bin with no
+/// sample holds none: `lo > hi`).
 struct MinMax {
     /// Bin start times (s).
     t: Vec<f64>,
@@ -178,19 +198,19 @@ struct MinMax {
     hi: Vec<f64>,
 }
 
-fn min_max_bins(rec: &Recording, x: &[f64]) -> MinMax {
-    let n = (BIN_S * rec.rate_hz) as usize;
+fn min_max(trace: &Trace, width_s: f64, bins: usize) -> MinMax {
     let mut out = MinMax {
-        t: Vec::new(),
-        lo: Vec::new(),
-        hi: Vec::new(),
+        t: (0..bins).map(|b| b as f64 * width_s).collect(),
+        lo: vec![f64::INFINITY; bins],
+        hi: vec![f64::NEG_INFINITY; bins],
     };
-    for (b, chunk) in x.chunks(n).enumerate() {
-        out.t.push(rec.time_s(b * n).max(0.0));
-        out.lo
-            .push(chunk.iter().copied().fold(f64::INFINITY, f64::min));
-        out.hi
-            .push(chunk.iter().copied().fold(f64::NEG_INFINITY, f64::max));
+    for (&t, &x) in trace.t_s.iter().zip(&trace.x) {
+        let b = (t / width_s).floor();
+        if b >= 0.0 && (b as usize) < bins {
+            let b = b as usize;
+            out.lo[b] = out.lo[b].min(x);
+            out.hi[b] = out.hi[b].max(x);
+        }
     }
     out
 }
@@ -288,15 +308,17 @@ fn figure3(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
 }
 
 /// One panel of min/max bins: a filled band per bin.
+/// A trace's envelope: the min/max of the samples under each pixel column, so the band reads as
+/// a continuous envelope at any size (bins of fixed width alias against the pixel grid).
 fn draw_band(
     area: &DrawingArea<BitMapBackend, Shift>,
     caption: &str,
-    band: &MinMax,
+    trace: &Trace,
     y: f64,
     color: RGBColor,
     x_label: bool,
 ) -> Result2<()> {
-    let t_end = band.t.last().copied().unwrap_or(1.0) + BIN_S;
+    let t_end = trace.end_s();
     let mut chart = ChartBuilder::on(area)
         .caption(caption, (FONT, 15))
         .margin(6)
@@ -309,19 +331,23 @@ fn draw_band(
         mesh.x_desc("time (s)");
     }
     mesh.draw()?;
+    let columns = chart.plotting_area().dim_in_pixel().0.max(1) as usize;
+    let width_s = t_end / columns as f64;
+    let band = min_max(trace, width_s, columns);
     chart.draw_series(
         band.t
             .iter()
             .zip(band.lo.iter().zip(&band.hi))
-            .map(|(&ti, (&a, &b))| Rectangle::new([(ti, a), (ti + BIN_S, b)], color.filled())),
+            .filter(|(_, (a, b))| a <= b)
+            .map(|(&ti, (&a, &b))| Rectangle::new([(ti, a), (ti + width_s, b)], color.filled())),
     )?;
     Ok(())
 }
 
 /// Figure 4: force of each string on the soundboard in T, L and P, una corda (a, b) and normal (c, d).
 fn figure4(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
-    let string = |rec: &Recording, s: usize| -> [MinMax; 3] {
-        std::array::from_fn(|d| min_max_bins(rec, &rec.channel(|f| f.obs.bridge_force_n[s][d])))
+    let string = |rec: &Recording, s: usize| -> [Trace; 3] {
+        std::array::from_fn(|d| Trace::new(rec, rec.channel(|f| f.obs.bridge_force_n[s][d])))
     };
     let columns = [
         (
@@ -348,8 +374,8 @@ fn figure4(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
 
 /// Figure 5: total force transmitted to the soundboard, una corda (a) and normal (b).
 fn figure5(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
-    let total = |rec: &Recording| -> [MinMax; 3] {
-        std::array::from_fn(|d| min_max_bins(rec, &rec.channel(|f| f.obs.total_force_n[d])))
+    let total = |rec: &Recording| -> [Trace; 3] {
+        std::array::from_fn(|d| Trace::new(rec, rec.channel(|f| f.obs.total_force_n[d])))
     };
     let columns = [
         ("(a) una corda", "a_uc", total(uc)),
@@ -365,14 +391,20 @@ fn figure5(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
 }
 
 /// A grid of min/max force bands, one row per direction (T, L, P) and one column per case, each
-/// row on one scale so that the cases compare; written as `stem.png` and `stem.csv`.
+/// row on one scale so that the cases compare; written as `stem.png` and `stem.csv` (the CSV in
+/// bins of `BIN_S`).
 fn band_grid(
     dir: &Path,
     stem: &str,
     title: &str,
     size: (u32, u32),
-    columns: &[(&str, &str, [MinMax; 3])],
+    columns: &[(&str, &str, [Trace; 3])],
 ) -> Result<Vec<PathBuf>, FigureError> {
+    let bins = (columns[0].2[0].end_s() / BIN_S).ceil() as usize;
+    let binned: Vec<[MinMax; 3]> = columns
+        .iter()
+        .map(|(_, _, traces)| traces.each_ref().map(|t| min_max(t, BIN_S, bins)))
+        .collect();
     let mut csv = String::from("time_s");
     for (_, tag, _) in columns {
         for d in Direction::ALL.map(Direction::name) {
@@ -380,9 +412,9 @@ fn band_grid(
         }
     }
     csv.push('\n');
-    for k in 0..columns[0].2[0].t.len() {
-        let _ = write!(csv, "{:.4}", columns[0].2[0].t[k]);
-        for (_, _, bins) in columns {
+    for k in 0..bins {
+        let _ = write!(csv, "{:.4}", binned[0][0].t[k]);
+        for bins in &binned {
             for b in bins {
                 let _ = write!(csv, ",{:.6},{:.6}", b.lo[k], b.hi[k]);
             }
@@ -400,15 +432,15 @@ fn band_grid(
             let y = symmetric_range(
                 &columns
                     .iter()
-                    .flat_map(|(_, _, b)| [&b[d].lo[..], &b[d].hi[..]])
+                    .map(|(_, _, t)| &t[d].x[..])
                     .collect::<Vec<_>>(),
             );
-            for (c, (label, _, bins)) in columns.iter().enumerate() {
+            for (c, (label, _, traces)) in columns.iter().enumerate() {
                 let caption = format!("{label} — {}", Direction::ALL[d].name());
                 draw_band(
                     &panels[d * columns.len() + c],
                     &caption,
-                    &bins[d],
+                    &traces[d],
                     y,
                     COLORS[d],
                     Direction::ALL[d] == Direction::P,
@@ -513,4 +545,47 @@ fn figure6(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
         png,
         write_text(dir.join("fig6_spectrograms.csv"), &csv)?,
     ])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixel_columns_hold_every_sample_once() {
+        // 1 s of a 1 kHz sine at 48 kHz on 700 columns (68.6 samples each, not a whole number):
+        // every column is filled, spans the sine's full swing, and the counts add up.
+        let rate = 48_000.0;
+        let trace = Trace {
+            t_s: (0..48_000).map(|k| k as f64 / rate).collect(),
+            x: (0..48_000)
+                .map(|k| (2.0 * std::f64::consts::PI * 1000.0 * k as f64 / rate).sin())
+                .collect(),
+        };
+        let columns = 700;
+        let band = min_max(&trace, trace.end_s() / columns as f64, columns);
+        let worst = (0..columns)
+            .map(|c| (1.0 - band.hi[c]).max(1.0 + band.lo[c]))
+            .fold(0.0, f64::max);
+        println!("700 columns over a 1 kHz sine: every column within {worst:.3} of ±1");
+        assert!(worst < 0.01, "{worst}");
+        // A ramp x = t: each column holds exactly the samples of its own time span.
+        let ramp = Trace {
+            x: trace.t_s.clone(),
+            t_s: trace.t_s.clone(),
+        };
+        let width = ramp.end_s() / columns as f64;
+        let band = min_max(&ramp, width, columns);
+        for c in 0..columns {
+            let (start, end) = (c as f64 * width, (c + 1) as f64 * width);
+            assert!(
+                band.lo[c] >= start && band.lo[c] < start + 1.0 / rate,
+                "column {c}"
+            );
+            assert!(
+                band.hi[c] < end && band.hi[c] >= end - 1.0 / rate - 1e-12,
+                "column {c}"
+            );
+        }
+    }
 }

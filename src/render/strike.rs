@@ -155,15 +155,18 @@ impl<E: Engine> Renderer<E> {
 #[derive(Debug, Clone)]
 pub struct Recording {
     pub rate_hz: f64,
-    /// Group delay of the anti-alias filter (s): frame `k` shows the system at `k / rate_hz - delay_s`.
+    /// Group delay of the anti-alias filter (s): frame `k` shows the system at
+    /// `(k + 1) / rate_hz - delay_s` ([`Recording::time_s`]).
     pub delay_s: f64,
     pub frames: Vec<Frame>,
 }
 
 impl Recording {
-    /// Physical time of frame `k` (s), the filter delay removed.
+    /// Physical time of frame `k` (s), the filter delay removed: the frame is filtered from
+    /// states after every step up to the `(k + 1)`-th frame's worth (each step is observed after
+    /// it is taken), centred `delay_s` before the newest.
     pub fn time_s(&self, k: usize) -> f64 {
-        k as f64 / self.rate_hz - self.delay_s
+        (k + 1) as f64 / self.rate_hz - self.delay_s
     }
 
     /// One channel of the recording, extracted by `f`.
