@@ -2,7 +2,7 @@
 # Fuzz every parser that reads outside input, with cargo-fuzz (libFuzzer, nightly): MIDI files
 # (smf), live MIDI bytes (live_midi), presets (preset), soundboard assets (asset).
 #   bash scripts/fuzz.sh            10 000 runs per target: the smoke run CI does
-#   bash scripts/fuzz.sh 1000000    the full run quoted in the README
+#   bash scripts/fuzz.sh 1000000    the full run quoted in docs/robustness.md
 # The random seed is fixed (FUZZ_SEED, default 1) so that CI is reproducible; set another seed
 # to explore elsewhere.
 # Each target starts from fuzz/seeds/<target> (committed; crash regressions included) and grows

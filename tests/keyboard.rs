@@ -59,7 +59,7 @@ fn every_key_builds_with_the_documented_layout() {
                 cents
             );
         }
-        // The layout the README documents, typed here rather than read from the scaling: single
+        // The layout docs/parameters.md documents, typed here rather than read from the scaling: single
         // strings A0–E1 (1–8), bichords F1–F#2 (9–22), trichords above; wound through F#2;
         // duplex felt-muted up to C5 (52); dampers up to F6 (69).
         let expected_strings = match k {

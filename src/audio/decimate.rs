@@ -140,7 +140,7 @@ mod tests {
 
     #[test]
     fn passband_flat_and_stopband_rejected() {
-        // The README's figures: flat to 20 kHz at 48 kHz out (0.417 of the rate), −90 dB from
+        // The figures of docs/model.md: flat to 20 kHz at 48 kHz out (0.417 of the rate), −90 dB from
         // 24 kHz (half the rate) on.
         for r in [2, 3] {
             let pass = [0.01, 0.2, 0.4, 0.417].map(|f| gain_db(r, f));

@@ -43,8 +43,8 @@ pub(super) struct Block {
 /// with the string, ~1/1000 of `k` at C2), the string's mass moving with the bridge (`-g y''`) and
 /// the damping of that motion (`-C_0 g y'`, `C_0` the modal and duplex damping). In `q` itself the
 /// board felt `k` per string explicitly, nearly cancelled by the string's response within the
-/// step, and ETDRK4's error on those two large terms undamped the board's modes (README,
-/// Robustness).
+/// step, and ETDRK4's error on those two large terms undamped the board's modes
+/// (docs/robustness.md).
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct Statics {
     /// `psi.g` at the bridge, `psi(L_e).g` at the strike point, `psi(x_d).g` at the damper.
