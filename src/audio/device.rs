@@ -41,6 +41,23 @@ pub enum DeviceError {
     },
 }
 
+/// Why live MIDI input cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum MidiError {
+    #[error(
+        "live MIDI input is unavailable: {0} (on Linux it needs the ALSA sequencer, /dev/snd/seq)"
+    )]
+    Unavailable(String),
+    #[error("no MIDI input port is connected")]
+    NoPort,
+    #[error("no MIDI input matches {port:?} (inputs: {})", .inputs.join(", "))]
+    NoMatch { port: String, inputs: Vec<String> },
+    #[error("cannot open MIDI input {port}: {reason}")]
+    Connect { port: String, reason: String },
+    #[error("the event queue is gone")]
+    QueueGone,
+}
+
 /// Every output device of the default host, with whether it can play at `rate_hz`.
 pub fn output_devices(rate_hz: u32) -> Result<Vec<OutputInfo>, DeviceError> {
     let host = cpal::default_host();
@@ -69,10 +86,10 @@ pub fn output_devices(rate_hz: u32) -> Result<Vec<OutputInfo>, DeviceError> {
 
 /// The MIDI input client with its ports and their names, or why live MIDI is unavailable (on
 /// Linux it needs the ALSA sequencer, `/dev/snd/seq`).
-pub fn midi_input() -> Result<(midir::MidiInput, Vec<midir::MidiInputPort>, Vec<String>), String> {
-    let input = midir::MidiInput::new("unacorda").map_err(|e| {
-        format!("live MIDI input is unavailable: {e} (on Linux it needs the ALSA sequencer, /dev/snd/seq)")
-    })?;
+pub fn midi_input() -> Result<(midir::MidiInput, Vec<midir::MidiInputPort>, Vec<String>), MidiError>
+{
+    let input =
+        midir::MidiInput::new("unacorda").map_err(|e| MidiError::Unavailable(e.to_string()))?;
     let ports = input.ports();
     let names = ports
         .iter()

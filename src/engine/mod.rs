@@ -15,7 +15,9 @@
 //! - [`tuning`]: the coupled first partial, from the undamped linear system.
 
 pub mod etd;
+pub mod exact;
 pub mod kernels;
+pub(crate) mod modal;
 pub mod parallel;
 pub mod physics;
 pub mod pool;

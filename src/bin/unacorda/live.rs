@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use unacorda::audio::device::{self, midi_input, output_devices, CallbackStats, Fault};
+use unacorda::audio::device::{self, midi_input, output_devices, CallbackStats, Fault, MidiError};
 use unacorda::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use unacorda::config::scaling::{Scaling, KEYS};
 use unacorda::engine::etd::EtdPool;
@@ -264,7 +264,7 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
 fn connect_midi<E: VoicePool>(
     port: Option<&str>,
     handle: &Arc<Mutex<SynthHandle<E>>>,
-) -> Result<(midir::MidiInputConnection<()>, String), String> {
+) -> Result<(midir::MidiInputConnection<()>, String), MidiError> {
     let (input, ports, names) = midi_input()?;
     let index = match port {
         None => (!ports.is_empty()).then_some(0),
@@ -275,16 +275,18 @@ fn connect_midi<E: VoicePool>(
             .or_else(|| names.iter().position(|n| n.contains(p))),
     };
     let Some(index) = index else {
-        let reason = match port {
-            Some(p) => format!("no MIDI input matches {p:?} (inputs: {})", names.join(", ")),
-            None => "no MIDI input port is connected".into(),
-        };
-        return Err(reason);
+        return Err(match port {
+            Some(p) => MidiError::NoMatch {
+                port: p.to_owned(),
+                inputs: names,
+            },
+            None => MidiError::NoPort,
+        });
     };
     let handle = handle.clone();
     let clock = handle
         .lock()
-        .map_err(|_| "the event queue is gone")?
+        .map_err(|_| MidiError::QueueGone)?
         .clock
         .clone();
     let mut parser = LiveParser::new();
@@ -308,7 +310,10 @@ fn connect_midi<E: VoicePool>(
             (),
         )
         .map(|c| (c, names[index].clone()))
-        .map_err(|e| format!("cannot open MIDI input {}: {e}", names[index]))
+        .map_err(|e| MidiError::Connect {
+            port: names[index].clone(),
+            reason: e.to_string(),
+        })
 }
 
 /// The live MIDI input, watched for being unplugged (midir reports nothing: the port just leaves

@@ -1,7 +1,7 @@
 //! The board in its own complex modes, known in closed form, formed once per stage for all voices.
 
 use super::kernels::*;
-use super::modal::*;
+use crate::engine::modal::*;
 use faer::c64;
 
 /// The board in its own complex modes, known in closed form: each mode `qdd = -w² q - 2 zeta w

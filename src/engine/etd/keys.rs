@@ -2,7 +2,7 @@
 //! their ports and inputs, in coordinates relative to the static deflection by the bridge
 //! ([`Statics`]).
 
-use super::modal::*;
+use crate::engine::modal::*;
 use crate::engine::physics::contact::Contact;
 use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::physics::hammer::HammerParams;

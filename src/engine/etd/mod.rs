@@ -46,7 +46,6 @@ use std::sync::atomic::Ordering;
 mod board;
 mod kernels;
 mod keys;
-mod modal;
 mod split;
 mod voices;
 use board::*;

@@ -1,4 +1,4 @@
-//! A string direction's block `x' = A x + B u` diagonalised into complex modes (conjugate pairs
+//! A second-order block `x' = A x + B u` diagonalised into complex modes (conjugate pairs
 //! stored once), with its output rows, input vectors and the ETDRK4 weights of each mode.
 
 use crate::engine::kernels::LANES;
@@ -10,22 +10,24 @@ use faer::{c64, Mat};
 ///
 /// Of each complex-conjugate pair of modes only one is stored (its partner is its conjugate: the
 /// block is real), with weight 2 folded into the output rows; real (overdamped) modes have weight 1.
-pub(super) struct Modal {
-    pub(super) n: usize,
+pub(crate) struct Modal {
+    pub(crate) n: usize,
     /// Kept eigenpairs `(column, weight)`.
-    pub(super) keep: Vec<(usize, f64)>,
-    pub(super) u: Mat<c64>,
-    pub(super) lu: PartialPivLu<c64>,
+    pub(crate) keep: Vec<(usize, f64)>,
+    /// Each kept mode's eigenvalue `lambda` (1/s).
+    pub(crate) lambda: Vec<c64>,
+    pub(crate) u: Mat<c64>,
+    pub(crate) lu: PartialPivLu<c64>,
     /// Per kept mode: `e^{lambda h/2}`, `e^{lambda h}`, `Q`, `(E - 1) Q`, `f1`, `f2`, `f3`.
-    pub(super) eh: Vec<c64>,
-    pub(super) ef: Vec<c64>,
-    pub(super) etd: [Vec<c64>; 5],
-    pub(super) padded: usize,
+    pub(crate) eh: Vec<c64>,
+    pub(crate) ef: Vec<c64>,
+    pub(crate) etd: [Vec<c64>; 5],
+    pub(crate) padded: usize,
 }
 
 impl Modal {
     /// Diagonalise `qdd = -K q - C qdot + ...` (dense `n × n`, row-major) for step `h`.
-    pub(super) fn new(k: &[f64], c: &[f64], n: usize, h: f64) -> Result<Modal, BuildError> {
+    pub(crate) fn new(k: &[f64], c: &[f64], n: usize, h: f64) -> Result<Modal, BuildError> {
         let a = Mat::<f64>::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
             (true, true) => 0.0,
             (true, false) => f64::from(u8::from(j - n == i)),
@@ -72,11 +74,12 @@ impl Modal {
             ef: exp(h),
             etd,
             keep,
+            lambda: lam,
         })
     }
 
     /// The output row `r = c^T V` (weighted) reading `c^T q`, or `c^T qdot` if `velocity`.
-    pub(super) fn row(&self, c: &[f64], velocity: bool) -> Vec<c64> {
+    pub(crate) fn row(&self, c: &[f64], velocity: bool) -> Vec<c64> {
         let off = if velocity { self.n } else { 0 };
         self.keep
             .iter()
@@ -91,7 +94,7 @@ impl Modal {
     }
 
     /// The input vector `g = V^-1 [0; b]` of a force distribution `b` on the accelerations.
-    pub(super) fn input(&self, b: &[f64]) -> Vec<c64> {
+    pub(crate) fn input(&self, b: &[f64]) -> Vec<c64> {
         let n = self.n;
         let rhs = Mat::<c64>::from_fn(2 * n, 1, |i, _| {
             c64::new(if i >= n { b[i - n] } else { 0.0 }, 0.0)
@@ -101,7 +104,7 @@ impl Modal {
     }
 
     /// Real and imaginary parts, padded with zeros to whole SIMD lanes (a zero mode stays zero).
-    pub(super) fn split(&self, v: &[c64]) -> [Vec<f64>; 2] {
+    pub(crate) fn split(&self, v: &[c64]) -> [Vec<f64>; 2] {
         let mut re: Vec<f64> = v.iter().map(|x| x.re).collect();
         let mut im: Vec<f64> = v.iter().map(|x| x.im).collect();
         re.resize(self.padded, 0.0);
@@ -109,12 +112,12 @@ impl Modal {
         [re, im]
     }
 
-    pub(super) fn times(a: &[c64], b: &[c64]) -> Vec<c64> {
+    pub(crate) fn times(a: &[c64], b: &[c64]) -> Vec<c64> {
         a.iter().zip(b).map(|(x, y)| x * y).collect()
     }
 
     /// A row through the three propagators the stages read: `r`, `r E`, `r E²`.
-    pub(super) fn rows3(&self, r: &[c64]) -> [[Vec<f64>; 2]; 3] {
+    pub(crate) fn rows3(&self, r: &[c64]) -> [[Vec<f64>; 2]; 3] {
         [
             self.split(r),
             self.split(&Self::times(r, &self.eh)),
@@ -123,20 +126,20 @@ impl Modal {
     }
 
     /// An input through the final weights: `f1 g`, `f2 g`, `f3 g`.
-    pub(super) fn gains3(&self, g: &[c64]) -> [[Vec<f64>; 2]; 3] {
+    pub(crate) fn gains3(&self, g: &[c64]) -> [[Vec<f64>; 2]; 3] {
         std::array::from_fn(|k| self.split(&Self::times(g, &self.etd[2 + k])))
     }
 
     /// What one unit of input `g` adds to the output `r` at the later stages: `[Re r Q g,
     /// Re r (E - 1) Q g]`.
-    pub(super) fn resp(&self, r: &[c64], g: &[c64]) -> [f64; 2] {
+    pub(crate) fn resp(&self, r: &[c64], g: &[c64]) -> [f64; 2] {
         let dot = |e: &[c64]| -> f64 { (0..r.len()).map(|m| (r[m] * e[m] * g[m]).re).sum() };
         [dot(&self.etd[0]), dot(&self.etd[1])]
     }
 
     /// Per stored mode, the mechanical energy per `|z|²` (J): the cycle-averaged
     /// `1/2 (qdot^T qdot + q^T K q)` of `w Re(v z)` for the mode's eigenvector `v`.
-    pub(super) fn energy(&self, k: &[f64]) -> Vec<f64> {
+    pub(crate) fn energy(&self, k: &[f64]) -> Vec<f64> {
         let n = self.n;
         let mut e: Vec<f64> = self
             .keep
@@ -159,7 +162,7 @@ impl Modal {
         e
     }
 
-    pub(super) fn propagator(&self) -> [Vec<f64>; 2] {
+    pub(crate) fn propagator(&self) -> [Vec<f64>; 2] {
         self.split(&self.ef)
     }
 }
@@ -169,7 +172,7 @@ impl Modal {
 /// `h {-4 - z + e^z (4 - 3z + z^2)} / z^3`, `2h {2 + z + e^z (z - 2)} / z^3`,
 /// `h {-4 - 3z - z^2 + e^z (4 - z)} / z^3` with `z = lambda h`. Near `z = 0` these cancel, so
 /// there they are the mean over a circle of radius 1 around `z` (Kassam & Trefethen 2005).
-pub(super) fn etd_weights(lambda: c64, h: f64) -> [c64; 5] {
+pub(crate) fn etd_weights(lambda: c64, h: f64) -> [c64; 5] {
     let one = c64::new(1.0, 0.0);
     let exp = |z: c64| {
         let m = z.re.exp();
