@@ -5,6 +5,7 @@
 use crate::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use crate::config::output::OutputSettings;
 use crate::engine::etd::EtdUnison;
+use crate::engine::exact::ExactUnison;
 use crate::engine::kernels::Real;
 use crate::engine::rk4::dense::DenseUnison;
 use crate::engine::{Rk4Pool, Strike, UnisonSpec, VoicePool};
@@ -119,6 +120,40 @@ pub fn exponential_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> Voice
         real_time_factor: steps as f64 / rate_hz / dt,
         flops_per_s: flops / dt,
     }
+}
+
+/// Build `spec`'s key on the exact engine ([`ExactUnison`]) at `rate_hz` and time the build (s);
+/// then strike it, pass the hammer's contact, and time `seconds` of sound (each step and the
+/// volume velocity read after it, as the synth does). Returns the speed, the build time and the
+/// complex modes of the key.
+pub fn exact_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> (VoiceSpeed, f64, usize) {
+    let mut spec = spec.clone();
+    spec.sample_rate_hz = rate_hz;
+    let t = Instant::now();
+    let mut voice = ExactUnison::new(&spec).expect("the preset builds");
+    let build_s = t.elapsed().as_secs_f64();
+    voice.strike(Strike {
+        velocity_m_s: 2.5,
+        una_corda: false,
+    });
+    for _ in 0..(0.01 * rate_hz) as usize {
+        voice.step();
+    }
+    let steps = (seconds * rate_hz).max(1.0) as usize;
+    let flops = voice.flops_per_step() * steps as f64;
+    let t = Instant::now();
+    let mut sink = 0.0;
+    for _ in 0..steps {
+        voice.step();
+        sink += voice.volume_velocity_m3_s();
+    }
+    let dt = t.elapsed().as_secs_f64();
+    std::hint::black_box(sink);
+    let speed = VoiceSpeed {
+        real_time_factor: steps as f64 / rate_hz / dt,
+        flops_per_s: flops / dt,
+    };
+    (speed, build_s, voice.n_modes())
 }
 
 /// Time per RK4 step (s) of a c2 voice in a long silent tail — its motion 50 ms after a strike,

@@ -310,3 +310,73 @@ fn play_refuses_bad_flags_and_missing_devices() {
     ];
     assert_refused(&cases, None);
 }
+
+#[test]
+fn bench_writes_every_printed_figure_as_json() {
+    // A short bench: the JSON holds each engine's callback figures for every voice count it
+    // printed, the same numbers as the text, and the real-time factors, start-up and memory.
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("bench.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_unacorda"))
+        .args(["bench", "--seconds", "0.1", "--voices", "2", "--json"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    // The text's "(0.28 × deadline)" medians, in order.
+    let printed: Vec<f64> = text
+        .lines()
+        .filter(|l| l.contains(" voices: median"))
+        .map(|l| {
+            let open = l.find('(').unwrap();
+            l[open + 1..]
+                .split('×')
+                .next()
+                .unwrap()
+                .trim()
+                .parse()
+                .unwrap()
+        })
+        .collect();
+    let callbacks = report["callbacks"].as_array().unwrap();
+    println!(
+        "{} callback figures printed, {} in the JSON",
+        printed.len(),
+        callbacks.len()
+    );
+    assert_eq!(printed.len(), callbacks.len());
+    assert_eq!(
+        printed.len(),
+        6,
+        "rk4, etd and etd on two cores, 1 and 2 voices"
+    );
+    for (p, c) in printed.iter().zip(callbacks) {
+        for field in [
+            "engine",
+            "cores",
+            "voices",
+            "median_x_deadline",
+            "p999_x_deadline",
+            "misses",
+            "blocks",
+        ] {
+            assert!(!c[field].is_null(), "{field} in {c}");
+        }
+        let median = c["median_x_deadline"].as_f64().unwrap();
+        assert!((median - p).abs() <= 0.0051, "printed {p}, JSON {median}");
+        assert!(c["p999_x_deadline"].as_f64().unwrap() >= median);
+    }
+    let engines: Vec<&str> = report["voices"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v["engine"].as_str().unwrap())
+        .collect();
+    assert_eq!(engines, ["rk4-f64", "rk4-f32", "etd", "exact"]);
+    assert!(report["voices"][3]["real_time_factor"].as_f64().unwrap() > 0.0);
+    assert_eq!(report["startup"][0]["keys"], 88);
+    assert!(report["memory"][0]["bytes_per_voice"].as_u64().unwrap() > 0);
+}

@@ -1,22 +1,86 @@
 //! `bench`: the engine's speed on this machine, in the user's terms (real-time factors, voices
 //! within the deadline, FLOP rate against the core's peak, memory).
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+use std::path::Path;
 use std::sync::atomic::Ordering;
 use unacorda::config::preset::Preset;
 use unacorda::config::scaling::{LoadedScaling, Scaling, KEYS};
 use unacorda::engine::etd::EtdPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::{
-    block_times_s, denormal_tail_step_s, dense_real_time_factor, exponential_speed, loaded_synth,
-    nominal_f64_peak, percentile, resident_bytes, voice_speed,
+    block_times_s, denormal_tail_step_s, dense_real_time_factor, exact_speed, exponential_speed,
+    loaded_synth, nominal_f64_peak, percentile, resident_bytes, voice_speed,
 };
 use unacorda::play::{Piano, MAX_VOICES};
 
 /// Block length of the live figures (frames at 48 kHz).
 const BLOCK: usize = 64;
 
-pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
+/// Every figure `bench` prints, for `--json`.
+#[derive(Serialize, Default)]
+struct Report {
+    block_frames: usize,
+    rate_hz: f64,
+    deadline_s: f64,
+    /// Nominal f64 peak of one core (FLOP/s), where known.
+    f64_peak_flops: Option<f64>,
+    voices: Vec<VoiceFigure>,
+    dense_real_time_factor: f64,
+    denormal_step_us: Denormals,
+    callbacks: Vec<CallbackFigure>,
+    startup: Vec<Startup>,
+    memory: Vec<Memory>,
+}
+
+/// One c2 voice on its own.
+#[derive(Serialize)]
+struct VoiceFigure {
+    engine: &'static str,
+    real_time_factor: f64,
+    flops_per_s: f64,
+    /// Time to build the key (s), where it is measured.
+    build_s: Option<f64>,
+}
+
+#[derive(Serialize, Default)]
+struct Denormals {
+    sounding: f64,
+    tail_ftz: f64,
+    tail_plain: f64,
+}
+
+/// The callback with `voices` sounding: times as fractions of the block's deadline.
+#[derive(Serialize)]
+struct CallbackFigure {
+    engine: &'static str,
+    cores: usize,
+    voices: usize,
+    median_x_deadline: f64,
+    p999_x_deadline: f64,
+    misses: usize,
+    blocks: usize,
+    helper_late: Option<u64>,
+}
+
+/// Building the 88-key piano, what `play` does before it sounds.
+#[derive(Serialize)]
+struct Startup {
+    engine: &'static str,
+    keys: usize,
+    build_s: f64,
+}
+
+#[derive(Serialize)]
+struct Memory {
+    engine: &'static str,
+    bytes_per_voice: usize,
+    voices: usize,
+    resident_bytes: Option<u64>,
+}
+
+pub fn bench(seconds: f64, max_voices: usize, json: Option<&Path>) -> Result<()> {
     if !(0.1..=60.0).contains(&seconds) {
         bail!("--seconds {seconds}: expected 0.1 to 60 s per measurement");
     }
@@ -47,7 +111,22 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
         ),
         None => println!("  {:.1} GFLOP/s", fast.flops_per_s / 1e9),
     }
+    let mut report = Report {
+        block_frames: BLOCK,
+        f64_peak_flops: nominal_f64_peak().map(|(peak, _)| peak),
+        ..Report::default()
+    };
+    let mut voice = |engine, v: &unacorda::measure::VoiceSpeed, build_s| {
+        report.voices.push(VoiceFigure {
+            engine,
+            real_time_factor: v.real_time_factor,
+            flops_per_s: v.flops_per_s,
+            build_s,
+        })
+    };
+    voice("rk4-f64", &fast, None);
     let single = voice_speed::<f32>(&spec, seconds);
+    voice("rk4-f32", &single, None);
     println!(
         "same voice, RK4 in f32 (bridge forces within 1e-4 of f64 over 4 s: tests/precision.rs):\n  real-time factor {:.2} ({:.2} × f64), {:.1} GFLOP/s{}",
         single.real_time_factor,
@@ -61,6 +140,7 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
     );
     let rate = c2.output_rate_hz();
     let live = exponential_speed(&spec, rate, seconds);
+    voice("etd", &live, None);
     println!(
         "same voice on the live integrator (exponential RK4, ETDRK4, on each string direction's complex modes with its contact spring and duplex damping; board coupling, hammer and damper explicit) at {:.0} kHz:\n  real-time factor {:.2} ({:.1} × the paper-faithful RK4), {:.1} GFLOP/s{}",
         rate / 1e3,
@@ -72,10 +152,26 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
             100.0 * live.flops_per_s / peak
         ))
     );
+    let (exact, build_s, modes) = exact_speed(&spec, rate, seconds);
+    voice("exact", &exact, Some(build_s));
+    println!(
+        "same voice on the exact engine (the key's coupled strings and board in {} complex modes, z <- e^(lambda h) z; built in {:.2} s) at {:.0} kHz, hammer released:\n  real-time factor {:.1} ({:.1} × the live integrator), {:.1} GFLOP/s{}",
+        modes,
+        build_s,
+        rate / 1e3,
+        exact.real_time_factor,
+        exact.real_time_factor / live.real_time_factor,
+        exact.flops_per_s / 1e9,
+        nominal_f64_peak().map_or(String::new(), |(peak, _)| format!(
+            " = {:.0} % of nominal f64 peak",
+            100.0 * exact.flops_per_s / peak
+        ))
+    );
     // The dense baseline is a few hundred times slower: time a slice of the same length in steps
     // that takes about `seconds`.
     let steps = ((seconds * spec.sample_rate_hz * fast.real_time_factor / 400.0) as usize).max(20);
     let dense = dense_real_time_factor(&spec, steps);
+    report.dense_real_time_factor = dense;
     println!(
         "dense state-space baseline (Eq. 10–11 as written: A of order {}, faer mat-vec, RK4), same voice:\n  real-time factor {dense:.5}; unacorda is {:.0} × faster",
         2 * (spec.strings.len() * (spec.modes.modes_t + spec.modes.modes_p + spec.modes.modes_l)
@@ -86,6 +182,11 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
 
     let steps = ((seconds * spec.sample_rate_hz * fast.real_time_factor) as usize).max(100);
     let (sounding, ftz, plain) = denormal_tail_step_s(&spec, steps);
+    report.denormal_step_us = Denormals {
+        sounding: sounding * 1e6,
+        tail_ftz: ftz * 1e6,
+        tail_plain: plain * 1e6,
+    };
     println!(
         "denormals, same voice in a long silent tail (state scaled to ≤ 1e-305, mostly subnormal), µs per RK4 step:\n  sounding {:.2}; tail with FTZ/DAZ as in the audio thread {:.2} ({:.2} × sounding); tail without {:.2} ({:.1} × sounding)",
         sounding * 1e6,
@@ -96,27 +197,38 @@ pub fn bench(seconds: f64, max_voices: usize) -> Result<()> {
     );
 
     let scaling = Scaling::resolve("grand")?;
-    callback::<Rk4Pool>(
-        &scaling,
-        seconds,
-        max_voices,
-        1,
-        "RK4 at 96 kHz, the reference",
-    )?;
-    callback::<EtdPool>(
-        &scaling,
-        seconds,
-        max_voices,
-        1,
-        "ETDRK4 at 48 kHz, the live integrator",
-    )?;
-    callback::<EtdPool>(
-        &scaling,
-        seconds,
-        max_voices,
-        2,
-        "ETDRK4 at 48 kHz, the live integrator, voices split over two cores",
-    )?;
+    let settings = scaling.base.output_settings();
+    report.rate_hz = settings.rate_hz;
+    report.deadline_s = BLOCK as f64 / settings.rate_hz;
+    for (engine, cores, label) in [
+        ("rk4", 1, "RK4 at 96 kHz, the reference"),
+        ("etd", 1, "ETDRK4 at 48 kHz, the live integrator"),
+        (
+            "etd",
+            2,
+            "ETDRK4 at 48 kHz, the live integrator, voices split over two cores",
+        ),
+    ] {
+        let run = if engine == "rk4" {
+            callback::<Rk4Pool>
+        } else {
+            callback::<EtdPool>
+        };
+        run(
+            &scaling,
+            seconds,
+            max_voices,
+            cores,
+            label,
+            engine,
+            &mut report,
+        )?;
+    }
+    if let Some(path) = json {
+        let text = serde_json::to_string_pretty(&report).expect("plain data serialises");
+        std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+    }
     Ok(())
 }
 
@@ -128,9 +240,19 @@ fn callback<E: VoicePool>(
     max_voices: usize,
     cores: usize,
     label: &str,
+    engine: &'static str,
+    report: &mut Report,
 ) -> Result<()> {
     let keys: Vec<usize> = (1..=KEYS).collect();
+    let started = std::time::Instant::now();
     let piano = Piano::<E>::build(scaling, &keys, max_voices)?;
+    if cores == 1 {
+        report.startup.push(Startup {
+            engine,
+            keys: keys.len(),
+            build_s: started.elapsed().as_secs_f64(),
+        });
+    }
     let settings = scaling.base.output_settings();
     let deadline = BLOCK as f64 / settings.rate_hz;
     println!(
@@ -164,6 +286,16 @@ fn callback<E: VoicePool>(
                 String::new()
             }
         );
+        report.callbacks.push(CallbackFigure {
+            engine,
+            cores,
+            voices,
+            median_x_deadline: median / deadline,
+            p999_x_deadline: p999 / deadline,
+            misses,
+            blocks,
+            helper_late: (cores == 2).then_some(late),
+        });
         if p999 < 0.5 * deadline {
             within = voices;
         }
@@ -174,6 +306,12 @@ fn callback<E: VoicePool>(
     }
     println!("  voices within the deadline (p99.9 below 50 % of it): {within}");
     let (synth, _handle) = loaded_synth(&piano, settings, max_voices, BLOCK);
+    report.memory.push(Memory {
+        engine,
+        bytes_per_voice: synth.piano().instrument.bytes_per_voice(),
+        voices: max_voices,
+        resident_bytes: resident_bytes(),
+    });
     println!(
         "  memory: {:.1} kB of state per voice; resident {:.0} MB with {max_voices} voices sounding",
         synth.piano().instrument.bytes_per_voice() as f64 / 1e3,

@@ -119,6 +119,10 @@ enum Command {
         /// Largest voice count tried (also the pool size), 1–256.
         #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES)]
         voices: usize,
+        /// Also write every figure as JSON (per engine, core count and voice count: median and
+        /// p99.9 as fractions of the deadline, misses, blocks; real-time factors; start-up; memory).
+        #[arg(long, value_name = "FILE.json")]
+        json: Option<PathBuf>,
     },
     /// Regenerate the paper's Figures 2–6 (PNG + CSV): the board's mobility, full vs reduced, and
     /// a preset struck una corda vs normal.
@@ -447,7 +451,11 @@ fn run(cli: Cli) -> Result<()> {
         Command::Play(args) => live::play(args)?,
         Command::Devices => live::devices()?,
         Command::Modes(args) => modes::modes(args)?,
-        Command::Bench { seconds, voices } => bench::bench(seconds, voices)?,
+        Command::Bench {
+            seconds,
+            voices,
+            json,
+        } => bench::bench(seconds, voices, json.as_deref())?,
         Command::Soundboard { input, out } => {
             let spec = unacorda::config::preset::load_board_spec(&input)?;
             let command = format!(

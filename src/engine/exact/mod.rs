@@ -397,6 +397,20 @@ impl ExactUnison {
             v + h / 6.0 * accel(&fu) + h / 3.0 * (accel(&fa) + accel(&fb)) + h / 6.0 * accel(&fc);
     }
 
+    /// Floating-point operations of one step and of reading the volume velocity after it: 6 per
+    /// complex mode to propagate and 4 to read, once the hammer is released; with the hammer,
+    /// ETDRK4's four reads of each struck string's point (4 each), three stage states (6 each,
+    /// and 2 per struck string) and the final drive (6 per struck string).
+    pub fn flops_per_step(&self) -> f64 {
+        let m = self.n_modes() as f64;
+        let free = 10.0 * m;
+        if !self.hammer_on {
+            return free;
+        }
+        let struck = self.struck.iter().filter(|&&s| s).count() as f64;
+        free + m * (4.0 * 4.0 * struck + 3.0 * (6.0 + 2.0 * struck) + 6.0 * struck)
+    }
+
     /// Net volume velocity of the board (m^3/s).
     pub fn volume_velocity_m3_s(&self) -> f64 {
         self.volume_velocity_row.read(&self.z)
