@@ -123,8 +123,8 @@ pub fn exponential_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> Voice
 }
 
 /// Build `spec`'s key on the exact engine ([`ExactUnison`]) at `rate_hz` and time the build (s);
-/// then strike it, pass the hammer's contact, and time `seconds` of sound (each step and the
-/// volume velocity read after it, as the synth does). Returns the speed, the build time and the
+/// then strike it, pass the hammer's contact, and time `seconds` of sound in 64-frame blocks
+/// (each step and the volume velocity read after it, as the synth asks). Returns the speed, the build time and the
 /// complex modes of the key.
 pub fn exact_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> (VoiceSpeed, f64, usize) {
     let mut spec = spec.clone();
@@ -142,13 +142,13 @@ pub fn exact_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> (VoiceSpeed
     let steps = (seconds * rate_hz).max(1.0) as usize;
     let flops = voice.flops_per_step() * steps as f64;
     let t = Instant::now();
-    let mut sink = 0.0;
-    for _ in 0..steps {
-        voice.step();
-        sink += voice.volume_velocity_m3_s();
+    let mut block = [0.0; 64];
+    for _ in 0..steps.div_ceil(block.len()) {
+        voice.run(&mut block);
+        std::hint::black_box(&block);
     }
+    let steps = steps.div_ceil(block.len()) * block.len();
     let dt = t.elapsed().as_secs_f64();
-    std::hint::black_box(sink);
     let speed = VoiceSpeed {
         real_time_factor: steps as f64 / rate_hz / dt,
         flops_per_s: flops / dt,

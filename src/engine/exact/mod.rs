@@ -24,6 +24,7 @@
 //! The board copy is this key's: the coupling between keys through the shared board, and the
 //! dampers, come with the pool (issue 16, step 2).
 
+use crate::engine::kernels::has_avx2_fma;
 use crate::engine::modal::Modal;
 use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::physics::hammer::HammerParams;
@@ -196,6 +197,8 @@ pub struct ExactUnison {
     za: Split,
     zb: Split,
     zc: Split,
+    /// Whether the CPU has AVX2 + FMA (the mode loops then use them).
+    fast_path: bool,
 }
 
 impl ExactUnison {
@@ -283,6 +286,7 @@ impl ExactUnison {
             za: Split::zeros(kept),
             zb: Split::zeros(kept),
             zc: Split::zeros(kept),
+            fast_path: has_avx2_fma(),
         })
     }
 
@@ -349,6 +353,25 @@ impl ExactUnison {
                 z.re[m] = self.ef.re[m] * a - self.ef.im[m] * b;
                 z.im[m] = self.ef.re[m] * b + self.ef.im[m] * a;
             }
+        }
+    }
+
+    /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity (m^3/s)
+    /// after each; once the hammer is released, each step and its read are one pass over the
+    /// modes ([`propagate_read`]).
+    pub fn run(&mut self, volume_velocity: &mut [f64]) {
+        for out in volume_velocity {
+            *out = if self.hammer_on {
+                self.step();
+                self.volume_velocity_m3_s()
+            } else {
+                propagate_read(
+                    &self.ef,
+                    &mut self.z,
+                    &self.volume_velocity_row,
+                    self.fast_path,
+                )
+            };
         }
     }
 
@@ -439,6 +462,69 @@ impl ExactUnison {
     }
 }
 
+/// Lanes of the mode loops' partial sums (so that they vectorise: a single sum would be a serial
+/// chain).
+const LANES: usize = 8;
+
+/// `z <- e ⊙ z`, then `Re(r z)`, in one pass: 6 FLOP per mode to propagate, 4 to read; with
+/// AVX2 + FMA where the CPU has them.
+fn propagate_read(e: &Split, z: &mut Split, r: &Split, fast: bool) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if fast {
+        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
+        return unsafe { propagate_read_avx2(e, z, r) };
+    }
+    let _ = fast;
+    propagate_read_with::<false>(e, z, r)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn propagate_read_avx2(e: &Split, z: &mut Split, r: &Split) -> f64 {
+    propagate_read_with::<true>(e, z, r)
+}
+
+/// `a b + c`, fused with `FMA`.
+#[inline(always)]
+fn fma<const FMA: bool>(a: f64, b: f64, c: f64) -> f64 {
+    if FMA {
+        a.mul_add(b, c)
+    } else {
+        a * b + c
+    }
+}
+
+#[inline(always)]
+fn propagate_read_with<const FMA: bool>(e: &Split, z: &mut Split, r: &Split) -> f64 {
+    let n = z.re.len();
+    let (er, ei, rr, ri) = (&e.re[..n], &e.im[..n], &r.re[..n], &r.im[..n]);
+    let (zr, zi) = (&mut z.re[..n], &mut z.im[..n]);
+    let mut acc = [0.0; LANES];
+    let mut tail = 0.0;
+    let whole = n / LANES * LANES;
+    for base in (0..whole).step_by(LANES) {
+        for l in 0..LANES {
+            let m = base + l;
+            let (a, b) = (zr[m], zi[m]);
+            let (re, im) = (
+                fma::<FMA>(er[m], a, -ei[m] * b),
+                fma::<FMA>(er[m], b, ei[m] * a),
+            );
+            zr[m] = re;
+            zi[m] = im;
+            acc[l] = fma::<FMA>(rr[m], re, fma::<FMA>(-ri[m], im, acc[l]));
+        }
+    }
+    for m in whole..n {
+        let (a, b) = (zr[m], zi[m]);
+        let (re, im) = (er[m] * a - ei[m] * b, er[m] * b + ei[m] * a);
+        zr[m] = re;
+        zi[m] = im;
+        tail += rr[m] * re - ri[m] * im;
+    }
+    acc.iter().sum::<f64>() + tail
+}
+
 /// `out = e2 ⊙ from + sum_s q_s u_s` over the struck strings' inputs (zero forces add nothing).
 fn stage(out: &mut Split, e2: &Split, from: &Split, q: &[Split], u: &[f64; MAX_STRINGS]) {
     for m in 0..out.re.len() {
@@ -491,6 +577,37 @@ mod tests {
         }
         assert!(u.hammer_engaged());
         u.hammer_y
+    }
+
+    #[test]
+    fn the_fused_step_agrees_with_the_portable_one() {
+        // 2 s of c2's tail (hammer released) through the AVX2 + FMA pass and the portable one.
+        let mut spec = Preset::resolve("c2").unwrap().unison_spec();
+        spec.sample_rate_hz = 48_000.0;
+        let mut fast = ExactUnison::new(&spec).unwrap();
+        fast.strike(Strike {
+            velocity_m_s: 2.5,
+            una_corda: false,
+        });
+        let mut warm = [0.0; 480];
+        fast.run(&mut warm);
+        assert!(!fast.hammer_engaged());
+        let mut slow = fast.clone();
+        slow.fast_path = false;
+        let (mut a, mut b) = (vec![0.0; 96_000], vec![0.0; 96_000]);
+        fast.run(&mut a);
+        slow.run(&mut b);
+        let peak = b.iter().fold(0f64, |m, x| m.max(x.abs()));
+        let worst = a
+            .iter()
+            .zip(&b)
+            .fold(0f64, |m, (x, y)| m.max((x - y).abs()))
+            / peak;
+        println!(
+            "fused step, AVX2 + FMA (used: {}) vs portable: {worst:.1e} of the peak over 2 s",
+            has_avx2_fma()
+        );
+        assert!(worst < 1e-12, "{worst:e}");
     }
 
     #[test]
