@@ -124,8 +124,8 @@ pub fn exponential_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> Voice
 
 /// Build `spec`'s key on the exact engine ([`ExactUnison`]) at `rate_hz` and time the build (s);
 /// then strike it, pass the hammer's contact, and time `seconds` of sound in 64-frame blocks
-/// (each step and the volume velocity read after it, as the synth asks). Returns the speed, the build time and the
-/// complex modes of the key.
+/// (each step and the volume velocity read after it, as the synth asks). Returns the speed, the
+/// build time and the complex modes of the key.
 pub fn exact_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> (VoiceSpeed, f64, usize) {
     let mut spec = spec.clone();
     spec.sample_rate_hz = rate_hz;
@@ -139,15 +139,15 @@ pub fn exact_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> (VoiceSpeed
     for _ in 0..(0.01 * rate_hz) as usize {
         voice.step();
     }
-    let steps = (seconds * rate_hz).max(1.0) as usize;
+    let mut block = [0.0; 64];
+    let blocks = ((seconds * rate_hz).max(1.0) as usize).div_ceil(block.len());
+    let steps = blocks * block.len();
     let flops = voice.flops_per_step() * steps as f64;
     let t = Instant::now();
-    let mut block = [0.0; 64];
-    for _ in 0..steps.div_ceil(block.len()) {
+    for _ in 0..blocks {
         voice.run(&mut block);
         std::hint::black_box(&block);
     }
-    let steps = steps.div_ceil(block.len()) * block.len();
     let dt = t.elapsed().as_secs_f64();
     let speed = VoiceSpeed {
         real_time_factor: steps as f64 / rate_hz / dt,

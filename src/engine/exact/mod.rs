@@ -347,12 +347,7 @@ impl ExactUnison {
                 self.hammer_on = false;
             }
         } else {
-            let z = &mut self.z;
-            for m in 0..z.re.len() {
-                let (a, b) = (z.re[m], z.im[m]);
-                z.re[m] = self.ef.re[m] * a - self.ef.im[m] * b;
-                z.im[m] = self.ef.re[m] * b + self.ef.im[m] * a;
-            }
+            propagate(&self.ef, &mut self.z);
         }
     }
 
@@ -401,12 +396,8 @@ impl ExactUnison {
         );
         let fc = self.felt(&self.zc, yc);
         // The step.
+        propagate(&self.ef, &mut self.z);
         let z = &mut self.z;
-        for m in 0..z.re.len() {
-            let (a, b) = (z.re[m], z.im[m]);
-            z.re[m] = self.ef.re[m] * a - self.ef.im[m] * b;
-            z.im[m] = self.ef.re[m] * b + self.ef.im[m] * a;
-        }
         for s in (0..self.n_strings).filter(|&s| self.struck[s]) {
             let [g1, g2, g3] = &self.drive_f[s];
             let (u1, u2, u3) = (fu[s], fa[s] + fb[s], fc[s]);
@@ -523,6 +514,15 @@ fn propagate_read_with<const FMA: bool>(e: &Split, z: &mut Split, r: &Split) -> 
         tail += rr[m] * re - ri[m] * im;
     }
     acc.iter().sum::<f64>() + tail
+}
+
+/// `z <- e ⊙ z` (complex, per mode).
+fn propagate(e: &Split, z: &mut Split) {
+    for m in 0..z.re.len() {
+        let (a, b) = (z.re[m], z.im[m]);
+        z.re[m] = e.re[m] * a - e.im[m] * b;
+        z.im[m] = e.re[m] * b + e.im[m] * a;
+    }
 }
 
 /// `out = e2 ⊙ from + sum_s q_s u_s` over the struck strings' inputs (zero forces add nothing).
