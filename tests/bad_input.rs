@@ -350,8 +350,8 @@ fn bench_writes_every_printed_figure_as_json() {
     assert_eq!(printed.len(), callbacks.len());
     assert_eq!(
         printed.len(),
-        6,
-        "rk4, etd and etd on two cores, 1 and 2 voices"
+        8,
+        "rk4, etd, etd on two cores and the exact pool, 1 and 2 voices"
     );
     for (p, c) in printed.iter().zip(callbacks) {
         for field in [

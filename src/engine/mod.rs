@@ -147,6 +147,7 @@ macro_rules! voice_pool {
 
 voice_pool!(Rk4Pool, rk4::Rk4Key<f64>, |_| None::<f64>);
 voice_pool!(etd::EtdPool, etd::PreparedKey, Some::<f64>);
+voice_pool!(exact::ExactPool, exact::ExactKey, Some::<f64>);
 
 /// What the offline renderer needs of a one-key engine: RK4 on [`Rk4Pool`] (the reference, at
 /// the paper's rate) or ETDRK4 on [`etd::EtdUnison`] (at the output rate).
@@ -197,12 +198,32 @@ impl Engine for etd::EtdUnison {
     }
 }
 
+impl Engine for exact::ExactUnison {
+    fn step(&mut self) {
+        exact::ExactUnison::step(self)
+    }
+    fn observe(&self) -> Observation {
+        exact::ExactUnison::observe(self)
+    }
+    fn strike(&mut self, strike: Strike) {
+        exact::ExactUnison::strike(self, strike)
+    }
+    fn set_damper(&mut self, down: bool) {
+        exact::ExactUnison::set_damper(self, down)
+    }
+    fn step_s(&self) -> f64 {
+        exact::ExactUnison::step_s(self)
+    }
+}
+
 /// How a one-key render integrates: the paper's RK4 at `min_rate_over_fmax × f_max` (the
-/// reference), or exponential RK4 (ETDRK4) on complex modes at the output rate (the live
-/// integrator, `tests/integrators.rs`).
+/// reference), exponential RK4 (ETDRK4) on complex modes at the output rate (the live
+/// integrator), or the key's coupled modes advanced exactly ([`exact`]) at the output rate
+/// (`tests/integrators.rs`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Integrator {
     #[default]
     Rk4,
     Exponential,
+    Exact,
 }

@@ -189,24 +189,45 @@ pub(crate) fn etd_weights(lambda: c64, h: f64) -> [c64; 5] {
         ]
     };
     let z = lambda * h;
-    let phi = if z.norm() > 0.5 {
-        direct(z)
-    } else {
-        const POINTS: usize = 64;
-        let mut acc = [c64::new(0.0, 0.0); 4];
-        for k in 0..POINTS {
-            let t = 2.0 * std::f64::consts::PI * (k as f64 + 0.5) / POINTS as f64;
-            let v = direct(z + c64::new(t.cos(), t.sin()));
-            for (a, v) in acc.iter_mut().zip(v) {
-                *a += v;
-            }
-        }
-        acc.map(|a| a / POINTS as f64)
-    };
+    let phi = cancellation_free(z, direct);
     // phi[0] is Q / h; the others are already per unit h.
     let q = phi[0] * h;
     let e2 = exp(z * 0.5);
     [q, (e2 - one) * q, phi[1] * h, phi[2] * h, phi[3] * h]
+}
+
+/// `direct(z)` where its terms do not cancel (`|z| > 0.5`), else its mean over the circle of
+/// radius 1 around `z` (Kassam & Trefethen 2005: the functions are analytic, so the mean is
+/// their value, without the cancellation).
+fn cancellation_free<const K: usize>(z: c64, direct: impl Fn(c64) -> [c64; K]) -> [c64; K] {
+    if z.norm() > 0.5 {
+        return direct(z);
+    }
+    const POINTS: usize = 64;
+    let mut acc = [c64::new(0.0, 0.0); K];
+    for k in 0..POINTS {
+        let t = 2.0 * std::f64::consts::PI * (k as f64 + 0.5) / POINTS as f64;
+        let v = direct(z + c64::new(t.cos(), t.sin()));
+        for (a, v) in acc.iter_mut().zip(v) {
+            *a += v;
+        }
+    }
+    acc.map(|a| a / POINTS as f64)
+}
+
+/// Weights of an input that is linear over the step, `u(t_n + tau) = u0 + s tau`, on a mode
+/// `lambda`: `z' = e^{lambda h} z + (h phi1) (g u0) + (h^2 phi2) (g s)` with
+/// `phi1(x) = (e^x - 1)/x`, `phi2(x) = (e^x - 1 - x)/x^2`, `x = lambda h` — exact for such an input.
+/// Near `x = 0` they are the mean over a circle of radius 1 around `x`, as in [`etd_weights`].
+pub(crate) fn input_weights(lambda: c64, h: f64) -> [c64; 2] {
+    let one = c64::new(1.0, 0.0);
+    let direct = |x: c64| -> [c64; 2] {
+        let m = x.re.exp();
+        let e = c64::new(m * x.im.cos(), m * x.im.sin());
+        [(e - one) / x, (e - one - x) / (x * x)]
+    };
+    let phi = cancellation_free(lambda * h, direct);
+    [phi[0] * h, phi[1] * h * h]
 }
 
 #[cfg(test)]
@@ -249,6 +270,31 @@ mod tests {
         });
         println!("kick response vs closed form: underdamped {under:.1e}, overdamped {over:.1e}");
         assert!(under < 1e-9 && over < 1e-9);
+    }
+
+    #[test]
+    fn input_weights_integrate_a_ramp_exactly() {
+        // y' = lambda y + u0 + s t from y(0) = 0, closed form at t = h, against the weights.
+        let (h, u0, s) = (1e-3, 0.7, -40.0);
+        let mut worst: f64 = 0.0;
+        for x in [
+            c64::new(-0.3, 0.2),
+            c64::new(-0.01, 2.5),
+            c64::new(-4.0, 1.0),
+            c64::new(-0.1, 0.05),
+        ] {
+            let l = x / h;
+            let e = (l * h).exp();
+            let one = c64::new(1.0, 0.0);
+            // Particular solution of a ramp: y_p = -(u0 + s t)/l - s/l^2.
+            let yp = |t: f64| -(one * (u0 + s * t)) / l - one * s / (l * l);
+            let exact = yp(h) - e * yp(0.0);
+            let [w1, w2] = input_weights(l, h);
+            let got = w1 * u0 + w2 * s;
+            worst = worst.max(((got - exact) / exact).norm());
+        }
+        println!("linear-input weights vs the closed form: {worst:.1e}");
+        assert!(worst < 1e-9, "{worst:e}");
     }
 
     #[test]

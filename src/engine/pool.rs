@@ -5,7 +5,7 @@
 //! and implements the few hooks of [`Policy`] (what its strings and board do); the decisions are
 //! the provided methods.
 
-use super::spec::{Strike, MAX_STRINGS};
+use super::spec::{BuildError, Strike, UnisonSpec, MAX_STRINGS};
 use std::f64::consts::PI;
 
 /// What one voice of a pool is doing, whatever the engine. Written by the policy on the thread
@@ -43,6 +43,32 @@ impl Default for VoiceState {
             pending: None,
         }
     }
+}
+
+/// What every pool asks of its keys: at least one key and one voice, one board and one rate
+/// shared by all, one prepared key per spec. Returns the first spec.
+pub fn check_keys(
+    specs: &[UnisonSpec],
+    prepared: usize,
+    voices: usize,
+) -> Result<&UnisonSpec, BuildError> {
+    let first = specs.first().ok_or(BuildError::NoVoice)?;
+    if voices == 0 {
+        return Err(BuildError::NoVoice);
+    }
+    if specs
+        .iter()
+        .any(|s| s.sample_rate_hz != first.sample_rate_hz || s.board != first.board)
+    {
+        return Err(BuildError::SharedBoard);
+    }
+    if prepared != specs.len() {
+        return Err(BuildError::PreparedKeys {
+            specs: specs.len(),
+            keys: prepared,
+        });
+    }
+    Ok(first)
 }
 
 /// One step along a stolen voice's fade: the contact forces fall to zero along a raised cosine

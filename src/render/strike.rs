@@ -10,6 +10,7 @@ use crate::audio::radiate::Monopole;
 use crate::audio::Decimator;
 use crate::config::preset::LoadedPreset;
 use crate::engine::etd::EtdUnison;
+use crate::engine::exact::ExactUnison;
 use crate::engine::MAX_STRINGS;
 use crate::engine::{BuildError, Observation, Rk4Pool, Strike};
 use crate::engine::{Engine, Integrator};
@@ -86,6 +87,15 @@ impl Renderer<EtdUnison> {
         let mut spec = preset.unison_spec();
         spec.sample_rate_hz = preset.output_rate_hz();
         Ok(Self::from_instrument(EtdUnison::new(&spec)?, preset))
+    }
+}
+
+impl Renderer<ExactUnison> {
+    /// The preset's key on the exact engine, stepping at the output rate.
+    pub fn exact(preset: &LoadedPreset) -> Result<Self, BuildError> {
+        let mut spec = preset.unison_spec();
+        spec.sample_rate_hz = preset.output_rate_hz();
+        Ok(Self::from_instrument(ExactUnison::new(&spec)?, preset))
     }
 }
 
@@ -207,6 +217,13 @@ pub fn simulate_with(
         Integrator::Rk4 => record(Renderer::new(preset)?, strike, release_s, seconds, progress),
         Integrator::Exponential => record(
             Renderer::exponential(preset)?,
+            strike,
+            release_s,
+            seconds,
+            progress,
+        ),
+        Integrator::Exact => record(
+            Renderer::exact(preset)?,
             strike,
             release_s,
             seconds,

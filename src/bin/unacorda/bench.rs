@@ -8,6 +8,7 @@ use std::sync::atomic::Ordering;
 use unacorda::config::preset::Preset;
 use unacorda::config::scaling::{LoadedScaling, Scaling, KEYS};
 use unacorda::engine::etd::EtdPool;
+use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::{
     block_times_s, denormal_tail_step_s, dense_real_time_factor, exact_speed, exponential_speed,
@@ -208,11 +209,16 @@ pub fn bench(seconds: f64, max_voices: usize, json: Option<&Path>) -> Result<()>
             2,
             "ETDRK4 at 48 kHz, the live integrator, voices split over two cores",
         ),
+        (
+            "exact",
+            1,
+            "exact at 48 kHz, each key's coupled modes, keys coupled through the board",
+        ),
     ] {
-        let run = if engine == "rk4" {
-            callback::<Rk4Pool>
-        } else {
-            callback::<EtdPool>
+        let run = match engine {
+            "rk4" => callback::<Rk4Pool>,
+            "etd" => callback::<EtdPool>,
+            _ => callback::<ExactPool>,
         };
         run(
             &scaling,

@@ -96,22 +96,7 @@ impl EtdPool {
         strings: Vec<PreparedKey>,
         voices: usize,
     ) -> Result<EtdPool, BuildError> {
-        let first = specs.first().ok_or(BuildError::NoVoice)?;
-        if voices == 0 {
-            return Err(BuildError::NoVoice);
-        }
-        if specs
-            .iter()
-            .any(|s| s.sample_rate_hz != first.sample_rate_hz || s.board != first.board)
-        {
-            return Err(BuildError::SharedBoard);
-        }
-        if strings.len() != specs.len() {
-            return Err(BuildError::PreparedKeys {
-                specs: specs.len(),
-                keys: strings.len(),
-            });
-        }
+        let first = crate::engine::pool::check_keys(specs, strings.len(), voices)?;
         let h = 1.0 / first.sample_rate_hz;
         let board = &first.board;
         let mut keys = Vec::with_capacity(specs.len());

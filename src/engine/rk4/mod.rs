@@ -156,22 +156,7 @@ impl<T: Real> Rk4Pool<T> {
         keys: Vec<Rk4Key<T>>,
         voices: usize,
     ) -> Result<Self, BuildError> {
-        let first = specs.first().ok_or(BuildError::NoVoice)?;
-        if keys.len() != specs.len() {
-            return Err(BuildError::PreparedKeys {
-                specs: specs.len(),
-                keys: keys.len(),
-            });
-        }
-        if voices == 0 {
-            return Err(BuildError::NoVoice);
-        }
-        if specs
-            .iter()
-            .any(|s| s.board != first.board || s.sample_rate_hz != first.sample_rate_hz)
-        {
-            return Err(BuildError::SharedBoard);
-        }
+        let first = crate::engine::pool::check_keys(specs, keys.len(), voices)?;
         let capacity = keys.iter().map(|k| k.n_modes).max().unwrap_or(0);
         let voice_slots: Vec<Voice> = (0..voices)
             .map(|i| Voice {

@@ -1,0 +1,182 @@
+//! The coupling between keys through the shared soundboard.
+//!
+//! Each key carries its own copy of the board in its modes, driven by its own contact forces, so
+//! the true board's motion is the sum of the copies (the board is linear). A key's strings must
+//! feel the whole board, so each key is also driven by the *other* keys' board motion at its
+//! bridge point, `D_k = phi_k^T sum_{j != k} b_j`. That is formed here from the forces alone: a
+//! modal integration of the board (its modes are diagonal, `z_m' = lambda_m z_m + f_m/(2 i
+//! omega_dm)`, `q_m = 2 Re z_m`) driven by the sum of every key's force, less the same
+//! integration driven by the key's own force — so that what a key receives holds no part of
+//! itself, whatever the scheme's error (reading the key's own exact copy instead would leave
+//! that error, `O((omega h)^2)` of its own large part, in its input). The forces enter linearly
+//! over the step between their values at its ends (exact for such a force), so the shared part
+//! lags the keys by one step: each key extrapolates `D` over the next step from its last two
+//! values (a ramp), which keeps the coupled system's decay (`tests/exact_pool.rs`).
+
+use super::kernels::Split;
+use crate::engine::modal::input_weights;
+use crate::engine::physics::soundboard::SoundboardModes;
+use faer::c64;
+
+/// The keys are coupled through the board's modes below this frequency (Hz); each key's own copy
+/// keeps them all. Above it the coupling's one-step lag, extrapolated, is no longer accurate
+/// enough: with all 88 keys sounding the coupled pool runs away at 4.6 kHz when the modes up to
+/// 5 kHz couple, and stays stable up to 4 kHz (`tests/exact_pool.rs`); sympathy and chords are
+/// carried by the modes well below (`tests/exact_pool.rs`, `tests/stability.rs`).
+pub(crate) const COUPLING_MAX_HZ: f64 = 3000.0;
+
+/// The board's modes as the coupling integrates them, and the shared part's state. Owned and
+/// stepped by the thread that steps the pool.
+#[derive(Debug, Clone)]
+pub(crate) struct BoardCoupling {
+    /// The board's modes the keys are coupled through (below [`COUPLING_MAX_HZ`]).
+    modes: Vec<usize>,
+    /// Per mode `e^{lambda h}`, and the weights of the force at the start and the end of the step.
+    e: Split,
+    from: Split,
+    to: Split,
+    lambda: Vec<c64>,
+    omega2: Vec<f64>,
+    /// Every key's part together, and the modal force of every key at the start of the step and
+    /// (accumulated as the keys step) at its end.
+    shared: Split,
+    force_before: Vec<f64>,
+    force_now: Vec<f64>,
+}
+
+impl BoardCoupling {
+    pub(crate) fn new(board: &SoundboardModes, h: f64) -> BoardCoupling {
+        let modes: Vec<usize> = (0..board.len())
+            .filter(|&k| board.freq_hz[k] < COUPLING_MAX_HZ)
+            .collect();
+        let m = modes.len();
+        let mut lambda = Vec::with_capacity(m);
+        let mut omega2 = Vec::with_capacity(m);
+        let (mut e, mut from, mut to) = (Vec::new(), Vec::new(), Vec::new());
+        for &k in &modes {
+            let osc = board.oscillator(k);
+            let (w, zeta) = (osc.omega_rad_s, osc.damping_ratio);
+            let wd = w * (1.0 - zeta * zeta).sqrt();
+            let l = c64::new(-zeta * w, wd);
+            let g = c64::new(0.0, -0.5 / wd); // 1 / (2 i omega_d)
+            let [w1, w2] = input_weights(l, h);
+            e.push((l * h).exp());
+            from.push(g * (w1 - w2 / h));
+            to.push(g * (w2 / h));
+            lambda.push(l);
+            omega2.push(w * w);
+        }
+        BoardCoupling {
+            modes,
+            e: Split::new(&e),
+            from: Split::new(&from),
+            to: Split::new(&to),
+            lambda,
+            omega2,
+            shared: Split::zeros(m),
+            force_before: vec![0.0; m],
+            force_now: vec![0.0; m],
+        }
+    }
+
+    pub(crate) fn modes(&self) -> usize {
+        self.e.len()
+    }
+
+    /// A key's mode shapes at its bridge point (all the board's modes) restricted to the
+    /// coupling's.
+    pub(crate) fn restrict(&self, shape: &[Vec<f64>; 3]) -> [Vec<f64>; 3] {
+        std::array::from_fn(|d| self.modes.iter().map(|&k| shape[d][k]).collect())
+    }
+
+    /// Advance a key's own part over the step in which its total contact force went from
+    /// `before` to `after` (N, per direction, at its point `phi`), and add that force to the
+    /// step's sum.
+    pub(crate) fn step_own(
+        &mut self,
+        own: &mut Split,
+        phi: &[Vec<f64>; 3],
+        before: [f64; 3],
+        after: [f64; 3],
+    ) {
+        let (e, from, to) = (&self.e, &self.from, &self.to);
+        for m in 0..self.e.len() {
+            let f0 = phi[0][m] * before[0] + phi[1][m] * before[1] + phi[2][m] * before[2];
+            let f1 = phi[0][m] * after[0] + phi[1][m] * after[1] + phi[2][m] * after[2];
+            let (a, b) = (own.re[m], own.im[m]);
+            own.re[m] = e.re[m] * a - e.im[m] * b + from.re[m] * f0 + to.re[m] * f1;
+            own.im[m] = e.re[m] * b + e.im[m] * a + from.im[m] * f0 + to.im[m] * f1;
+            self.force_now[m] += f1;
+        }
+    }
+
+    /// Advance the shared part over the step once every key has added its force.
+    pub(crate) fn step_shared(&mut self) {
+        let (e, from, to, g) = (&self.e, &self.from, &self.to, &mut self.shared);
+        for m in 0..e.len() {
+            let (f0, f1) = (self.force_before[m], self.force_now[m]);
+            let (a, b) = (g.re[m], g.im[m]);
+            g.re[m] = e.re[m] * a - e.im[m] * b + from.re[m] * f0 + to.re[m] * f1;
+            g.im[m] = e.re[m] * b + e.im[m] * a + from.im[m] * f0 + to.im[m] * f1;
+        }
+        std::mem::swap(&mut self.force_before, &mut self.force_now);
+        self.force_now.iter_mut().for_each(|f| *f = 0.0);
+    }
+
+    /// The other keys' board displacement at a key's point `phi` (m, per direction), its own
+    /// part `own` taken out (`None`: a key not in the shared part).
+    pub(crate) fn others_at(&self, own: Option<&Split>, phi: &[Vec<f64>; 3]) -> [f64; 3] {
+        let mut d = [0.0; 3];
+        for m in 0..self.e.len() {
+            let q = 2.0 * (self.shared.re[m] - own.map_or(0.0, |own| own.re[m]));
+            for (d, phi) in d.iter_mut().zip(phi) {
+                *d += phi[m] * q;
+            }
+        }
+        d
+    }
+
+    /// A key joins (`sign` 1) or leaves (`sign` -1) the shared part with its own part and its
+    /// last force.
+    pub(crate) fn join(&mut self, own: &Split, phi: &[Vec<f64>; 3], force: [f64; 3], sign: f64) {
+        for m in 0..self.e.len() {
+            self.shared.re[m] += sign * own.re[m];
+            self.shared.im[m] += sign * own.im[m];
+            self.force_before[m] +=
+                sign * (phi[0][m] * force[0] + phi[1][m] * force[1] + phi[2][m] * force[2]);
+        }
+    }
+
+    /// The shared part's energy as a board's (J): a measure of its size.
+    pub(crate) fn energy_j(&self) -> f64 {
+        (0..self.e.len())
+            .map(|m| {
+                let z = c64::new(self.shared.re[m], self.shared.im[m]);
+                let (q, v) = (2.0 * z.re, 2.0 * (self.lambda[m] * z).re);
+                0.5 * (v * v + self.omega2[m] * q * q)
+            })
+            .sum()
+    }
+
+    pub(crate) fn rest(&mut self) {
+        self.shared.fill_zero();
+        self.force_before.iter_mut().for_each(|f| *f = 0.0);
+        self.force_now.iter_mut().for_each(|f| *f = 0.0);
+    }
+
+    /// The shared part and the force at the start of the step, as plain numbers (the linear
+    /// state), and back.
+    pub(crate) fn state(&self) -> Vec<f64> {
+        let mut x = self.shared.re.clone();
+        x.extend_from_slice(&self.shared.im);
+        x.extend_from_slice(&self.force_before);
+        x
+    }
+
+    pub(crate) fn set_state(&mut self, x: &[f64]) {
+        let m = self.e.len();
+        self.shared.re.copy_from_slice(&x[..m]);
+        self.shared.im.copy_from_slice(&x[m..2 * m]);
+        self.force_before.copy_from_slice(&x[2 * m..3 * m]);
+    }
+}

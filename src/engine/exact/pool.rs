@@ -1,0 +1,339 @@
+//! Many keys on the exact engine: a bank of prepared keys and a fixed pool of voices on one
+//! shared board, with the same behaviour as the other pools ([`Policy`]: assign, steal with a
+//! fade, strike in the current motion, dampers, silent voices retired, runaways reset).
+
+use super::board::BoardCoupling;
+use super::kernels::Split;
+use super::key::ExactKey;
+use super::voice::Voice;
+use crate::engine::kernels::has_avx2_fma;
+use crate::engine::pool::{fade_step, Policy, VoiceState};
+use crate::engine::spec::{BuildError, LinearState, Observation, UnisonSpec, STEAL_FADE_S};
+use crate::engine::Pair;
+
+/// Voices of up to 88 keys on one shared soundboard, each key integrated exactly in its coupled
+/// modes, the keys coupled through the board ([`super::board`]). Stepped by the thread that owns it.
+#[derive(Debug, Clone)]
+pub struct ExactPool {
+    keys: Vec<ExactKey>,
+    /// Each key's mode shapes at its bridge point, on the modes the keys are coupled through.
+    points: Vec<[Vec<f64>; 3]>,
+    voices: Vec<Voice>,
+    voice_of_key: Vec<Option<usize>>,
+    board: BoardCoupling,
+    /// ETDRK4's stage states, sized for the largest key.
+    scratch: [Split; 3],
+    h: f64,
+    fade_steps: u32,
+    fast_path: bool,
+    /// The board's net volume velocity after the last step (m^3/s).
+    volume_velocity_m3_s: f64,
+}
+
+impl ExactPool {
+    /// One key diagonalised at `spec.sample_rate_hz` (the costly part of building, independent
+    /// from key to key).
+    pub fn prepare_key(spec: &UnisonSpec) -> Result<ExactKey, BuildError> {
+        ExactKey::new(spec)
+    }
+
+    /// The pool for `specs` (one per key, in order with `keys`) with `voices` voices.
+    pub fn from_keys(
+        specs: &[UnisonSpec],
+        keys: Vec<ExactKey>,
+        voices: usize,
+    ) -> Result<ExactPool, BuildError> {
+        let first = crate::engine::pool::check_keys(specs, keys.len(), voices)?;
+        let h = 1.0 / first.sample_rate_hz;
+        let modes = keys.iter().map(ExactKey::n_modes).max().unwrap_or(0);
+        let board = BoardCoupling::new(&first.board, h);
+        let points = specs
+            .iter()
+            .map(|s| {
+                s.board
+                    .points
+                    .get(s.bridge_point)
+                    .map(|p| board.restrict(&p.shape))
+                    .ok_or(BuildError::BridgePoint(s.bridge_point))
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(ExactPool {
+            points,
+            voice_of_key: vec![None; keys.len()],
+            voices: vec![Voice::new(modes, board.modes()); voices],
+            keys,
+            scratch: std::array::from_fn(|_| Split::zeros(modes)),
+            board,
+            h,
+            fade_steps: ((STEAL_FADE_S / h).round() as u32).max(1),
+            fast_path: has_avx2_fma(),
+            volume_velocity_m3_s: 0.0,
+        })
+    }
+
+    pub fn step_s(&self) -> f64 {
+        self.h
+    }
+
+    /// One step of every active voice, then of the board coupling; fades move, and a voice whose
+    /// fade has ended takes its next key.
+    pub fn step(&mut self) {
+        let mut total = 0.0;
+        let mut faded = false;
+        for v in self.voices.iter_mut() {
+            let (true, Some(key)) = (v.state.active, v.state.key) else {
+                continue;
+            };
+            let (point, key) = (&self.points[key], &self.keys[key]);
+            faded |= fade_step(&mut v.state, self.fade_steps);
+            let before = v.force_n;
+            v.step(key, &mut self.scratch, self.fast_path);
+            self.board
+                .step_own(&mut v.own_board, point, before, v.force_n);
+            total += v.state.coupling * v.read[0];
+        }
+        self.board.step_shared();
+        for v in self.voices.iter_mut() {
+            let (true, Some(key)) = (v.state.active, v.state.key) else {
+                continue;
+            };
+            v.other_before_m = v.other_m;
+            v.other_m = self.board.others_at(Some(&v.own_board), &self.points[key]);
+        }
+        self.volume_velocity_m3_s = total;
+        if faded {
+            for k in 0..self.voices.len() {
+                self.complete_fade(k);
+            }
+        }
+    }
+
+    /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity after each.
+    pub fn run(&mut self, volume_velocity: &mut [f64], _pair: Option<&dyn Pair>) {
+        for out in volume_velocity {
+            self.step();
+            *out = self.volume_velocity_m3_s;
+        }
+    }
+
+    pub fn volume_velocity_m3_s(&self) -> f64 {
+        self.volume_velocity_m3_s
+    }
+
+    /// Voice `k`'s forces and its part of the volume velocity now (Eq. 19).
+    pub fn observe_voice(&self, k: usize) -> Observation {
+        let v = &self.voices[k];
+        let (true, Some(key)) = (v.state.active, v.state.key) else {
+            return Observation::default();
+        };
+        let key = &self.keys[key];
+        let c = v.state.coupling;
+        let mut obs = Observation {
+            volume_velocity_m3_s: c * v.read[0],
+            hammer_force_n: v.hammer_force_n(key),
+            ..Observation::default()
+        };
+        let ns = key.n_strings as f64;
+        for d in 0..3 {
+            let slope = (v.other_m[d] - v.other_before_m[d]) / self.h;
+            obs.bridge_velocity_m_s[d] = key.bridge_velocity_row[d].read(&v.z) + slope;
+            obs.total_force_n[d] = v.force_n[d];
+            // The total's direct part, shared equally: every string's spring sees the same D.
+            let direct = (key.feed_k[d] * v.other_m[d] + key.feed_c[d] * slope) / ns;
+            for s in 0..key.n_strings {
+                obs.bridge_force_n[s][d] = c * (key.force_row[s][d].read(&v.z) - direct);
+            }
+        }
+        obs
+    }
+
+    /// Bytes per voice of its state, and of the coefficients of the largest key it may play.
+    pub fn bytes_per_voice(&self) -> usize {
+        let v = &self.voices[0];
+        let state = 16 * (v.z.len() + v.own_board.len());
+        state + self.keys.iter().map(ExactKey::bytes).max().unwrap_or(0)
+    }
+
+    /// The linear state: per active voice its modes (real, imaginary), its own board part, the
+    /// coupling input it remembers and its last forces; then the shared board part.
+    pub fn linear_state(&self) -> LinearState {
+        let mut state = LinearState::default();
+        for (k, v) in self.voices.iter().enumerate() {
+            let (true, Some(key)) = (v.state.active, v.state.key) else {
+                continue;
+            };
+            let key = &self.keys[key];
+            let n = key.n_modes();
+            state.push(Some(k), &v.z.re[..n], &key.energy);
+            state.push(Some(k), &v.z.im[..n], &key.energy);
+            let rest = Self::memory(v);
+            state.push(Some(k), &rest, &vec![0.0; rest.len()]);
+        }
+        let board = self.board.state();
+        state.push(None, &board, &vec![1.0; board.len()]);
+        state
+    }
+
+    /// A voice's memory beyond its modes, as plain numbers.
+    fn memory(v: &Voice) -> Vec<f64> {
+        let mut x = v.own_board.re.clone();
+        x.extend_from_slice(&v.own_board.im);
+        x.extend_from_slice(&v.other_m);
+        x.extend_from_slice(&v.other_before_m);
+        x.extend_from_slice(&v.force_n);
+        x.extend_from_slice(&v.damper_n);
+        x
+    }
+
+    /// Set the state [`ExactPool::linear_state`] reads, in the same layout.
+    pub fn set_linear_state(&mut self, x: &[f64]) {
+        let mut at = 0;
+        let mut take = |n: usize| {
+            at += n;
+            &x[at - n..at]
+        };
+        for v in self.voices.iter_mut() {
+            let (true, Some(key)) = (v.state.active, v.state.key) else {
+                continue;
+            };
+            let n = self.keys[key].n_modes();
+            v.z.re[..n].copy_from_slice(take(n));
+            v.z.im[..n].copy_from_slice(take(n));
+            let m = v.own_board.len();
+            v.own_board.re.copy_from_slice(take(m));
+            v.own_board.im.copy_from_slice(take(m));
+            v.other_m.copy_from_slice(take(3));
+            v.other_before_m.copy_from_slice(take(3));
+            v.force_n.copy_from_slice(take(3));
+            let c = v.damper_n.len();
+            v.damper_n.copy_from_slice(take(c));
+        }
+        let m = 3 * self.board.modes();
+        self.board.set_state(take(m));
+    }
+
+    /// Mechanical energy of every active key's modes (J; each key's copy of the board in it,
+    /// cycle-averaged per mode).
+    pub fn mechanical_energy_j(&self) -> f64 {
+        (0..self.voices.len()).map(|k| self.voice_energy_j(k)).sum()
+    }
+
+    /// Remove voice `k`'s part from the shared board and set it at rest.
+    fn rest_voice(&mut self, k: usize) {
+        let v = &mut self.voices[k];
+        if v.state.active {
+            if let Some(key) = v.state.key {
+                self.board
+                    .join(&v.own_board, &self.points[key], v.force_n, -1.0);
+            }
+        }
+        v.rest();
+    }
+}
+
+/// The pool policy's hooks on the exact engine's voices.
+impl Policy for ExactPool {
+    fn n_voices(&self) -> usize {
+        self.voices.len()
+    }
+
+    fn state(&self, k: usize) -> &VoiceState {
+        &self.voices[k].state
+    }
+
+    fn state_mut(&mut self, k: usize) -> &mut VoiceState {
+        &mut self.voices[k].state
+    }
+
+    fn voice_of_key(&self, key: usize) -> Option<usize> {
+        self.voice_of_key[key]
+    }
+
+    fn set_voice_of_key(&mut self, key: usize, voice: Option<usize>) {
+        self.voice_of_key[key] = voice;
+    }
+
+    fn fade_steps(&self) -> u32 {
+        self.fade_steps
+    }
+
+    fn key_strings(&self, key: usize) -> usize {
+        self.keys[key].n_strings
+    }
+
+    fn key_has_damper(&self, key: usize) -> bool {
+        self.keys[key].damper.is_some()
+    }
+
+    /// The voice's coefficients are its key's (an index); its state starts at rest.
+    fn load_key(&mut self, k: usize, _key: usize) {
+        self.rest_voice(k);
+    }
+
+    fn rest_strings(&mut self, k: usize) {
+        self.rest_voice(k);
+    }
+
+    /// A voice joins on the board as the other keys move it: its strings at their static
+    /// deflection by the change in that motion since it left, its own part added to the shared.
+    fn enter(&mut self, k: usize) {
+        let v = &mut self.voices[k];
+        let Some(key) = v.state.key else {
+            return;
+        };
+        let (point, key) = (&self.points[key], &self.keys[key]);
+        let now = self.board.others_at(None, point);
+        for (d, follow) in key.follow.iter().enumerate() {
+            follow.add_to(&mut v.z, now[d] - v.other_m[d]);
+        }
+        v.other_m = now;
+        v.other_before_m = now;
+        self.board.join(&v.own_board, point, v.force_n, 1.0);
+    }
+
+    fn leave(&mut self, k: usize) {
+        let v = &self.voices[k];
+        if let Some(key) = v.state.key {
+            self.board
+                .join(&v.own_board, &self.points[key], v.force_n, -1.0);
+        }
+    }
+
+    fn strike_contact_m(&self, k: usize, struck: usize) -> f64 {
+        let v = &self.voices[k];
+        v.state
+            .key
+            .map_or(0.0, |key| v.strike_contact_m(&self.keys[key], struck))
+    }
+
+    fn set_hammer(&mut self, k: usize, position_m: f64, velocity_m_s: f64) {
+        let v = &mut self.voices[k];
+        (v.hammer_y, v.hammer_v) = (position_m, velocity_m_s);
+    }
+
+    fn hammer_finite(&self, k: usize) -> bool {
+        let v = &self.voices[k];
+        v.hammer_y.is_finite() && v.hammer_v.is_finite()
+    }
+
+    fn voice_energy_j(&self, k: usize) -> f64 {
+        let v = &self.voices[k];
+        match (v.state.active, v.state.key) {
+            (true, Some(key)) => v.energy_j(&self.keys[key]),
+            _ => 0.0,
+        }
+    }
+
+    fn board_energy_j(&self) -> f64 {
+        self.board.energy_j()
+    }
+
+    /// The shared part at rest, and every voice's own part with it (they are its terms).
+    fn rest_board(&mut self) {
+        self.board.rest();
+        for v in &mut self.voices {
+            v.own_board.fill_zero();
+            v.force_n = [0.0; 3];
+        }
+    }
+}
