@@ -44,7 +44,7 @@ pub struct PlayArgs {
     pub callbacks: Option<u64>,
     /// `exponential` (default): ETDRK4 on complex modes at 48 kHz, the live integrator; `rk4`: the
     /// paper's RK4 at 96 kHz, the reference (slower: see `unacorda bench`); `exact`: each key's
-    /// coupled modes advanced exactly (not yet fast enough for more than a voice or two).
+    /// coupled modes advanced exactly (one core; 24 s to build the 88 keys).
     #[arg(long, value_enum, default_value_t = IntegratorArg::Exponential)]
     pub integrator: IntegratorArg,
     /// Cores for the audio callback, 1–2: with 2 a helper thread advances half of the live

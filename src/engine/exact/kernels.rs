@@ -255,3 +255,167 @@ pub(crate) fn stage(out: &mut Split, e2: &Split, from: &Split, q: &[Split], u: &
         }
     }
 }
+
+/// Longest block advanced mode by mode ([`free_block`], [`fold_block`]).
+pub(crate) const BLOCK: usize = 64;
+
+/// `len` free steps of every mode, mode by mode (each mode's coefficients loaded once): `z <-
+/// e^len ⊙ z`, and `out[i][t] = Re(r_i e^{t+1} z)` for `t < len` — what the per-sample
+/// [`advance`] reads with no input, in another order of summation.
+pub(crate) fn free_block(
+    fast: bool,
+    e: &Split,
+    z: &mut Split,
+    rows: &[Split; READS],
+    out: &mut [[f64; BLOCK]; READS],
+    len: usize,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if fast {
+        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
+        return unsafe { free_block_avx2(e, z, rows, out, len) };
+    }
+    let _ = fast;
+    free_block_with::<false>(e, z, rows, out, len)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn free_block_avx2(
+    e: &Split,
+    z: &mut Split,
+    rows: &[Split; READS],
+    out: &mut [[f64; BLOCK]; READS],
+    len: usize,
+) {
+    free_block_with::<true>(e, z, rows, out, len)
+}
+
+#[inline(always)]
+fn free_block_with<const FMA: bool>(
+    e: &Split,
+    z: &mut Split,
+    rows: &[Split; READS],
+    out: &mut [[f64; BLOCK]; READS],
+    len: usize,
+) {
+    let n = e.len();
+    let mut acc = [[[0.0; LANES]; BLOCK]; READS];
+    let mut chunk = |base: usize, lanes: usize, acc: &mut [[[f64; LANES]; BLOCK]; READS]| {
+        let mut er = [0.0; LANES];
+        let mut ei = [0.0; LANES];
+        let mut zr = [0.0; LANES];
+        let mut zi = [0.0; LANES];
+        let mut rr = [[0.0; LANES]; READS];
+        let mut ri = [[0.0; LANES]; READS];
+        for l in 0..lanes {
+            let m = base + l;
+            (er[l], ei[l], zr[l], zi[l]) = (e.re[m], e.im[m], z.re[m], z.im[m]);
+            for i in 0..READS {
+                (rr[i][l], ri[i][l]) = (rows[i].re[m], rows[i].im[m]);
+            }
+        }
+        for t in 0..len {
+            for l in 0..LANES {
+                let (a, b) = (zr[l], zi[l]);
+                zr[l] = fma::<FMA>(er[l], a, -ei[l] * b);
+                zi[l] = fma::<FMA>(er[l], b, ei[l] * a);
+                for i in 0..READS {
+                    acc[i][t][l] =
+                        fma::<FMA>(rr[i][l], zr[l], fma::<FMA>(-ri[i][l], zi[l], acc[i][t][l]));
+                }
+            }
+        }
+        for l in 0..lanes {
+            (z.re[base + l], z.im[base + l]) = (zr[l], zi[l]);
+        }
+    };
+    let mut base = 0;
+    while base < n {
+        let lanes = LANES.min(n - base);
+        chunk(base, lanes, &mut acc);
+        base += lanes;
+    }
+    for i in 0..READS {
+        for t in 0..len {
+            out[i][t] = acc[i][t].iter().sum();
+        }
+    }
+}
+
+/// Fold `len` steps of inputs into the modes, mode by mode: `z += sum_t e^{len-1-t} (sum_j g_j
+/// u[t][j])` — what the per-sample [`advance`] adds, by superposition.
+pub(crate) fn fold_block(
+    fast: bool,
+    e: &Split,
+    z: &mut Split,
+    g: &[Split; INPUTS],
+    u: &[[f64; INPUTS]; BLOCK],
+    len: usize,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if fast {
+        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
+        return unsafe { fold_block_avx2(e, z, g, u, len) };
+    }
+    let _ = fast;
+    fold_block_with::<false>(e, z, g, u, len)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn fold_block_avx2(
+    e: &Split,
+    z: &mut Split,
+    g: &[Split; INPUTS],
+    u: &[[f64; INPUTS]; BLOCK],
+    len: usize,
+) {
+    fold_block_with::<true>(e, z, g, u, len)
+}
+
+#[inline(always)]
+fn fold_block_with<const FMA: bool>(
+    e: &Split,
+    z: &mut Split,
+    g: &[Split; INPUTS],
+    u: &[[f64; INPUTS]; BLOCK],
+    len: usize,
+) {
+    let n = e.len();
+    let mut base = 0;
+    while base < n {
+        let lanes = LANES.min(n - base);
+        let mut er = [0.0; LANES];
+        let mut ei = [0.0; LANES];
+        let mut gr = [[0.0; LANES]; INPUTS];
+        let mut gi = [[0.0; LANES]; INPUTS];
+        for l in 0..lanes {
+            let m = base + l;
+            (er[l], ei[l]) = (e.re[m], e.im[m]);
+            for j in 0..INPUTS {
+                (gr[j][l], gi[j][l]) = (g[j].re[m], g[j].im[m]);
+            }
+        }
+        let (mut ar, mut ai) = ([0.0; LANES], [0.0; LANES]);
+        for ut in u.iter().take(len) {
+            for l in 0..LANES {
+                let (a, b) = (ar[l], ai[l]);
+                let (mut re, mut im) = (
+                    fma::<FMA>(er[l], a, -ei[l] * b),
+                    fma::<FMA>(er[l], b, ei[l] * a),
+                );
+                for j in 0..INPUTS {
+                    re = fma::<FMA>(gr[j][l], ut[j], re);
+                    im = fma::<FMA>(gi[j][l], ut[j], im);
+                }
+                (ar[l], ai[l]) = (re, im);
+            }
+        }
+        for l in 0..lanes {
+            z.re[base + l] += ar[l];
+            z.im[base + l] += ai[l];
+        }
+        base += lanes;
+    }
+}

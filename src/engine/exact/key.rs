@@ -3,7 +3,7 @@
 //! voice reads and drives it through — the hammer (ETDRK4 weights), the other keys' board motion
 //! at its bridge point (the coupling), the damper felt, the radiated volume velocity.
 
-use super::kernels::{Split, INPUTS, READS};
+use super::kernels::{Split, BLOCK, INPUTS, READS};
 use crate::engine::modal::{input_weights, Modal};
 use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::physics::hammer::HammerParams;
@@ -157,6 +157,33 @@ pub(crate) struct DamperKey {
     pub(crate) reads_to: [[f64; DAMPER_CHANNELS]; READS],
 }
 
+/// `Re(r_i e^k g_j)` for `k < BLOCK`.
+fn markov_parameters(
+    e: &[c64],
+    rows: &[Split; READS],
+    inputs: &[Split; INPUTS],
+) -> Vec<[[f64; INPUTS]; READS]> {
+    let mut power: Vec<c64> = vec![c64::new(1.0, 0.0); e.len()];
+    let mut out = Vec::with_capacity(BLOCK);
+    for _ in 0..BLOCK {
+        out.push(std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                (0..e.len())
+                    .map(|m| {
+                        let r = c64::new(rows[i].re[m], rows[i].im[m]);
+                        let g = c64::new(inputs[j].re[m], inputs[j].im[m]);
+                        (r * power[m] * g).re
+                    })
+                    .sum()
+            })
+        }));
+        for (p, e) in power.iter_mut().zip(e) {
+            *p *= e;
+        }
+    }
+    out
+}
+
 /// One key's coefficients (module notes), shared by every voice that plays it.
 #[derive(Debug, Clone)]
 pub struct ExactKey {
@@ -189,6 +216,10 @@ pub struct ExactKey {
     /// Per direction, the modes' static response to a unit `D` held (a key joining a moving
     /// board starts on it, not jolted by its contact springs).
     pub(crate) follow: [Split; 3],
+    /// What a unit of each coupling input entering at one step adds to each read `k` steps
+    /// later, `Re(r_i e^{lambda h k} g_j)` for `k < BLOCK` (the key's Markov parameters: a block
+    /// advanced freely, mode by mode, gets its coupling back by superposition).
+    pub(crate) markov: Vec<[[f64; INPUTS]; READS]>,
     pub(crate) damper: Option<DamperKey>,
     /// Per mode, its mechanical energy per `|z|^2` (J, cycle-averaged).
     pub(crate) energy: Vec<f64>,
@@ -300,6 +331,7 @@ impl ExactKey {
         let coupling = std::array::from_fn(|j| Split::new(&coupling_inputs[j % 3][j / 3]));
         let follow = std::array::from_fn(|d| Split::new(&coupling_inputs[d][2]));
         let n_s = ns as f64;
+        let markov = markov_parameters(&modal.ef, &reads, &coupling);
         let damper = spec.damper.map(|damper| {
             let x = damper.position_ratio * s0.speaking_length_m;
             let mut rows = Vec::new();
@@ -389,6 +421,7 @@ impl ExactKey {
             feed_k: std::array::from_fn(|d| n_s * spec.contact.stiffness_n_m[d]),
             feed_c: std::array::from_fn(|d| n_s * spec.contact.damping_n_s_m[d]),
             follow,
+            markov,
             damper,
             energy,
             hammer: spec.hammer,
@@ -406,6 +439,7 @@ impl ExactKey {
         let n = self.n_modes();
         let damper = self.damper.as_ref().map_or(0, |d| 3 * d.channels * 16 * n);
         (2 + self.n_strings * (1 + 1 + 3 + 3) + 3 + READS + INPUTS + 3) * split(&self.ef)
+            + 8 * BLOCK * READS * INPUTS
             + 8 * n
             + damper
     }

@@ -1,7 +1,7 @@
 //! One sounding key of the exact engine: its modal state, its hammer, the coupling input it
 //! receives and the damper force it feels, and the step that advances them.
 
-use super::kernels::{advance, propagate, stage, Split, INPUTS, READS};
+use super::kernels::{advance, propagate, stage, Split, BLOCK, INPUTS, READS};
 use super::key::{ExactKey, DAMPER_CHANNELS};
 use crate::engine::pool::VoiceState;
 use crate::engine::spec::MAX_STRINGS;
@@ -27,6 +27,11 @@ pub(crate) struct Voice {
     pub(crate) own_board: Split,
     /// What the last step read: volume velocity (m^3/s), total contact force T, L, P (N).
     pub(crate) read: [f64; READS],
+    /// Over a block advanced mode by mode ([`super::pool`]): whether this voice is, what its
+    /// modes read with no input, and the coupling inputs of each step.
+    pub(crate) in_block: bool,
+    pub(crate) block_read: [[f64; BLOCK]; READS],
+    pub(crate) block_inputs: [[f64; INPUTS]; BLOCK],
 }
 
 impl Voice {
@@ -42,7 +47,40 @@ impl Voice {
             damper_n: [0.0; DAMPER_CHANNELS],
             own_board: Split::zeros(board_modes),
             read: [0.0; READS],
+            in_block: false,
+            block_read: [[0.0; BLOCK]; READS],
+            block_inputs: [[0.0; INPUTS]; BLOCK],
         }
+    }
+
+    /// Whether the next steps are linear and time-invariant: no hammer, no damper on the strings,
+    /// no fade (a block of them may then be advanced mode by mode).
+    pub(crate) fn is_free(&self, key: &ExactKey) -> bool {
+        let damped = self.state.damper_down && key.damper.is_some();
+        !(self.state.hammer_on || damped) && self.state.fade_left == 0
+    }
+
+    /// The coupling inputs of the next step: the other keys' board motion `D` now and its slope
+    /// over the last step, scaled by the voice's coupling.
+    pub(crate) fn inputs(&self, h: f64) -> [f64; INPUTS] {
+        let c = self.state.coupling;
+        let mut u = [0.0; INPUTS];
+        for d in 0..3 {
+            u[d] = c * self.other_m[d];
+            u[3 + d] = c * (self.other_m[d] - self.other_before_m[d]) / h;
+        }
+        u
+    }
+
+    /// The step's reads with the contact springs' direct part, stretched by the other keys'
+    /// board motion: the total contact force this key puts on the board.
+    pub(crate) fn finish(&mut self, key: &ExactKey, u: &[f64; INPUTS], mut read: [f64; READS]) {
+        for d in 0..3 {
+            let at_end = u[d] + key.h * u[3 + d];
+            read[1 + d] -= key.feed_k[d] * at_end + key.feed_c[d] * u[3 + d];
+            self.force_n[d] = self.state.coupling * read[1 + d];
+        }
+        self.read = read;
     }
 
     /// Strings, board copy and everything they remember at rest.
@@ -54,6 +92,7 @@ impl Voice {
         self.force_n = [0.0; 3];
         self.damper_n = [0.0; DAMPER_CHANNELS];
         self.read = [0.0; READS];
+        self.in_block = false;
     }
 
     /// Mechanical energy of the key's modes (J, cycle-averaged per mode).
@@ -93,13 +132,7 @@ impl Voice {
     /// the modes exactly, the other keys' board motion entering as a ramp extrapolated from its
     /// last two values, the damper felt implicitly. Fills `self.read` and `self.force_n`.
     pub(crate) fn step(&mut self, key: &ExactKey, scratch: &mut [Split; 3], fast: bool) {
-        let h = key.h;
-        let c = self.state.coupling;
-        let mut u = [0.0; INPUTS];
-        for d in 0..3 {
-            u[d] = c * self.other_m[d];
-            u[3 + d] = c * (self.other_m[d] - self.other_before_m[d]) / h;
-        }
+        let u = self.inputs(key.h);
         let contact = self.state.hammer_on;
         if contact {
             self.contact_step(key, scratch);
@@ -147,13 +180,7 @@ impl Voice {
         } else {
             self.damper_n = [0.0; DAMPER_CHANNELS];
         }
-        for d in 0..3 {
-            // The contact springs' direct part: stretched by the other keys' board motion.
-            let at_end = u[d] + h * u[3 + d];
-            read[1 + d] -= key.feed_k[d] * at_end + key.feed_c[d] * u[3 + d];
-            self.force_n[d] = c * read[1 + d];
-        }
-        self.read = read;
+        self.finish(key, &u, read);
         if contact {
             let points = (0..key.n_strings)
                 .filter(|&s| self.state.struck[s])
