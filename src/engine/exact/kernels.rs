@@ -35,18 +35,14 @@ impl Split {
         self.re.len()
     }
 
-    /// `Re(r z)` of a row `r` (self) and the first `self.len()` modes of a state `z`.
+    /// `Re(r z)` of a row `r` (self) and the first `self.len()` modes of a state `z` (or of an
+    /// input `g`: what a unit of it adds to the read).
     pub(crate) fn read(&self, z: &Split) -> f64 {
         let mut acc = 0.0;
         for m in 0..self.re.len() {
             acc += self.re[m] * z.re[m] - self.im[m] * z.im[m];
         }
         acc
-    }
-
-    /// `Re(r g)` of a row `r` (self) and an input `g`: what a unit of that input adds to the read.
-    pub(crate) fn response(&self, g: &Split) -> f64 {
-        self.read(g)
     }
 
     /// `z += g u` on the first `self.len()` modes.

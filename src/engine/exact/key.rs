@@ -363,8 +363,8 @@ impl ExactKey {
             let mut a = faer::Mat::<f64>::zeros(r, r);
             for i in 0..r {
                 for j in 0..r {
-                    rows_from[i * DAMPER_CHANNELS + j] = rows[i].response(&from[j]);
-                    a[(i, j)] = f64::from(u8::from(i == j)) + cf * rows[i].response(&to[j]);
+                    rows_from[i * DAMPER_CHANNELS + j] = rows[i].read(&from[j]);
+                    a[(i, j)] = f64::from(u8::from(i == j)) + cf * rows[i].read(&to[j]);
                 }
             }
             let inv = faer::linalg::solvers::DenseSolveCore::inverse(&a.partial_piv_lu());
@@ -375,22 +375,10 @@ impl ExactKey {
                 }
             }
             let reads_from = std::array::from_fn(|i| {
-                std::array::from_fn(|j| {
-                    if j < r {
-                        reads[i].response(&from[j])
-                    } else {
-                        0.0
-                    }
-                })
+                std::array::from_fn(|j| if j < r { reads[i].read(&from[j]) } else { 0.0 })
             });
             let reads_to = std::array::from_fn(|i| {
-                std::array::from_fn(|j| {
-                    if j < r {
-                        reads[i].response(&to[j])
-                    } else {
-                        0.0
-                    }
-                })
+                std::array::from_fn(|j| if j < r { reads[i].read(&to[j]) } else { 0.0 })
             });
             DamperKey {
                 channels: r,

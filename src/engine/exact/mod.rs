@@ -118,7 +118,7 @@ impl ExactUnison {
         for out in volume_velocity {
             *out = if self.voice.state.hammer_on || self.voice.state.damper_down {
                 self.step();
-                self.volume_velocity_m3_s()
+                self.voice.read[0]
             } else {
                 self.voice.read[0] = propagate_read(
                     &self.key.ef,
@@ -145,9 +145,9 @@ impl ExactUnison {
         free + m * (4.0 * 4.0 * struck + 3.0 * (6.0 + 2.0 * struck) + 6.0 * struck + 12.0)
     }
 
-    /// Net volume velocity of the board (m^3/s) after the last step.
+    /// Net volume velocity of the board (m^3/s) after the last step (read by the step itself).
     pub fn volume_velocity_m3_s(&self) -> f64 {
-        self.key.reads[0].read(&self.voice.z)
+        self.voice.read[0]
     }
 
     /// Forces and volume velocity now (Eq. 19).

@@ -75,37 +75,13 @@ impl ExactPool {
         self.h
     }
 
-    /// One step of every active voice, then of the board coupling; fades move, and a voice whose
-    /// fade has ended takes its next key.
+    /// One step of every active voice, each one sample at a time ([`Voice::step`]), then of the
+    /// board coupling ([`ExactPool::sample`]).
     pub fn step(&mut self) {
-        let mut total = 0.0;
-        let mut faded = false;
         for v in self.voices.iter_mut() {
-            let (true, Some(key)) = (v.state.active, v.state.key) else {
-                continue;
-            };
-            let (point, key) = (&self.points[key], &self.keys[key]);
-            faded |= fade_step(&mut v.state, self.fade_steps);
-            let before = v.force_n;
-            v.step(key, &mut self.scratch, self.fast_path);
-            self.board
-                .step_own(&mut v.own_board, point, before, v.force_n);
-            total += v.state.coupling * v.read[0];
+            v.in_block = false;
         }
-        self.board.step_shared();
-        for v in self.voices.iter_mut() {
-            let (true, Some(key)) = (v.state.active, v.state.key) else {
-                continue;
-            };
-            v.other_before_m = v.other_m;
-            v.other_m = self.board.others_at(Some(&v.own_board), &self.points[key]);
-        }
-        self.volume_velocity_m3_s = total;
-        if faded {
-            for k in 0..self.voices.len() {
-                self.complete_fade(k);
-            }
-        }
+        self.sample(0);
     }
 
     /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity after each,
@@ -143,49 +119,7 @@ impl ExactPool {
             }
         }
         for (t, out) in out.iter_mut().enumerate() {
-            let mut total = 0.0;
-            let mut faded = false;
-            for v in self.voices.iter_mut() {
-                let (true, Some(key)) = (v.state.active, v.state.key) else {
-                    continue;
-                };
-                let (point, key) = (&self.points[key], &self.keys[key]);
-                let before = v.force_n;
-                if v.in_block {
-                    let u = v.inputs(key.h);
-                    v.block_inputs[t] = u;
-                    let mut read = [0.0; READS];
-                    for (i, r) in read.iter_mut().enumerate() {
-                        *r = v.block_read[i][t];
-                        for j in 0..=t {
-                            let (m, u) = (&key.markov[t - j][i], &v.block_inputs[j]);
-                            *r += (0..INPUTS).map(|q| m[q] * u[q]).sum::<f64>();
-                        }
-                    }
-                    v.finish(key, &u, read);
-                } else {
-                    faded |= fade_step(&mut v.state, self.fade_steps);
-                    v.step(key, &mut self.scratch, self.fast_path);
-                }
-                self.board
-                    .step_own(&mut v.own_board, point, before, v.force_n);
-                total += v.state.coupling * v.read[0];
-            }
-            self.board.step_shared();
-            for v in self.voices.iter_mut() {
-                let (true, Some(key)) = (v.state.active, v.state.key) else {
-                    continue;
-                };
-                v.other_before_m = v.other_m;
-                v.other_m = self.board.others_at(Some(&v.own_board), &self.points[key]);
-            }
-            *out = total;
-            self.volume_velocity_m3_s = total;
-            if faded {
-                for k in 0..self.voices.len() {
-                    self.complete_fade(k);
-                }
-            }
+            *out = self.sample(t);
         }
         for v in self.voices.iter_mut() {
             if let (true, Some(key)) = (v.in_block, v.state.key) {
@@ -199,7 +133,57 @@ impl ExactPool {
                     len,
                 );
             }
+            v.in_block = false;
         }
+    }
+
+    /// Step `t` of a block for every active voice — a voice in the block from its free reads and
+    /// its Markov parameters, any other by [`Voice::step`] — then the board coupling; fades move,
+    /// and a voice whose fade has ended takes its next key. Returns the board's volume velocity.
+    fn sample(&mut self, t: usize) -> f64 {
+        let mut total = 0.0;
+        let mut faded = false;
+        for v in self.voices.iter_mut() {
+            let (true, Some(key)) = (v.state.active, v.state.key) else {
+                continue;
+            };
+            let (point, key) = (&self.points[key], &self.keys[key]);
+            let before = v.force_n;
+            if v.in_block {
+                let u = v.inputs(key.h);
+                v.block_inputs[t] = u;
+                let mut read = [0.0; READS];
+                for (i, r) in read.iter_mut().enumerate() {
+                    *r = v.block_read[i][t];
+                    for j in 0..=t {
+                        let (m, u) = (&key.markov[t - j][i], &v.block_inputs[j]);
+                        *r += (0..INPUTS).map(|q| m[q] * u[q]).sum::<f64>();
+                    }
+                }
+                v.finish(key, &u, read);
+            } else {
+                faded |= fade_step(&mut v.state, self.fade_steps);
+                v.step(key, &mut self.scratch, self.fast_path);
+            }
+            self.board
+                .step_own(&mut v.own_board, point, before, v.force_n);
+            total += v.state.coupling * v.read[0];
+        }
+        self.board.step_shared();
+        for v in self.voices.iter_mut() {
+            let (true, Some(key)) = (v.state.active, v.state.key) else {
+                continue;
+            };
+            v.other_before_m = v.other_m;
+            v.other_m = self.board.others_at(Some(&v.own_board), &self.points[key]);
+        }
+        self.volume_velocity_m3_s = total;
+        if faded {
+            for k in 0..self.voices.len() {
+                self.complete_fade(k);
+            }
+        }
+        total
     }
 
     pub fn volume_velocity_m3_s(&self) -> f64 {
