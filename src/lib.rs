@@ -5,6 +5,7 @@
 //! - [`engine`]: the physics (pure, no I/O),
 //! - [`preset`]: parameter files,
 //! - [`play`]: MIDI events and pedals applied to keys sharing one soundboard,
+//! - [`keycache`]: prepared keys kept between runs,
 //! - [`render`]: strikes to frames at the output rate,
 //! - [`scaling`]: every key of the keyboard from a few anchor keys,
 //! - [`analysis`]: spectra, envelopes and the paper's figures,
@@ -21,6 +22,7 @@ pub mod audio;
 pub mod board;
 pub mod config;
 pub mod engine;
+pub mod keycache;
 pub mod measure;
 pub mod midi;
 pub mod play;

@@ -181,6 +181,13 @@ pub enum PianoError {
     Build(#[from] crate::engine::BuildError),
 }
 
+/// A keyboard to build pianos from: its keys' parameters, and where prepared keys are kept.
+#[derive(Debug, Clone, Copy)]
+pub struct Keyboard<'a> {
+    pub scaling: &'a crate::config::scaling::LoadedScaling,
+    pub cache: Option<&'a crate::keycache::KeyCache>,
+}
+
 /// An instrument with its player: what the audio thread owns.
 #[derive(Debug, Clone)]
 pub struct Piano<E: VoicePool> {
@@ -204,6 +211,17 @@ impl<E: VoicePool> Piano<E> {
         keys: &[usize],
         voices: usize,
     ) -> Result<Piano<E>, PianoError> {
+        Piano::build_with(scaling, keys, voices, None)
+    }
+
+    /// [`Piano::build`], the prepared keys read from and kept in `cache` where the engine's
+    /// keys are worth keeping.
+    pub fn build_with(
+        scaling: &crate::config::scaling::LoadedScaling,
+        keys: &[usize],
+        voices: usize,
+        cache: Option<&crate::keycache::KeyCache>,
+    ) -> Result<Piano<E>, PianoError> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let threads = threads.min(keys.len()).max(1);
         let rate_hz = scaling.base.output_rate_hz();
@@ -219,7 +237,10 @@ impl<E: VoicePool> Piano<E> {
                             .map(|&k| {
                                 let spec = scaling.key_preset(k)?.unison_spec();
                                 let spec = E::at_engine_rate(spec, rate_hz);
-                                let key = E::prepare_key(&spec)?;
+                                let key = match cache {
+                                    Some(cache) => cache.key(&spec, E::prepare_key)?,
+                                    None => E::prepare_key(&spec)?,
+                                };
                                 Ok((spec, key))
                             })
                             .collect::<Result<Vec<_>, PianoError>>()

@@ -320,6 +320,7 @@ fn bench_writes_every_printed_figure_as_json() {
     let out = Command::new(env!("CARGO_BIN_EXE_unacorda"))
         .args(["bench", "--seconds", "0.1", "--voices", "2", "--json"])
         .arg(&json)
+        .env("UNACORDA_CACHE", dir.path().join("keys"))
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(0));
@@ -350,8 +351,8 @@ fn bench_writes_every_printed_figure_as_json() {
     assert_eq!(printed.len(), callbacks.len());
     assert_eq!(
         printed.len(),
-        8,
-        "rk4, etd, etd on two cores and the exact pool, 1 and 2 voices"
+        10,
+        "rk4, etd and the exact pool, on one core and (etd, exact) two, 1 and 2 voices"
     );
     for (p, c) in printed.iter().zip(callbacks) {
         for field in [
@@ -378,5 +379,15 @@ fn bench_writes_every_printed_figure_as_json() {
     assert_eq!(engines, ["rk4-f64", "rk4-f32", "etd", "exact"]);
     assert!(report["voices"][3]["real_time_factor"].as_f64().unwrap() > 0.0);
     assert_eq!(report["startup"][0]["keys"], 88);
+    // The exact engine's keys prepared and kept, then its start-up from them.
+    let exact: Vec<_> = report["startup"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|s| s["engine"] == "exact")
+        .map(|s| s["keys_from_cache"].as_u64().unwrap())
+        .collect();
+    println!("exact engine's start-up, keys read back: {exact:?}");
+    assert_eq!(exact, [0, 88]);
     assert!(report["memory"][0]["bytes_per_voice"].as_u64().unwrap() > 0);
 }

@@ -27,6 +27,7 @@ use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::midi::file::{parse, TimedEvent};
 use unacorda::midi::{Event, Pedal};
+use unacorda::play::Keyboard;
 use unacorda::play::Piano;
 use unacorda::render::render_midi_into;
 
@@ -207,8 +208,12 @@ fn chord(release_s: f64, pedal_up_s: Option<f64>) -> Vec<TimedEvent> {
 fn quarter_seconds<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> Vec<f64> {
     let scaling = Scaling::resolve("grand").unwrap();
     let mut samples = Vec::new();
+    let keyboard = Keyboard {
+        scaling: &scaling,
+        cache: None,
+    };
     let r = render_midi_into::<E>(
-        &scaling,
+        keyboard,
         events,
         tail_s,
         32,

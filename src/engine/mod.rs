@@ -39,7 +39,7 @@ pub use spec::{
 /// dampers, retire, reset) is [`Policy`], written once for both; this is the rest.
 pub trait VoicePool: Policy + Clone + Send + std::fmt::Debug + 'static {
     /// One key's coefficients, prepared before the pool is built.
-    type Key: Send;
+    type Key: Send + StoredKey;
     /// `spec` at the rate this engine steps at: unchanged (the internal rate), or `output_rate_hz`
     /// for an engine that steps at the output rate.
     fn at_engine_rate(spec: UnisonSpec, output_rate_hz: f64) -> UnisonSpec;
@@ -87,6 +87,51 @@ pub trait VoicePool: Policy + Clone + Send + std::fmt::Debug + 'static {
     /// is released) or a stolen voice is fading (its contact springs change).
     fn is_driven(&self) -> bool {
         (0..self.n_voices()).any(|k| self.hammer_on(k) || self.is_fading(k))
+    }
+}
+
+/// A key's prepared coefficients as bytes, for an engine whose keys are costly to prepare, so
+/// that a front end may keep them between runs (the engine does no I/O). By default a key is
+/// not kept.
+pub trait StoredKey: Sized {
+    /// The engine's name in the store; `None`: its keys are cheap and never kept.
+    const STORE: Option<&'static str> = None;
+    /// The source of everything that decides the coefficients beside the spec: a stored key
+    /// is used only by a build of the same source.
+    const SOURCE: &'static [&'static str] = &[];
+    fn to_bytes(&self) -> Vec<u8> {
+        Vec::new()
+    }
+    /// The key [`StoredKey::to_bytes`] wrote for `spec`, or `None` if the bytes do not read
+    /// back whole for it.
+    fn from_bytes(_spec: &UnisonSpec, _bytes: &[u8]) -> Option<Self> {
+        None
+    }
+}
+
+impl StoredKey for rk4::Rk4Key<f64> {}
+impl StoredKey for etd::PreparedKey {}
+
+impl StoredKey for exact::ExactKey {
+    const STORE: Option<&'static str> = Some("exact");
+    const SOURCE: &'static [&'static str] = &[
+        include_str!("exact/key.rs"),
+        include_str!("exact/kernels.rs"),
+        include_str!("exact/bytes.rs"),
+        include_str!("modal.rs"),
+        include_str!("spec.rs"),
+        include_str!("physics/contact.rs"),
+        include_str!("physics/damper.rs"),
+        include_str!("physics/duplex.rs"),
+        include_str!("physics/hammer.rs"),
+        include_str!("physics/soundboard.rs"),
+        include_str!("physics/string.rs"),
+    ];
+    fn to_bytes(&self) -> Vec<u8> {
+        exact::ExactKey::to_bytes(self)
+    }
+    fn from_bytes(spec: &UnisonSpec, bytes: &[u8]) -> Option<Self> {
+        exact::ExactKey::from_bytes(spec, bytes)
     }
 }
 

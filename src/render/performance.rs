@@ -75,10 +75,15 @@ pub fn render_midi_with(
     tap: impl FnMut(&Rk4Pool, u64),
 ) -> Result<Performance, RenderError> {
     let mut samples = Vec::new();
-    let r = render_midi_into::<Rk4Pool>(scaling, events, tail_s, voices, progress, tap, |block| {
-        samples.extend_from_slice(block);
-        ControlFlow::Continue(())
-    })?;
+    let keyboard = crate::play::Keyboard {
+        scaling,
+        cache: None,
+    };
+    let r =
+        render_midi_into::<Rk4Pool>(keyboard, events, tail_s, voices, progress, tap, |block| {
+            samples.extend_from_slice(block);
+            ControlFlow::Continue(())
+        })?;
     Ok(Performance {
         rate_hz: r.rate_hz,
         samples,
@@ -89,10 +94,11 @@ pub fn render_midi_with(
 
 /// [`render_midi_with`] on the engine `E` (RK4 [`Rk4Pool`] or the live integrator,
 /// [`crate::engine::etd::EtdPool`]), handing each block of samples to `sink`
-/// as it is made (a WAV being written) instead of keeping them; the render stops early when
+/// as it is made (a WAV being written) instead of keeping them, the prepared keys read from and
+/// kept in the keyboard's cache where it has one; the render stops early when
 /// `sink` breaks (interrupted, or the disk is full).
 pub fn render_midi_into<E: crate::engine::VoicePool>(
-    scaling: &crate::config::scaling::LoadedScaling,
+    keyboard: crate::play::Keyboard<'_>,
     events: &[crate::midi::file::TimedEvent],
     tail_s: f64,
     voices: usize,
@@ -118,7 +124,8 @@ pub fn render_midi_into<E: crate::engine::VoicePool>(
         return Err(RenderError::NoKeys);
     }
     let voices = voices.min(keys.len());
-    let piano = crate::play::Piano::<E>::build(scaling, &keys, voices)?;
+    let scaling = keyboard.scaling;
+    let piano = crate::play::Piano::<E>::build_with(scaling, &keys, voices, keyboard.cache)?;
     let settings = scaling.base.output_settings();
     let fs = settings.rate_hz;
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE)?;

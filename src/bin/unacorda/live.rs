@@ -149,7 +149,22 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     let scaling = Scaling::resolve(&args.keyboard)?;
     let keys: Vec<usize> = (1..=KEYS).collect();
     eprintln!("building {} keys on one soundboard…", keys.len());
-    let piano = Piano::<E>::build(&scaling, &keys, args.voices)?;
+    let started = std::time::Instant::now();
+    let cache = unacorda::keycache::KeyCache::from_env();
+    let piano = Piano::<E>::build_with(&scaling, &keys, args.voices, cache.as_ref())?;
+    if let Some(cache) = &cache {
+        let (hits, stored) = (
+            cache.hits.load(Ordering::Relaxed),
+            cache.stored.load(Ordering::Relaxed),
+        );
+        if hits + stored > 0 {
+            eprintln!(
+                "built in {:.1} s ({hits} keys read back from {}, {stored} prepared and kept there)",
+                started.elapsed().as_secs_f64(),
+                cache.dir().display()
+            );
+        }
+    }
     let settings = scaling.base.output_settings();
     let (mut synth, handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
     if cores == 2 {

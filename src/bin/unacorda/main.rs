@@ -125,6 +125,9 @@ enum Command {
         /// p99.9 as fractions of the deadline, misses, blocks; real-time factors; start-up; memory).
         #[arg(long, value_name = "FILE.json")]
         json: Option<PathBuf>,
+        /// Time the callback of this engine only (default: every engine).
+        #[arg(long, value_parser = ["rk4", "etd", "exact"])]
+        engine: Option<String>,
     },
     /// Regenerate the paper's Figures 2–6 (PNG + CSV): the board's mobility, full vs reduced, and
     /// a preset struck una corda vs normal.
@@ -226,8 +229,13 @@ fn render_midi_file<E: unacorda::engine::VoicePool>(
         let _ = ctrlc::set_handler(move || interrupted.store(true, Ordering::Relaxed));
     }
     let (mut peak, mut failure) = (0f32, None);
-    let r = unacorda::render::render_midi_into::<E>(
+    let cache = unacorda::keycache::KeyCache::from_env();
+    let keyboard = unacorda::play::Keyboard {
         scaling,
+        cache: cache.as_ref(),
+    };
+    let r = unacorda::render::render_midi_into::<E>(
+        keyboard,
         events,
         tail,
         voices,
@@ -462,7 +470,8 @@ fn run(cli: Cli) -> Result<()> {
             seconds,
             voices,
             json,
-        } => bench::bench(seconds, voices, json.as_deref())?,
+            engine,
+        } => bench::bench(seconds, voices, json.as_deref(), engine.as_deref())?,
         Command::Soundboard { input, out } => {
             let spec = unacorda::config::preset::load_board_spec(&input)?;
             let command = format!(

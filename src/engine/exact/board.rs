@@ -13,7 +13,7 @@
 //! lags the keys by one step: each key extrapolates `D` over the next step from its last two
 //! values (a ramp), which keeps the coupled system's decay (`tests/exact_pool.rs`).
 
-use super::kernels::Split;
+use super::kernels::{fma, Split, LANES};
 use crate::engine::modal::input_weights;
 use crate::engine::physics::soundboard::SoundboardModes;
 use faer::c64;
@@ -66,6 +66,14 @@ impl BoardCoupling {
             lambda.push(l);
             omega2.push(w * w);
         }
+        // Padded to whole lanes with modes that are never driven and never move (their `e`,
+        // weights and shapes zero), so that the loops over modes have no remainder.
+        let padded = m.div_ceil(LANES) * LANES;
+        for v in [&mut e, &mut from, &mut to, &mut lambda] {
+            v.resize(padded, c64::new(0.0, 0.0));
+        }
+        omega2.resize(padded, 0.0);
+        let m = padded;
         BoardCoupling {
             modes,
             e: Split::new(&e),
@@ -84,30 +92,109 @@ impl BoardCoupling {
     }
 
     /// A key's mode shapes at its bridge point (all the board's modes) restricted to the
-    /// coupling's.
+    /// coupling's (zero on the padding).
     pub(crate) fn restrict(&self, shape: &[Vec<f64>; 3]) -> [Vec<f64>; 3] {
-        std::array::from_fn(|d| self.modes.iter().map(|&k| shape[d][k]).collect())
+        std::array::from_fn(|d| {
+            let mut phi: Vec<f64> = self.modes.iter().map(|&k| shape[d][k]).collect();
+            phi.resize(self.e.len(), 0.0);
+            phi
+        })
     }
 
     /// Advance a key's own part over the step in which its total contact force went from
-    /// `before` to `after` (N, per direction, at its point `phi`), and add that force to the
-    /// step's sum.
+    /// `before` to `after` (N, per direction, at its point `phi`), add that force to the step's
+    /// sum, and return the own part's displacement at the point after the step (m, per
+    /// direction); with AVX2 + FMA where `fast`.
     pub(crate) fn step_own(
+        &mut self,
+        fast: bool,
+        own: &mut Split,
+        phi: &[Vec<f64>; 3],
+        before: [f64; 3],
+        after: [f64; 3],
+    ) -> [f64; 3] {
+        #[cfg(target_arch = "x86_64")]
+        if fast {
+            // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
+            return unsafe { self.step_own_avx2(own, phi, before, after) };
+        }
+        let _ = fast;
+        self.step_own_with::<false>(own, phi, before, after)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn step_own_avx2(
         &mut self,
         own: &mut Split,
         phi: &[Vec<f64>; 3],
         before: [f64; 3],
         after: [f64; 3],
-    ) {
-        let (e, from, to) = (&self.e, &self.from, &self.to);
-        for m in 0..self.e.len() {
-            let f0 = phi[0][m] * before[0] + phi[1][m] * before[1] + phi[2][m] * before[2];
-            let f1 = phi[0][m] * after[0] + phi[1][m] * after[1] + phi[2][m] * after[2];
-            let (a, b) = (own.re[m], own.im[m]);
-            own.re[m] = e.re[m] * a - e.im[m] * b + from.re[m] * f0 + to.re[m] * f1;
-            own.im[m] = e.re[m] * b + e.im[m] * a + from.im[m] * f0 + to.im[m] * f1;
-            self.force_now[m] += f1;
+    ) -> [f64; 3] {
+        self.step_own_with::<true>(own, phi, before, after)
+    }
+
+    #[inline(always)]
+    fn step_own_with<const FMA: bool>(
+        &mut self,
+        own: &mut Split,
+        phi: &[Vec<f64>; 3],
+        before: [f64; 3],
+        after: [f64; 3],
+    ) -> [f64; 3] {
+        let n = self.e.len();
+        let (er, ei) = (&self.e.re[..n], &self.e.im[..n]);
+        let (fr, fi, tr, ti) = (
+            &self.from.re[..n],
+            &self.from.im[..n],
+            &self.to.re[..n],
+            &self.to.im[..n],
+        );
+        let (or, oi) = (&mut own.re[..n], &mut own.im[..n]);
+        let (p0, p1, p2) = (&phi[0][..n], &phi[1][..n], &phi[2][..n]);
+        let sum = &mut self.force_now[..n];
+        let mut at = [[0.0; LANES]; 3];
+        // The modes are padded to whole lanes ([`BoardCoupling::new`]); each chunk is loaded into
+        // registers (local arrays), so that the lanes vectorise.
+        for base in (0..n).step_by(LANES) {
+            let r = base..base + LANES;
+            let ld = |x: &[f64]| -> [f64; LANES] { x[r.clone()].try_into().unwrap() };
+            let (er, ei, fr, fi, tr, ti) = (ld(er), ld(ei), ld(fr), ld(fi), ld(tr), ld(ti));
+            let (p0, p1, p2) = (ld(p0), ld(p1), ld(p2));
+            let (mut zr, mut zi, mut sm) = (ld(or), ld(oi), ld(sum));
+            for l in 0..LANES {
+                let f0 = fma::<FMA>(
+                    p0[l],
+                    before[0],
+                    fma::<FMA>(p1[l], before[1], p2[l] * before[2]),
+                );
+                let f1 = fma::<FMA>(
+                    p0[l],
+                    after[0],
+                    fma::<FMA>(p1[l], after[1], p2[l] * after[2]),
+                );
+                let (a, b) = (zr[l], zi[l]);
+                zr[l] = fma::<FMA>(
+                    er[l],
+                    a,
+                    fma::<FMA>(-ei[l], b, fma::<FMA>(fr[l], f0, tr[l] * f1)),
+                );
+                zi[l] = fma::<FMA>(
+                    er[l],
+                    b,
+                    fma::<FMA>(ei[l], a, fma::<FMA>(fi[l], f0, ti[l] * f1)),
+                );
+                sm[l] += f1;
+                let q = 2.0 * zr[l];
+                at[0][l] = fma::<FMA>(p0[l], q, at[0][l]);
+                at[1][l] = fma::<FMA>(p1[l], q, at[1][l]);
+                at[2][l] = fma::<FMA>(p2[l], q, at[2][l]);
+            }
+            or[r.clone()].copy_from_slice(&zr);
+            oi[r.clone()].copy_from_slice(&zi);
+            sum[r].copy_from_slice(&sm);
         }
+        at.map(|a| a.iter().sum())
     }
 
     /// Advance the shared part over the step once every key has added its force.
@@ -123,17 +210,41 @@ impl BoardCoupling {
         self.force_now.iter_mut().for_each(|f| *f = 0.0);
     }
 
-    /// The other keys' board displacement at a key's point `phi` (m, per direction), its own
-    /// part `own` taken out (`None`: a key not in the shared part).
-    pub(crate) fn others_at(&self, own: Option<&Split>, phi: &[Vec<f64>; 3]) -> [f64; 3] {
-        let mut d = [0.0; 3];
-        for m in 0..self.e.len() {
-            let q = 2.0 * (self.shared.re[m] - own.map_or(0.0, |own| own.re[m]));
-            for (d, phi) in d.iter_mut().zip(phi) {
-                *d += phi[m] * q;
+    /// The shared part's displacement at a key's point `phi` (m, per direction: every key's,
+    /// its own included); with AVX2 + FMA where `fast`.
+    pub(crate) fn shared_at(&self, fast: bool, phi: &[Vec<f64>; 3]) -> [f64; 3] {
+        #[cfg(target_arch = "x86_64")]
+        if fast {
+            // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
+            return unsafe { self.shared_at_avx2(phi) };
+        }
+        let _ = fast;
+        self.shared_at_with::<false>(phi)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn shared_at_avx2(&self, phi: &[Vec<f64>; 3]) -> [f64; 3] {
+        self.shared_at_with::<true>(phi)
+    }
+
+    #[inline(always)]
+    fn shared_at_with<const FMA: bool>(&self, phi: &[Vec<f64>; 3]) -> [f64; 3] {
+        let n = self.e.len();
+        let s = &self.shared.re[..n];
+        let (p0, p1, p2) = (&phi[0][..n], &phi[1][..n], &phi[2][..n]);
+        let mut at = [[0.0; LANES]; 3];
+        for base in (0..n).step_by(LANES) {
+            let r = base..base + LANES;
+            let ld = |x: &[f64]| -> [f64; LANES] { x[r.clone()].try_into().unwrap() };
+            let (q, p0, p1, p2) = (ld(s), ld(p0), ld(p1), ld(p2));
+            for l in 0..LANES {
+                at[0][l] = fma::<FMA>(p0[l], 2.0 * q[l], at[0][l]);
+                at[1][l] = fma::<FMA>(p1[l], 2.0 * q[l], at[1][l]);
+                at[2][l] = fma::<FMA>(p2[l], 2.0 * q[l], at[2][l]);
             }
         }
-        d
+        at.map(|a| a.iter().sum())
     }
 
     /// A key joins (`sign` 1) or leaves (`sign` -1) the shared part with its own part and its

@@ -61,11 +61,14 @@ impl Split {
 
 /// Lanes of the mode loops' partial sums (so that they vectorise: a single sum would be a serial
 /// chain).
-const LANES: usize = 8;
+pub(crate) const LANES: usize = 8;
 
 /// Inputs that enter a step (the coupling's value and slope per direction) and rows read after it
 /// (the volume velocity and the total contact force per direction).
 pub(crate) const INPUTS: usize = 6;
+
+/// Directions of the coupling (T, L, P): a block's inputs, one per direction.
+pub(crate) const DIRECTIONS: usize = 3;
 pub(crate) const READS: usize = 4;
 
 /// One pass over the first `e.len()` modes: `z <- e ⊙ z` (if `propagate`), then
@@ -124,7 +127,7 @@ fn dispatch<const FMA: bool>(
 
 /// `a b + c`, fused with `FMA`.
 #[inline(always)]
-fn fma<const FMA: bool>(a: f64, b: f64, c: f64) -> f64 {
+pub(crate) fn fma<const FMA: bool>(a: f64, b: f64, c: f64) -> f64 {
     if FMA {
         a.mul_add(b, c)
     } else {
@@ -148,7 +151,10 @@ fn pass<const FMA: bool, const PROPAGATE: bool, const INPUT: bool>(
     let rr: [&[f64]; READS] = std::array::from_fn(|i| &rows[i].re[..n]);
     let ri: [&[f64]; READS] = std::array::from_fn(|i| &rows[i].im[..n]);
     let mut acc = [[0.0; LANES]; READS];
-    let mut mode = |m: usize, lane: usize, acc: &mut [[f64; LANES]; READS]| {
+    // A plain loop, not a closure: a closure would be compiled without the caller's target
+    // features (its `mul_add` a library call).
+    for m in 0..n {
+        let lane = m % LANES;
         let (mut re, mut im) = (zr[m], zi[m]);
         if PROPAGATE {
             (re, im) = (
@@ -167,15 +173,6 @@ fn pass<const FMA: bool, const PROPAGATE: bool, const INPUT: bool>(
         for i in 0..READS {
             acc[i][lane] = fma::<FMA>(rr[i][m], re, fma::<FMA>(-ri[i][m], im, acc[i][lane]));
         }
-    };
-    let whole = n / LANES * LANES;
-    for base in (0..whole).step_by(LANES) {
-        for lane in 0..LANES {
-            mode(base + lane, lane, &mut acc);
-        }
-    }
-    for m in whole..n {
-        mode(m, 0, &mut acc);
     }
     acc.map(|a| a.iter().sum())
 }
@@ -255,162 +252,291 @@ pub(crate) fn stage(out: &mut Split, e2: &Split, from: &Split, q: &[Split], u: &
 /// Longest block advanced mode by mode ([`free_block`], [`fold_block`]).
 pub(crate) const BLOCK: usize = 64;
 
-/// `len` free steps of every mode, mode by mode (each mode's coefficients loaded once): `z <-
-/// e^len ⊙ z`, and `out[i][t] = Re(r_i e^{t+1} z)` for `t < len` — what the per-sample
-/// [`advance`] reads with no input, in another order of summation.
+/// A block's inputs per direction, step `t` at `BLOCK - 1 - t` (so that a convolution with
+/// Markov parameters is a forward dot product).
+pub(crate) type Reversed = [[f64; BLOCK]; DIRECTIONS];
+
+/// Markov parameters per read and direction, tap `k` (steps after the input) at `k`.
+pub(crate) type Taps = [[[f64; BLOCK]; DIRECTIONS]; READS];
+
+/// What the inputs of steps `0..=t` add to each read after step `t`:
+/// `sum_d sum_{j<=t} taps[i][d][t-j] u_d(j)`; with AVX2 + FMA where `fast`.
+pub(crate) fn convolve(fast: bool, taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
+    #[cfg(target_arch = "x86_64")]
+    if fast {
+        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
+        return unsafe { convolve_avx2(taps, u, t) };
+    }
+    let _ = fast;
+    convolve_with::<false>(taps, u, t)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn convolve_avx2(taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
+    convolve_with::<true>(taps, u, t)
+}
+
+#[inline(always)]
+fn convolve_with<const FMA: bool>(taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
+    const W: usize = 4;
+    let start = BLOCK - 1 - t;
+    std::array::from_fn(|i| {
+        let mut acc = [0.0; W];
+        for d in 0..DIRECTIONS {
+            let (a, b) = (&taps[i][d][..=t], &u[d][start..]);
+            let whole = a.len() / W * W;
+            for k in (0..whole).step_by(W) {
+                for l in 0..W {
+                    acc[l] = fma::<FMA>(a[k + l], b[k + l], acc[l]);
+                }
+            }
+            for k in whole..a.len() {
+                acc[0] = fma::<FMA>(a[k], b[k], acc[0]);
+            }
+        }
+        acc.iter().sum()
+    })
+}
+
+/// A complex vector per mode in single precision, real and imaginary parts apart: the block
+/// kernels' coefficients (half the bytes and twice the lanes of [`Split`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(crate) struct Split32 {
+    pub(crate) re: Vec<f32>,
+    pub(crate) im: Vec<f32>,
+}
+
+impl Split32 {
+    pub(crate) fn new(v: &Split) -> Split32 {
+        Split32 {
+            re: v.re.iter().map(|&x| x as f32).collect(),
+            im: v.im.iter().map(|&x| x as f32).collect(),
+        }
+    }
+}
+
+/// Lanes of the single-precision block loops: two AVX2 registers, two independent recursions
+/// to hide the latency of each.
+const LANES32: usize = 16;
+
+/// `e^n` of one mode, in double precision.
+fn power(re: f64, im: f64, n: usize) -> (f64, f64) {
+    let (mut pr, mut pi) = (1.0, 0.0);
+    let (mut br, mut bi) = (re, im);
+    let mut n = n;
+    while n > 0 {
+        if n & 1 == 1 {
+            (pr, pi) = (pr * br - pi * bi, pr * bi + pi * br);
+        }
+        (br, bi) = (br * br - bi * bi, 2.0 * br * bi);
+        n >>= 1;
+    }
+    (pr, pi)
+}
+
+/// A key's coefficients for the block loops: per mode `e^{lambda h}` in single precision for the
+/// steps inside a block and `e^{lambda h BLOCK}` in double for the state carried from block to
+/// block, so that rounding inside a block is never compounded over a note's life (`e` rounded to
+/// f32 would shift the slowest modes' decay by ~8 %).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(crate) struct BlockCoefficients {
+    pub(crate) e: Split32,
+    pub(crate) e_block: Split,
+    /// The rows read after every step ([`READS`]) and the inputs folded in ([`DIRECTIONS`]).
+    pub(crate) rows: [Split32; READS],
+    pub(crate) inputs: [Split32; DIRECTIONS],
+}
+
+impl BlockCoefficients {
+    pub(crate) fn new(
+        e: &Split,
+        rows: &[Split; READS],
+        inputs: &[Split; DIRECTIONS],
+    ) -> BlockCoefficients {
+        let mut e_block = Split::zeros(e.len());
+        for m in 0..e.len() {
+            (e_block.re[m], e_block.im[m]) = power(e.re[m], e.im[m], BLOCK);
+        }
+        BlockCoefficients {
+            e: Split32::new(e),
+            e_block,
+            rows: std::array::from_fn(|i| Split32::new(&rows[i])),
+            inputs: std::array::from_fn(|j| Split32::new(&inputs[j])),
+        }
+    }
+}
+
+/// `len` free steps of every mode, mode by mode (each mode's coefficients loaded once):
+/// `out[i][t] = Re(r_i e^{t+1} z)` for `t < len` in single precision, then `z <- e^len ⊙ z` in
+/// double (`e_step` is the double-precision step, for a block shorter than [`BLOCK`]).
 pub(crate) fn free_block(
     fast: bool,
-    e: &Split,
+    c: &BlockCoefficients,
+    e_step: &Split,
     z: &mut Split,
-    rows: &[Split; READS],
     out: &mut [[f64; BLOCK]; READS],
     len: usize,
 ) {
     #[cfg(target_arch = "x86_64")]
     if fast {
         // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
-        return unsafe { free_block_avx2(e, z, rows, out, len) };
+        return unsafe { free_block_avx2(c, e_step, z, out, len) };
     }
     let _ = fast;
-    free_block_with::<false>(e, z, rows, out, len)
+    free_block_with::<false>(c, e_step, z, out, len)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn free_block_avx2(
-    e: &Split,
+    c: &BlockCoefficients,
+    e_step: &Split,
     z: &mut Split,
-    rows: &[Split; READS],
     out: &mut [[f64; BLOCK]; READS],
     len: usize,
 ) {
-    free_block_with::<true>(e, z, rows, out, len)
+    free_block_with::<true>(c, e_step, z, out, len)
+}
+
+/// `a b + c` in single precision, fused with `FMA`.
+#[inline(always)]
+fn fma32<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {
+    if FMA {
+        a.mul_add(b, c)
+    } else {
+        a * b + c
+    }
 }
 
 #[inline(always)]
 fn free_block_with<const FMA: bool>(
-    e: &Split,
+    c: &BlockCoefficients,
+    e_step: &Split,
     z: &mut Split,
-    rows: &[Split; READS],
     out: &mut [[f64; BLOCK]; READS],
     len: usize,
 ) {
-    let n = e.len();
-    let mut acc = [[[0.0; LANES]; BLOCK]; READS];
-    let mut chunk = |base: usize, lanes: usize, acc: &mut [[[f64; LANES]; BLOCK]; READS]| {
-        let mut er = [0.0; LANES];
-        let mut ei = [0.0; LANES];
-        let mut zr = [0.0; LANES];
-        let mut zi = [0.0; LANES];
-        let mut rr = [[0.0; LANES]; READS];
-        let mut ri = [[0.0; LANES]; READS];
+    let n = c.e.re.len();
+    let mut acc = [[[0f32; LANES32]; BLOCK]; READS];
+    let mut base = 0;
+    while base < n {
+        let lanes = LANES32.min(n - base);
+        let mut er = [0f32; LANES32];
+        let mut ei = [0f32; LANES32];
+        let mut zr = [0f32; LANES32];
+        let mut zi = [0f32; LANES32];
+        let mut rr = [[0f32; LANES32]; READS];
+        let mut ri = [[0f32; LANES32]; READS];
         for l in 0..lanes {
             let m = base + l;
-            (er[l], ei[l], zr[l], zi[l]) = (e.re[m], e.im[m], z.re[m], z.im[m]);
+            (er[l], ei[l]) = (c.e.re[m], c.e.im[m]);
+            (zr[l], zi[l]) = (z.re[m] as f32, z.im[m] as f32);
             for i in 0..READS {
-                (rr[i][l], ri[i][l]) = (rows[i].re[m], rows[i].im[m]);
+                (rr[i][l], ri[i][l]) = (c.rows[i].re[m], c.rows[i].im[m]);
             }
         }
         for t in 0..len {
-            for l in 0..LANES {
+            for l in 0..LANES32 {
                 let (a, b) = (zr[l], zi[l]);
-                zr[l] = fma::<FMA>(er[l], a, -ei[l] * b);
-                zi[l] = fma::<FMA>(er[l], b, ei[l] * a);
+                zr[l] = fma32::<FMA>(er[l], a, -ei[l] * b);
+                zi[l] = fma32::<FMA>(er[l], b, ei[l] * a);
                 for i in 0..READS {
-                    acc[i][t][l] =
-                        fma::<FMA>(rr[i][l], zr[l], fma::<FMA>(-ri[i][l], zi[l], acc[i][t][l]));
+                    acc[i][t][l] = fma32::<FMA>(
+                        rr[i][l],
+                        zr[l],
+                        fma32::<FMA>(-ri[i][l], zi[l], acc[i][t][l]),
+                    );
                 }
             }
         }
-        for l in 0..lanes {
-            (z.re[base + l], z.im[base + l]) = (zr[l], zi[l]);
+        for m in base..base + lanes {
+            let (pr, pi) = if len == BLOCK {
+                (c.e_block.re[m], c.e_block.im[m])
+            } else {
+                power(e_step.re[m], e_step.im[m], len)
+            };
+            let (a, b) = (z.re[m], z.im[m]);
+            z.re[m] = pr * a - pi * b;
+            z.im[m] = pr * b + pi * a;
         }
-    };
-    let mut base = 0;
-    while base < n {
-        let lanes = LANES.min(n - base);
-        chunk(base, lanes, &mut acc);
         base += lanes;
     }
     for i in 0..READS {
         for t in 0..len {
-            out[i][t] = acc[i][t].iter().sum();
+            out[i][t] = acc[i][t].iter().map(|&x| f64::from(x)).sum();
         }
     }
 }
 
 /// Fold `len` steps of inputs into the modes, mode by mode: `z += sum_t e^{len-1-t} (sum_j g_j
-/// u[t][j])` — what the per-sample [`advance`] adds, by superposition.
+/// u_j(t))`, the sum formed in single precision (it starts from zero each block) and added in
+/// double — by superposition, what stepping the inputs in one at a time adds. The inputs are
+/// [`Reversed`].
 pub(crate) fn fold_block(
     fast: bool,
-    e: &Split,
+    c: &BlockCoefficients,
     z: &mut Split,
-    g: &[Split; INPUTS],
-    u: &[[f64; INPUTS]; BLOCK],
+    u: &Reversed,
     len: usize,
 ) {
     #[cfg(target_arch = "x86_64")]
     if fast {
         // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
-        return unsafe { fold_block_avx2(e, z, g, u, len) };
+        return unsafe { fold_block_avx2(c, z, u, len) };
     }
     let _ = fast;
-    fold_block_with::<false>(e, z, g, u, len)
+    fold_block_with::<false>(c, z, u, len)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn fold_block_avx2(
-    e: &Split,
-    z: &mut Split,
-    g: &[Split; INPUTS],
-    u: &[[f64; INPUTS]; BLOCK],
-    len: usize,
-) {
-    fold_block_with::<true>(e, z, g, u, len)
+unsafe fn fold_block_avx2(c: &BlockCoefficients, z: &mut Split, u: &Reversed, len: usize) {
+    fold_block_with::<true>(c, z, u, len)
 }
 
 #[inline(always)]
 fn fold_block_with<const FMA: bool>(
-    e: &Split,
+    c: &BlockCoefficients,
     z: &mut Split,
-    g: &[Split; INPUTS],
-    u: &[[f64; INPUTS]; BLOCK],
+    u: &Reversed,
     len: usize,
 ) {
-    let n = e.len();
+    let n = c.e.re.len();
+    let u32s: [[f32; DIRECTIONS]; BLOCK] =
+        std::array::from_fn(|t| std::array::from_fn(|j| u[j][BLOCK - 1 - t] as f32));
     let mut base = 0;
     while base < n {
-        let lanes = LANES.min(n - base);
-        let mut er = [0.0; LANES];
-        let mut ei = [0.0; LANES];
-        let mut gr = [[0.0; LANES]; INPUTS];
-        let mut gi = [[0.0; LANES]; INPUTS];
+        let lanes = LANES32.min(n - base);
+        let mut er = [0f32; LANES32];
+        let mut ei = [0f32; LANES32];
+        let mut gr = [[0f32; LANES32]; DIRECTIONS];
+        let mut gi = [[0f32; LANES32]; DIRECTIONS];
         for l in 0..lanes {
             let m = base + l;
-            (er[l], ei[l]) = (e.re[m], e.im[m]);
-            for j in 0..INPUTS {
-                (gr[j][l], gi[j][l]) = (g[j].re[m], g[j].im[m]);
+            (er[l], ei[l]) = (c.e.re[m], c.e.im[m]);
+            for j in 0..DIRECTIONS {
+                (gr[j][l], gi[j][l]) = (c.inputs[j].re[m], c.inputs[j].im[m]);
             }
         }
-        let (mut ar, mut ai) = ([0.0; LANES], [0.0; LANES]);
-        for ut in u.iter().take(len) {
-            for l in 0..LANES {
+        let (mut ar, mut ai) = ([0f32; LANES32], [0f32; LANES32]);
+        for ut in u32s.iter().take(len) {
+            for l in 0..LANES32 {
                 let (a, b) = (ar[l], ai[l]);
                 let (mut re, mut im) = (
-                    fma::<FMA>(er[l], a, -ei[l] * b),
-                    fma::<FMA>(er[l], b, ei[l] * a),
+                    fma32::<FMA>(er[l], a, -ei[l] * b),
+                    fma32::<FMA>(er[l], b, ei[l] * a),
                 );
-                for j in 0..INPUTS {
-                    re = fma::<FMA>(gr[j][l], ut[j], re);
-                    im = fma::<FMA>(gi[j][l], ut[j], im);
+                for j in 0..DIRECTIONS {
+                    re = fma32::<FMA>(gr[j][l], ut[j], re);
+                    im = fma32::<FMA>(gi[j][l], ut[j], im);
                 }
                 (ar[l], ai[l]) = (re, im);
             }
         }
         for l in 0..lanes {
-            z.re[base + l] += ar[l];
-            z.im[base + l] += ai[l];
+            z.re[base + l] += f64::from(ar[l]);
+            z.im[base + l] += f64::from(ai[l]);
         }
         base += lanes;
     }

@@ -3,7 +3,7 @@
 //! voice reads and drives it through — the hammer (ETDRK4 weights), the other keys' board motion
 //! at its bridge point (the coupling), the damper felt, the radiated volume velocity.
 
-use super::kernels::{Split, BLOCK, INPUTS, READS};
+use super::kernels::{BlockCoefficients, Split, Taps, BLOCK, DIRECTIONS, INPUTS, READS};
 use crate::engine::modal::{input_weights, Modal};
 use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::physics::hammer::HammerParams;
@@ -158,25 +158,21 @@ pub(crate) struct DamperKey {
 }
 
 /// `Re(r_i e^k g_j)` for `k < BLOCK`.
-fn markov_parameters(
-    e: &[c64],
-    rows: &[Split; READS],
-    inputs: &[Split; INPUTS],
-) -> Vec<[[f64; INPUTS]; READS]> {
+fn markov_parameters(e: &[c64], rows: &[Split; READS], inputs: &[Split; DIRECTIONS]) -> Box<Taps> {
     let mut power: Vec<c64> = vec![c64::new(1.0, 0.0); e.len()];
-    let mut out = Vec::with_capacity(BLOCK);
-    for _ in 0..BLOCK {
-        out.push(std::array::from_fn(|i| {
-            std::array::from_fn(|j| {
-                (0..e.len())
+    let mut out = Box::new([[[0.0; BLOCK]; DIRECTIONS]; READS]);
+    for k in 0..BLOCK {
+        for (i, row) in rows.iter().enumerate() {
+            for (j, input) in inputs.iter().enumerate() {
+                out[i][j][k] = (0..e.len())
                     .map(|m| {
-                        let r = c64::new(rows[i].re[m], rows[i].im[m]);
-                        let g = c64::new(inputs[j].re[m], inputs[j].im[m]);
+                        let r = c64::new(row.re[m], row.im[m]);
+                        let g = c64::new(input.re[m], input.im[m]);
                         (r * power[m] * g).re
                     })
-                    .sum()
-            })
-        }));
+                    .sum();
+            }
+        }
         for (p, e) in power.iter_mut().zip(e) {
             *p *= e;
         }
@@ -216,10 +212,18 @@ pub struct ExactKey {
     /// Per direction, the modes' static response to a unit `D` held (a key joining a moving
     /// board starts on it, not jolted by its contact springs).
     pub(crate) follow: [Split; 3],
-    /// What a unit of each coupling input entering at one step adds to each read `k` steps
-    /// later, `Re(r_i e^{lambda h k} g_j)` for `k < BLOCK` (the key's Markov parameters: a block
+    /// The coupling over a block with one input per direction: the ramp's two inputs
+    /// `z' = e z + g_v D_n + g_s (D_n - D_{n-1})/h` become one, `w' = e w + beta D_n`, in the
+    /// shifted state `w_n = z_n + alpha D_{n-1}` with `alpha = -g_s/(h e)` and
+    /// `beta = g_v + g_s/h + alpha` (the reads corrected by `-Re(r_i alpha) D_n`).
+    pub(crate) block_alpha: [Split; DIRECTIONS],
+    pub(crate) block_alpha_read: [[f64; DIRECTIONS]; READS],
+    /// The block loops' coefficients: `e`, the reads and the inputs `beta_d`.
+    pub(crate) block: BlockCoefficients,
+    /// What a unit of `D_d` entering at one step adds to each read `k` steps later,
+    /// `Re(r_i e^{lambda h k} beta_d)` for `k < BLOCK` (the key's Markov parameters: a block
     /// advanced freely, mode by mode, gets its coupling back by superposition).
-    pub(crate) markov: Vec<[[f64; INPUTS]; READS]>,
+    pub(crate) markov: Box<Taps>,
     pub(crate) damper: Option<DamperKey>,
     /// Per mode, its mechanical energy per `|z|^2` (J, cycle-averaged).
     pub(crate) energy: Vec<f64>,
@@ -331,7 +335,22 @@ impl ExactKey {
         let coupling = std::array::from_fn(|j| Split::new(&coupling_inputs[j % 3][j / 3]));
         let follow = std::array::from_fn(|d| Split::new(&coupling_inputs[d][2]));
         let n_s = ns as f64;
-        let markov = markov_parameters(&modal.ef, &reads, &coupling);
+        let alpha: [Vec<c64>; DIRECTIONS] = std::array::from_fn(|d| {
+            (0..modal.ef.len())
+                .map(|m| -coupling_inputs[d][1][m] / (h * modal.ef[m]))
+                .collect()
+        });
+        let beta: [Vec<c64>; DIRECTIONS] = std::array::from_fn(|d| {
+            (0..modal.ef.len())
+                .map(|m| coupling_inputs[d][0][m] + coupling_inputs[d][1][m] / h + alpha[d][m])
+                .collect()
+        });
+        let block_beta = beta.map(|b| Split::new(&b));
+        let block_alpha = alpha.map(|a| Split::new(&a));
+        let block_alpha_read =
+            std::array::from_fn(|i| std::array::from_fn(|d| reads[i].read(&block_alpha[d])));
+        let markov = markov_parameters(&modal.ef, &reads, &block_beta);
+        let block = BlockCoefficients::new(&Split::new(&modal.ef), &reads, &block_beta);
         let damper = spec.damper.map(|damper| {
             let x = damper.position_ratio * s0.speaking_length_m;
             let mut rows = Vec::new();
@@ -409,6 +428,9 @@ impl ExactKey {
             feed_k: std::array::from_fn(|d| n_s * spec.contact.stiffness_n_m[d]),
             feed_c: std::array::from_fn(|d| n_s * spec.contact.damping_n_s_m[d]),
             follow,
+            block,
+            block_alpha,
+            block_alpha_read,
             markov,
             damper,
             energy,
@@ -426,8 +448,10 @@ impl ExactKey {
         let split = |s: &Split| 16 * s.len();
         let n = self.n_modes();
         let damper = self.damper.as_ref().map_or(0, |d| 3 * d.channels * 16 * n);
-        (2 + self.n_strings * (1 + 1 + 3 + 3) + 3 + READS + INPUTS + 3) * split(&self.ef)
-            + 8 * BLOCK * READS * INPUTS
+        (2 + self.n_strings * (1 + 1 + 3 + 3) + 3 + READS + INPUTS + 3 + DIRECTIONS + 1)
+            * split(&self.ef)
+            + (1 + READS + DIRECTIONS) * split(&self.ef) / 2
+            + 8 * BLOCK * READS * DIRECTIONS
             + 8 * n
             + damper
     }

@@ -29,6 +29,7 @@
 //! coupling between keys), [`pool`] (the voice pool), [`kernels`] (the loops over modes).
 
 mod board;
+mod bytes;
 mod kernels;
 mod key;
 mod pool;

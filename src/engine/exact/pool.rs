@@ -3,7 +3,7 @@
 //! fade, strike in the current motion, dampers, silent voices retired, runaways reset).
 
 use super::board::BoardCoupling;
-use super::kernels::{fold_block, free_block, Split, BLOCK, INPUTS, READS};
+use super::kernels::{convolve, fold_block, free_block, Split, BLOCK, DIRECTIONS};
 use super::key::ExactKey;
 use super::voice::Voice;
 use crate::engine::kernels::has_avx2_fma;
@@ -85,10 +85,12 @@ impl ExactPool {
     }
 
     /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity after each,
-    /// in blocks of up to [`BLOCK`] steps ([`ExactPool::block`]).
-    pub fn run(&mut self, volume_velocity: &mut [f64], _pair: Option<&dyn Pair>) {
+    /// in blocks of up to [`BLOCK`] steps ([`ExactPool::block`]); the voices' block-long passes
+    /// split over two cores through `pair` (the same result bit for bit: each voice's pass is its
+    /// own).
+    pub fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn Pair>) {
         for chunk in volume_velocity.chunks_mut(BLOCK) {
-            self.block(chunk);
+            self.block(chunk, pair);
         }
     }
 
@@ -97,42 +99,34 @@ impl ExactPool {
     /// damper or fade) is advanced mode by mode over the whole block — each mode's coefficients
     /// loaded once, not once a step — and gets the coupling back by superposition: its reads
     /// from its own Markov parameters step by step (the board needs them), its modes from the
-    /// inputs folded in at the end. The others step one sample at a time, as in `step`.
-    fn block(&mut self, out: &mut [f64]) {
+    /// inputs folded in at the end — one input per direction, in the shifted state
+    /// [`ExactKey::block_alpha`] describes. The others step one sample at a time, as in `step`.
+    fn block(&mut self, out: &mut [f64], pair: Option<&dyn Pair>) {
         let len = out.len();
+        let fast = self.fast_path;
         for v in self.voices.iter_mut() {
-            v.in_block = false;
-            let (true, Some(key)) = (v.state.active, v.state.key) else {
-                continue;
+            let free = match (v.state.active, v.state.key) {
+                (true, Some(key)) => v.is_free(&self.keys[key]),
+                _ => false,
             };
-            let key = &self.keys[key];
-            if v.is_free(key) {
-                free_block(
-                    self.fast_path,
-                    &key.ef,
-                    &mut v.z,
-                    &key.reads,
-                    &mut v.block_read,
-                    len,
-                );
-                v.in_block = true;
-            }
+            v.in_block = free;
         }
+        on_both_cores(pair, &self.keys, &mut self.voices, &|key, v| {
+            for (d, alpha) in key.block_alpha.iter().enumerate() {
+                alpha.add_to(&mut v.z, v.state.coupling * v.other_before_m[d]);
+            }
+            free_block(fast, &key.block, &key.ef, &mut v.z, &mut v.block_read, len);
+        });
         for (t, out) in out.iter_mut().enumerate() {
             *out = self.sample(t);
         }
-        for v in self.voices.iter_mut() {
-            if let (true, Some(key)) = (v.in_block, v.state.key) {
-                let key = &self.keys[key];
-                fold_block(
-                    self.fast_path,
-                    &key.ef,
-                    &mut v.z,
-                    &key.coupling,
-                    &v.block_inputs,
-                    len,
-                );
+        on_both_cores(pair, &self.keys, &mut self.voices, &|key, v| {
+            fold_block(fast, &key.block, &mut v.z, &v.block_inputs, len);
+            for (d, alpha) in key.block_alpha.iter().enumerate() {
+                alpha.add_to(&mut v.z, -v.block_inputs[d][BLOCK - len]);
             }
+        });
+        for v in self.voices.iter_mut() {
             v.in_block = false;
         }
     }
@@ -151,13 +145,14 @@ impl ExactPool {
             let before = v.force_n;
             if v.in_block {
                 let u = v.inputs(key.h);
-                v.block_inputs[t] = u;
-                let mut read = [0.0; READS];
+                for d in 0..DIRECTIONS {
+                    v.block_inputs[d][BLOCK - 1 - t] = u[d];
+                }
+                let mut read = convolve(self.fast_path, &key.markov, &v.block_inputs, t);
                 for (i, r) in read.iter_mut().enumerate() {
-                    *r = v.block_read[i][t];
-                    for j in 0..=t {
-                        let (m, u) = (&key.markov[t - j][i], &v.block_inputs[j]);
-                        *r += (0..INPUTS).map(|q| m[q] * u[q]).sum::<f64>();
+                    *r += v.block_read[i][t];
+                    for d in 0..DIRECTIONS {
+                        *r -= key.block_alpha_read[i][d] * u[d];
                     }
                 }
                 v.finish(key, &u, read);
@@ -165,8 +160,9 @@ impl ExactPool {
                 faded |= fade_step(&mut v.state, self.fade_steps);
                 v.step(key, &mut self.scratch, self.fast_path);
             }
-            self.board
-                .step_own(&mut v.own_board, point, before, v.force_n);
+            v.own_at_m =
+                self.board
+                    .step_own(self.fast_path, &mut v.own_board, point, before, v.force_n);
             total += v.state.coupling * v.read[0];
         }
         self.board.step_shared();
@@ -174,8 +170,9 @@ impl ExactPool {
             let (true, Some(key)) = (v.state.active, v.state.key) else {
                 continue;
             };
+            let shared = self.board.shared_at(self.fast_path, &self.points[key]);
             v.other_before_m = v.other_m;
-            v.other_m = self.board.others_at(Some(&v.own_board), &self.points[key]);
+            v.other_m = std::array::from_fn(|d| shared[d] - v.own_at_m[d]);
         }
         self.volume_velocity_m3_s = total;
         if faded {
@@ -301,6 +298,43 @@ impl ExactPool {
     }
 }
 
+/// `job` on every voice in a block ([`Voice::in_block`]), the voices split in two of about equal
+/// work (modes), one part on the other core through `pair` (all here without one, or when it does
+/// not start).
+fn on_both_cores(
+    pair: Option<&dyn Pair>,
+    keys: &[ExactKey],
+    voices: &mut [Voice],
+    job: &(dyn Fn(&ExactKey, &mut Voice) + Sync),
+) {
+    let work = |v: &Voice| match (v.in_block, v.state.key) {
+        (true, Some(key)) => keys[key].n_modes(),
+        _ => 0,
+    };
+    let run = |part: &mut [Voice]| {
+        for v in part.iter_mut() {
+            if let (true, Some(key)) = (v.in_block, v.state.key) {
+                job(&keys[key], v);
+            }
+        }
+    };
+    if let Some(pair) = pair {
+        let total: usize = voices.iter().map(work).sum();
+        let (mut at, mut sum) = (0, 0);
+        while at < voices.len() && 2 * sum < total {
+            sum += work(&voices[at]);
+            at += 1;
+        }
+        if 0 < sum && sum < total {
+            let (mine, theirs) = voices.split_at_mut(at);
+            if pair.join(&mut || run(theirs), &mut || run(mine)) {
+                return;
+            }
+        }
+    }
+    run(voices);
+}
+
 /// The pool policy's hooks on the exact engine's voices.
 impl Policy for ExactPool {
     fn n_voices(&self) -> usize {
@@ -352,7 +386,7 @@ impl Policy for ExactPool {
             return;
         };
         let (point, key) = (&self.points[key], &self.keys[key]);
-        let now = self.board.others_at(None, point);
+        let now = self.board.shared_at(self.fast_path, point);
         for (d, follow) in key.follow.iter().enumerate() {
             follow.add_to(&mut v.z, now[d] - v.other_m[d]);
         }
@@ -417,7 +451,8 @@ mod tests {
     #[test]
     fn a_block_advanced_mode_by_mode_equals_its_steps() {
         // C2 struck, C3 held (free after the first block), E3 struck with its damper down:
-        // 0.1 s by blocks of 64 against 0.1 s of single steps.
+        // 0.5 s by blocks of 64 (single precision inside each, double from block to block)
+        // against 0.5 s of single steps in double precision.
         let scaling = Scaling::resolve("grand").unwrap();
         let rate = scaling.base.output_rate_hz();
         let specs: Vec<_> = ["C2", "C3", "E3"]
@@ -442,9 +477,17 @@ mod tests {
         blocks.strike_voice(2, strike);
         blocks.set_damper_voice(2, true);
         let mut steps = blocks.clone();
-        let n = (0.1 * rate) as usize;
+        let n = (0.5 * rate) as usize;
         let mut a = vec![0.0; n];
+        let mut ones = blocks.clone();
         blocks.run(&mut a, None);
+        let c: Vec<f64> = (0..n)
+            .map(|_| {
+                let mut x = [0.0];
+                ones.run(&mut x, None);
+                x[0]
+            })
+            .collect();
         let b: Vec<f64> = (0..n)
             .map(|_| {
                 steps.step();
@@ -457,6 +500,13 @@ mod tests {
             .zip(&b)
             .fold(0f64, |m, (x, y)| m.max((x - y).abs()))
             / peak;
+        let ones_worst = c
+            .iter()
+            .zip(&b)
+            .fold(0f64, |m, (x, y)| m.max((x - y).abs()))
+            / peak;
+        println!("blocks of one step vs single steps, 0.5 s: volume velocity {ones_worst:.1e} of its peak (f32 rounding of each block's inputs, compounded over more blocks)");
+        assert!(ones_worst < 1e-4, "{ones_worst:e}");
         let state = |p: &ExactPool| p.linear_state().x;
         let (sa, sb) = (state(&blocks), state(&steps));
         let scale = sb.iter().fold(0f64, |m, x| m.max(x.abs()));
@@ -466,10 +516,11 @@ mod tests {
             .fold(0f64, |m, (x, y)| m.max((x - y).abs()))
             / scale;
         println!(
-            "blocks of {BLOCK} mode by mode vs single steps, 0.1 s: volume velocity {worst:.1e} of its peak, state {state_worst:.1e}"
+            "blocks of {BLOCK} mode by mode vs single steps, 0.5 s: volume velocity {worst:.1e} of its peak, state {state_worst:.1e}"
         );
+        // f32 inside a block: ~1e-7 per step, not compounded from block to block.
         assert!(
-            worst < 1e-9 && state_worst < 1e-9,
+            worst < 1e-5 && state_worst < 1e-5,
             "{worst:e} {state_worst:e}"
         );
     }

@@ -1,7 +1,9 @@
 //! One sounding key of the exact engine: its modal state, its hammer, the coupling input it
 //! receives and the damper force it feels, and the step that advances them.
 
-use super::kernels::{advance, propagate, stage, Split, BLOCK, INPUTS, READS};
+use super::kernels::{
+    advance, propagate, stage, Reversed, Split, BLOCK, DIRECTIONS, INPUTS, READS,
+};
 use super::key::{ExactKey, DAMPER_CHANNELS};
 use crate::engine::pool::VoiceState;
 use crate::engine::spec::MAX_STRINGS;
@@ -25,13 +27,16 @@ pub(crate) struct Voice {
     /// This key's part of the shared board's motion as the board coupling integrates it
     /// ([`super::board`]).
     pub(crate) own_board: Split,
+    /// The own part's displacement at the bridge point after the last step (m, per direction;
+    /// taken from the shared part's to leave the other keys').
+    pub(crate) own_at_m: [f64; 3],
     /// What the last step read: volume velocity (m^3/s), total contact force T, L, P (N).
     pub(crate) read: [f64; READS],
     /// Over a block advanced mode by mode ([`super::pool`]): whether this voice is, what its
-    /// modes read with no input, and the coupling inputs of each step.
+    /// modes read with no input, and the coupling input of each step (`c D_d`, m, [`Reversed`]).
     pub(crate) in_block: bool,
     pub(crate) block_read: [[f64; BLOCK]; READS],
-    pub(crate) block_inputs: [[f64; INPUTS]; BLOCK],
+    pub(crate) block_inputs: Reversed,
 }
 
 impl Voice {
@@ -46,10 +51,11 @@ impl Voice {
             force_n: [0.0; 3],
             damper_n: [0.0; DAMPER_CHANNELS],
             own_board: Split::zeros(board_modes),
+            own_at_m: [0.0; 3],
             read: [0.0; READS],
             in_block: false,
             block_read: [[0.0; BLOCK]; READS],
-            block_inputs: [[0.0; INPUTS]; BLOCK],
+            block_inputs: [[0.0; BLOCK]; DIRECTIONS],
         }
     }
 
@@ -87,6 +93,7 @@ impl Voice {
     pub(crate) fn rest(&mut self) {
         self.z.fill_zero();
         self.own_board.fill_zero();
+        self.own_at_m = [0.0; 3];
         self.other_m = [0.0; 3];
         self.other_before_m = [0.0; 3];
         self.force_n = [0.0; 3];
