@@ -182,15 +182,17 @@ fn checked(job: &mut dyn FnMut()) {
 
 #[test]
 fn the_callback_on_two_cores_never_allocates() {
-    never_allocates::<EtdPool>("live pool");
+    never_allocates::<EtdPool>("live pool", 100);
 }
 
 #[test]
 fn the_callback_on_two_cores_never_allocates_on_the_exact_pool() {
-    never_allocates::<ExactPool>("exact pool");
+    // One split a block, and only while two voices sound (the script's last 30 blocks are one).
+    never_allocates::<ExactPool>("exact pool", 50);
 }
 
-fn never_allocates<E: VoicePool>(name: &str) {
+/// `min_jobs`: the helper's jobs at least (each under the checker).
+fn never_allocates<E: VoicePool>(name: &str, min_jobs: u64) {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     HELPER_ALLOCATIONS.store(0, Ordering::Relaxed);
     HELPER_JOBS.store(0, Ordering::Relaxed);
@@ -202,10 +204,10 @@ fn never_allocates<E: VoicePool>(name: &str) {
     }
     let mut out = vec![0f32; 64];
     reset_violation_count();
-    // At least 400 blocks, and on until the helper has taken 100 jobs (how often it is on time
+    // At least 400 blocks, and on until the helper has taken `min_jobs` jobs (how often it is on time
     // depends on what else the machine runs; the checker's verdict does not).
     let mut blocks = 0;
-    while blocks < 400 || (HELPER_JOBS.load(Ordering::Relaxed) < 100 && blocks < 40_000) {
+    while blocks < 400 || (HELPER_JOBS.load(Ordering::Relaxed) < min_jobs && blocks < 40_000) {
         assert_no_alloc(|| synth.process(&mut out, 1));
         blocks += 1;
     }
@@ -226,7 +228,7 @@ fn never_allocates<E: VoicePool>(name: &str) {
     assert_eq!(helper, 0, "the helper's half allocated");
     // Every split ran the helper's half under the checker.
     assert!(
-        jobs >= 100 && jobs == splits,
+        jobs >= min_jobs && jobs == splits,
         "the work was not split: {jobs} jobs"
     );
 }
@@ -270,7 +272,7 @@ fn interleave<E: VoicePool>(name: &str) {
         let mut out = vec![0.0; 64];
         let mut all = Vec::new();
         let mut script = script().into_iter().peekable();
-        for block in 0..100u64 {
+        for block in 0..200u64 {
             while let Some((_, event)) = script.next_if(|(f, _)| *f < (block + 1) * 64) {
                 piano.apply(event);
             }

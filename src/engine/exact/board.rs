@@ -37,11 +37,15 @@ pub(crate) struct BoardCoupling {
     to: Split,
     lambda: Vec<c64>,
     omega2: Vec<f64>,
-    /// Every key's part together, and the modal force of every key at the start of the step and
-    /// (accumulated as the keys step) at its end.
+}
+
+/// The shared part's state: every key's part together, and the modal force of every key at the
+/// start of the step. Owned by the thread that steps the pool; the pool keeps a replica per half
+/// of its voices, stepped alike.
+#[derive(Debug, Clone)]
+pub(crate) struct SharedPart {
     shared: Split,
     force_before: Vec<f64>,
-    force_now: Vec<f64>,
 }
 
 impl BoardCoupling {
@@ -73,7 +77,6 @@ impl BoardCoupling {
             v.resize(padded, c64::new(0.0, 0.0));
         }
         omega2.resize(padded, 0.0);
-        let m = padded;
         BoardCoupling {
             modes,
             e: Split::new(&e),
@@ -81,9 +84,14 @@ impl BoardCoupling {
             to: Split::new(&to),
             lambda,
             omega2,
-            shared: Split::zeros(m),
-            force_before: vec![0.0; m],
-            force_now: vec![0.0; m],
+        }
+    }
+
+    /// The shared part at rest.
+    pub(crate) fn part(&self) -> SharedPart {
+        SharedPart {
+            shared: Split::zeros(self.e.len()),
+            force_before: vec![0.0; self.e.len()],
         }
     }
 
@@ -102,45 +110,47 @@ impl BoardCoupling {
     }
 
     /// Advance a key's own part over the step in which its total contact force went from
-    /// `before` to `after` (N, per direction, at its point `phi`), add that force to the step's
-    /// sum, and return the own part's displacement at the point after the step (m, per
+    /// `before` to `after` (N, per direction, at its point `phi`), add that force to `sum` (the
+    /// step's modal force), and return the own part's displacement at the point after the step (m, per
     /// direction); with AVX2 + FMA where `fast`.
     pub(crate) fn step_own(
-        &mut self,
+        &self,
         fast: bool,
         own: &mut Split,
         phi: &[Vec<f64>; 3],
-        before: [f64; 3],
-        after: [f64; 3],
+        (before, after): ([f64; 3], [f64; 3]),
+        sum: &mut [f64],
     ) -> [f64; 3] {
         #[cfg(target_arch = "x86_64")]
         if fast {
             // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
-            return unsafe { self.step_own_avx2(own, phi, before, after) };
+            return unsafe { self.step_own_avx2(own, phi, before, after, sum) };
         }
         let _ = fast;
-        self.step_own_with::<false>(own, phi, before, after)
+        self.step_own_with::<false>(own, phi, before, after, sum)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     unsafe fn step_own_avx2(
-        &mut self,
+        &self,
         own: &mut Split,
         phi: &[Vec<f64>; 3],
         before: [f64; 3],
         after: [f64; 3],
+        sum: &mut [f64],
     ) -> [f64; 3] {
-        self.step_own_with::<true>(own, phi, before, after)
+        self.step_own_with::<true>(own, phi, before, after, sum)
     }
 
     #[inline(always)]
     fn step_own_with<const FMA: bool>(
-        &mut self,
+        &self,
         own: &mut Split,
         phi: &[Vec<f64>; 3],
         before: [f64; 3],
         after: [f64; 3],
+        sum: &mut [f64],
     ) -> [f64; 3] {
         let n = self.e.len();
         let (er, ei) = (&self.e.re[..n], &self.e.im[..n]);
@@ -152,7 +162,7 @@ impl BoardCoupling {
         );
         let (or, oi) = (&mut own.re[..n], &mut own.im[..n]);
         let (p0, p1, p2) = (&phi[0][..n], &phi[1][..n], &phi[2][..n]);
-        let sum = &mut self.force_now[..n];
+        let sum = &mut sum[..n];
         let mut at = [[0.0; LANES]; 3];
         // The modes are padded to whole lanes ([`BoardCoupling::new`]); each chunk is loaded into
         // registers (local arrays), so that the lanes vectorise.
@@ -197,41 +207,42 @@ impl BoardCoupling {
         at.map(|a| a.iter().sum())
     }
 
-    /// Advance the shared part over the step once every key has added its force.
-    pub(crate) fn step_shared(&mut self) {
-        let (e, from, to, g) = (&self.e, &self.from, &self.to, &mut self.shared);
+    /// Advance the shared part over the step in which every key's modal force together went
+    /// from the part's last to `force_now`.
+    pub(crate) fn step_shared(&self, part: &mut SharedPart, force_now: &[f64]) {
+        let (e, from, to) = (&self.e, &self.from, &self.to);
+        let g = &mut part.shared;
         for m in 0..e.len() {
-            let (f0, f1) = (self.force_before[m], self.force_now[m]);
+            let (f0, f1) = (part.force_before[m], force_now[m]);
             let (a, b) = (g.re[m], g.im[m]);
             g.re[m] = e.re[m] * a - e.im[m] * b + from.re[m] * f0 + to.re[m] * f1;
             g.im[m] = e.re[m] * b + e.im[m] * a + from.im[m] * f0 + to.im[m] * f1;
         }
-        std::mem::swap(&mut self.force_before, &mut self.force_now);
-        self.force_now.iter_mut().for_each(|f| *f = 0.0);
+        part.force_before.copy_from_slice(&force_now[..e.len()]);
     }
 
     /// The shared part's displacement at a key's point `phi` (m, per direction: every key's,
     /// its own included); with AVX2 + FMA where `fast`.
-    pub(crate) fn shared_at(&self, fast: bool, phi: &[Vec<f64>; 3]) -> [f64; 3] {
+    pub(crate) fn shared_at(&self, part: &SharedPart, fast: bool, phi: &[Vec<f64>; 3]) -> [f64; 3] {
         #[cfg(target_arch = "x86_64")]
         if fast {
             // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
-            return unsafe { self.shared_at_avx2(phi) };
+            return unsafe { self.shared_at_avx2(part, phi) };
         }
         let _ = fast;
-        self.shared_at_with::<false>(phi)
+        self.shared_at_with::<false>(part, phi)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn shared_at_avx2(&self, phi: &[Vec<f64>; 3]) -> [f64; 3] {
-        self.shared_at_with::<true>(phi)
+    unsafe fn shared_at_avx2(&self, part: &SharedPart, phi: &[Vec<f64>; 3]) -> [f64; 3] {
+        self.shared_at_with::<true>(part, phi)
     }
 
     #[inline(always)]
-    fn shared_at_with<const FMA: bool>(&self, phi: &[Vec<f64>; 3]) -> [f64; 3] {
+    fn shared_at_with<const FMA: bool>(&self, part: &SharedPart, phi: &[Vec<f64>; 3]) -> [f64; 3] {
         let n = self.e.len();
-        let s = &self.shared.re[..n];
+        let s = &part.shared.re[..n];
         let (p0, p1, p2) = (&phi[0][..n], &phi[1][..n], &phi[2][..n]);
         let mut at = [[0.0; LANES]; 3];
         for base in (0..n).step_by(LANES) {
@@ -249,30 +260,45 @@ impl BoardCoupling {
 
     /// A key joins (`sign` 1) or leaves (`sign` -1) the shared part with its own part and its
     /// last force.
-    pub(crate) fn join(&mut self, own: &Split, phi: &[Vec<f64>; 3], force: [f64; 3], sign: f64) {
+    pub(crate) fn join(
+        &self,
+        part: &mut SharedPart,
+        own: &Split,
+        phi: &[Vec<f64>; 3],
+        force: [f64; 3],
+        sign: f64,
+    ) {
         for m in 0..self.e.len() {
-            self.shared.re[m] += sign * own.re[m];
-            self.shared.im[m] += sign * own.im[m];
-            self.force_before[m] +=
+            part.shared.re[m] += sign * own.re[m];
+            part.shared.im[m] += sign * own.im[m];
+            part.force_before[m] +=
                 sign * (phi[0][m] * force[0] + phi[1][m] * force[1] + phi[2][m] * force[2]);
         }
     }
 
     /// The shared part's energy as a board's (J): a measure of its size.
-    pub(crate) fn energy_j(&self) -> f64 {
+    pub(crate) fn energy_j(&self, part: &SharedPart) -> f64 {
         (0..self.e.len())
             .map(|m| {
-                let z = c64::new(self.shared.re[m], self.shared.im[m]);
+                let z = c64::new(part.shared.re[m], part.shared.im[m]);
                 let (q, v) = (2.0 * z.re, 2.0 * (self.lambda[m] * z).re);
                 0.5 * (v * v + self.omega2[m] * q * q)
             })
             .sum()
     }
+}
 
+impl SharedPart {
     pub(crate) fn rest(&mut self) {
         self.shared.fill_zero();
         self.force_before.iter_mut().for_each(|f| *f = 0.0);
-        self.force_now.iter_mut().for_each(|f| *f = 0.0);
+    }
+
+    /// Take `other`'s values (no allocation).
+    pub(crate) fn copy_from(&mut self, other: &SharedPart) {
+        self.shared.re.copy_from_slice(&other.shared.re);
+        self.shared.im.copy_from_slice(&other.shared.im);
+        self.force_before.copy_from_slice(&other.force_before);
     }
 
     /// The shared part and the force at the start of the step, as plain numbers (the linear
@@ -285,7 +311,7 @@ impl BoardCoupling {
     }
 
     pub(crate) fn set_state(&mut self, x: &[f64]) {
-        let m = self.e.len();
+        let m = self.force_before.len();
         self.shared.re.copy_from_slice(&x[..m]);
         self.shared.im.copy_from_slice(&x[m..2 * m]);
         self.force_before.copy_from_slice(&x[2 * m..3 * m]);

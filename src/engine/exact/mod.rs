@@ -26,10 +26,13 @@
 //! ([`key`]).
 //!
 //! Parts: [`key`] (one key's coefficients), [`voice`] (a voice's state and step), [`board`] (the
-//! coupling between keys), [`pool`] (the voice pool), [`kernels`] (the loops over modes).
+//! coupling between keys), [`pool`] (the voice pool), [`halves`] (a block of the pool in two
+//! halves, on one core or two), [`kernels`] (the loops over modes), [`bytes`] (a key's
+//! coefficients as bytes and back, to be kept between runs).
 
 mod board;
 mod bytes;
+mod halves;
 mod kernels;
 mod key;
 mod pool;

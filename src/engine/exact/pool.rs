@@ -3,13 +3,16 @@
 //! fade, strike in the current motion, dampers, silent voices retired, runaways reset).
 
 use super::board::BoardCoupling;
-use super::kernels::{convolve, fold_block, free_block, Split, BLOCK, DIRECTIONS};
+use super::halves::{run_alone, run_half, Context, Exchange, Half};
+use super::kernels::BLOCK;
 use super::key::ExactKey;
 use super::voice::Voice;
 use crate::engine::kernels::has_avx2_fma;
-use crate::engine::pool::{fade_step, Policy, VoiceState};
+use crate::engine::pool::{Policy, VoiceState};
 use crate::engine::spec::{BuildError, LinearState, Observation, UnisonSpec, STEAL_FADE_S};
 use crate::engine::Pair;
+use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
+use std::sync::atomic::Ordering;
 
 /// Voices of up to 88 keys on one shared soundboard, each key integrated exactly in its coupled
 /// modes, the keys coupled through the board ([`super::board`]). Stepped by the thread that owns it.
@@ -21,8 +24,10 @@ pub struct ExactPool {
     voices: Vec<Voice>,
     voice_of_key: Vec<Option<usize>>,
     board: BoardCoupling,
-    /// ETDRK4's stage states, sized for the largest key.
-    scratch: [Split; 3],
+    /// Each half's working values and replica of the board's shared part (half 0's is the
+    /// pool's between blocks), and what the halves hand each other on two cores.
+    halves: [Half; 2],
+    exchange: Exchange,
     h: f64,
     fade_steps: u32,
     fast_path: bool,
@@ -62,7 +67,8 @@ impl ExactPool {
             voice_of_key: vec![None; keys.len()],
             voices: vec![Voice::new(modes, board.modes()); voices],
             keys,
-            scratch: std::array::from_fn(|_| Split::zeros(modes)),
+            halves: [Half::new(modes, &board), Half::new(modes, &board)],
+            exchange: Exchange::new(board.modes()),
             board,
             h,
             fade_steps: ((STEAL_FADE_S / h).round() as u32).max(1),
@@ -76,21 +82,55 @@ impl ExactPool {
     }
 
     /// One step of every active voice, each one sample at a time ([`Voice::step`]), then of the
-    /// board coupling ([`ExactPool::sample`]).
+    /// board coupling.
     pub fn step(&mut self) {
         for v in self.voices.iter_mut() {
             v.in_block = false;
         }
-        self.sample(0);
+        let mut out = [0.0];
+        let cx = Context {
+            keys: &self.keys,
+            points: &self.points,
+            board: &self.board,
+            fade_steps: self.fade_steps,
+            fast: self.fast_path,
+        };
+        run_alone(
+            &cx,
+            [&mut self.voices, &mut []],
+            &mut self.halves,
+            &mut out,
+            false,
+        );
+        self.volume_velocity_m3_s = out[0];
+        self.finish_fades();
     }
 
     /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity after each,
-    /// in blocks of up to [`BLOCK`] steps ([`ExactPool::block`]); the voices' block-long passes
-    /// split over two cores through `pair` (the same result bit for bit: each voice's pass is its
-    /// own).
+    /// in blocks of up to [`BLOCK`] steps ([`ExactPool::block`]) that end where a stolen voice's
+    /// fade does (so that its next key starts between blocks); the voices split in two halves
+    /// over two cores through `pair` (the same result bit for bit: [`super::halves`]).
     pub fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn Pair>) {
-        for chunk in volume_velocity.chunks_mut(BLOCK) {
-            self.block(chunk, pair);
+        let mut done = 0;
+        while done < volume_velocity.len() {
+            let fade = self
+                .voices
+                .iter()
+                .filter(|v| v.state.active && v.state.fade_left > 0)
+                .map(|v| v.state.fade_left as usize)
+                .min()
+                .unwrap_or(BLOCK);
+            let n = (volume_velocity.len() - done).min(BLOCK).min(fade);
+            self.block(&mut volume_velocity[done..done + n], pair);
+            self.finish_fades();
+            done += n;
+        }
+    }
+
+    /// Every voice whose fade has ended takes its next key.
+    fn finish_fades(&mut self) {
+        for k in 0..self.voices.len() {
+            self.complete_fade(k);
         }
     }
 
@@ -103,84 +143,77 @@ impl ExactPool {
     /// [`ExactKey::block_alpha`] describes. The others step one sample at a time, as in `step`.
     fn block(&mut self, out: &mut [f64], pair: Option<&dyn Pair>) {
         let len = out.len();
-        let fast = self.fast_path;
-        for v in self.voices.iter_mut() {
-            let free = match (v.state.active, v.state.key) {
-                (true, Some(key)) => v.is_free(&self.keys[key]),
-                _ => false,
-            };
-            v.in_block = free;
-        }
-        on_both_cores(pair, &self.keys, &mut self.voices, &|key, v| {
-            for (d, alpha) in key.block_alpha.iter().enumerate() {
-                alpha.add_to(&mut v.z, v.state.coupling * v.other_before_m[d]);
-            }
-            free_block(fast, &key.block, &key.ef, &mut v.z, &mut v.block_read, len);
-        });
-        for (t, out) in out.iter_mut().enumerate() {
-            *out = self.sample(t);
-        }
-        on_both_cores(pair, &self.keys, &mut self.voices, &|key, v| {
-            fold_block(fast, &key.block, &mut v.z, &v.block_inputs, len);
-            for (d, alpha) in key.block_alpha.iter().enumerate() {
-                alpha.add_to(&mut v.z, -v.block_inputs[d][BLOCK - len]);
-            }
-        });
+        let mut work = [0usize; 2];
+        let mut total = 0;
         for v in self.voices.iter_mut() {
             v.in_block = false;
+            if let (true, Some(key)) = (v.state.active, v.state.key) {
+                let key = &self.keys[key];
+                v.in_block = v.is_free(key);
+                // A voice stepped sample by sample costs about three in the block.
+                total += key.n_modes() * if v.in_block { 1 } else { 3 };
+            }
         }
-    }
-
-    /// Step `t` of a block for every active voice — a voice in the block from its free reads and
-    /// its Markov parameters, any other by [`Voice::step`] — then the board coupling; fades move,
-    /// and a voice whose fade has ended takes its next key. Returns the board's volume velocity.
-    fn sample(&mut self, t: usize) -> f64 {
-        let mut total = 0.0;
-        let mut faded = false;
-        for v in self.voices.iter_mut() {
-            let (true, Some(key)) = (v.state.active, v.state.key) else {
-                continue;
-            };
-            let (point, key) = (&self.points[key], &self.keys[key]);
-            let before = v.force_n;
-            if v.in_block {
-                let u = v.inputs(key.h);
-                for d in 0..DIRECTIONS {
-                    v.block_inputs[d][BLOCK - 1 - t] = u[d];
-                }
-                let mut read = convolve(self.fast_path, &key.markov, &v.block_inputs, t);
-                for (i, r) in read.iter_mut().enumerate() {
-                    *r += v.block_read[i][t];
-                    for d in 0..DIRECTIONS {
-                        *r -= key.block_alpha_read[i][d] * u[d];
+        // Two halves of about equal work, in voice order.
+        let mut at = 0;
+        for v in &self.voices {
+            if 2 * work[0] >= total {
+                break;
+            }
+            if let (true, Some(key)) = (v.state.active, v.state.key) {
+                work[0] += self.keys[key].n_modes() * if v.in_block { 1 } else { 3 };
+            }
+            at += 1;
+        }
+        work[1] = total - work[0];
+        let [h0, h1] = &mut self.halves;
+        h1.part.copy_from(&h0.part);
+        self.exchange.reset();
+        let cx = Context {
+            keys: &self.keys,
+            points: &self.points,
+            board: &self.board,
+            fade_steps: self.fade_steps,
+            fast: self.fast_path,
+        };
+        let (v0, v1) = self.voices.split_at_mut(at);
+        let joined = match pair {
+            Some(pair) if work[0] > 0 && work[1] > 0 => {
+                let ex = &self.exchange;
+                // A panic on either side abandons the meetings, so the other side cannot wait
+                // forever, and is raised again here once both have stopped.
+                let mut panic = [None, None];
+                let [p0, p1] = &mut panic;
+                let cx = &cx;
+                let out = &mut *out;
+                let (v0, v1) = (&mut *v0, &mut *v1);
+                let (h0, h1) = (&mut *h0, &mut *h1);
+                let mut there = || {
+                    let run = AssertUnwindSafe(|| run_half(cx, 1, v1, h1, ex, None, len));
+                    if let Err(e) = catch_unwind(run) {
+                        ex.abandoned.store(true, Ordering::Relaxed);
+                        *p1 = Some(e);
                     }
+                };
+                let mut here = || {
+                    let run = AssertUnwindSafe(|| run_half(cx, 0, v0, h0, ex, Some(out), len));
+                    if let Err(e) = catch_unwind(run) {
+                        ex.abandoned.store(true, Ordering::Relaxed);
+                        *p0 = Some(e);
+                    }
+                };
+                let joined = pair.join(&mut there, &mut here);
+                if let Some(e) = panic.into_iter().flatten().next() {
+                    resume_unwind(e);
                 }
-                v.finish(key, &u, read);
-            } else {
-                faded |= fade_step(&mut v.state, self.fade_steps);
-                v.step(key, &mut self.scratch, self.fast_path);
+                joined
             }
-            v.own_at_m =
-                self.board
-                    .step_own(self.fast_path, &mut v.own_board, point, before, v.force_n);
-            total += v.state.coupling * v.read[0];
+            _ => false,
+        };
+        if !joined {
+            run_alone(&cx, [v0, v1], &mut self.halves, out, true);
         }
-        self.board.step_shared();
-        for v in self.voices.iter_mut() {
-            let (true, Some(key)) = (v.state.active, v.state.key) else {
-                continue;
-            };
-            let shared = self.board.shared_at(self.fast_path, &self.points[key]);
-            v.other_before_m = v.other_m;
-            v.other_m = std::array::from_fn(|d| shared[d] - v.own_at_m[d]);
-        }
-        self.volume_velocity_m3_s = total;
-        if faded {
-            for k in 0..self.voices.len() {
-                self.complete_fade(k);
-            }
-        }
-        total
+        self.volume_velocity_m3_s = out[len - 1];
     }
 
     pub fn volume_velocity_m3_s(&self) -> f64 {
@@ -236,7 +269,7 @@ impl ExactPool {
             let rest = Self::memory(v);
             state.push(Some(k), &rest, &vec![0.0; rest.len()]);
         }
-        let board = self.board.state();
+        let board = self.halves[0].part.state();
         state.push(None, &board, &vec![1.0; board.len()]);
         state
     }
@@ -276,7 +309,7 @@ impl ExactPool {
             v.damper_n.copy_from_slice(take(c));
         }
         let m = 3 * self.board.modes();
-        self.board.set_state(take(m));
+        self.halves[0].part.set_state(take(m));
     }
 
     /// Mechanical energy of every active key's modes (J; each key's copy of the board in it,
@@ -290,49 +323,13 @@ impl ExactPool {
         let v = &mut self.voices[k];
         if v.state.active {
             if let Some(key) = v.state.key {
+                let part = &mut self.halves[0].part;
                 self.board
-                    .join(&v.own_board, &self.points[key], v.force_n, -1.0);
+                    .join(part, &v.own_board, &self.points[key], v.force_n, -1.0);
             }
         }
         v.rest();
     }
-}
-
-/// `job` on every voice in a block ([`Voice::in_block`]), the voices split in two of about equal
-/// work (modes), one part on the other core through `pair` (all here without one, or when it does
-/// not start).
-fn on_both_cores(
-    pair: Option<&dyn Pair>,
-    keys: &[ExactKey],
-    voices: &mut [Voice],
-    job: &(dyn Fn(&ExactKey, &mut Voice) + Sync),
-) {
-    let work = |v: &Voice| match (v.in_block, v.state.key) {
-        (true, Some(key)) => keys[key].n_modes(),
-        _ => 0,
-    };
-    let run = |part: &mut [Voice]| {
-        for v in part.iter_mut() {
-            if let (true, Some(key)) = (v.in_block, v.state.key) {
-                job(&keys[key], v);
-            }
-        }
-    };
-    if let Some(pair) = pair {
-        let total: usize = voices.iter().map(work).sum();
-        let (mut at, mut sum) = (0, 0);
-        while at < voices.len() && 2 * sum < total {
-            sum += work(&voices[at]);
-            at += 1;
-        }
-        if 0 < sum && sum < total {
-            let (mine, theirs) = voices.split_at_mut(at);
-            if pair.join(&mut || run(theirs), &mut || run(mine)) {
-                return;
-            }
-        }
-    }
-    run(voices);
 }
 
 /// The pool policy's hooks on the exact engine's voices.
@@ -386,20 +383,22 @@ impl Policy for ExactPool {
             return;
         };
         let (point, key) = (&self.points[key], &self.keys[key]);
-        let now = self.board.shared_at(self.fast_path, point);
+        let part = &mut self.halves[0].part;
+        let now = self.board.shared_at(part, self.fast_path, point);
         for (d, follow) in key.follow.iter().enumerate() {
             follow.add_to(&mut v.z, now[d] - v.other_m[d]);
         }
         v.other_m = now;
         v.other_before_m = now;
-        self.board.join(&v.own_board, point, v.force_n, 1.0);
+        self.board.join(part, &v.own_board, point, v.force_n, 1.0);
     }
 
     fn leave(&mut self, k: usize) {
         let v = &self.voices[k];
         if let Some(key) = v.state.key {
+            let part = &mut self.halves[0].part;
             self.board
-                .join(&v.own_board, &self.points[key], v.force_n, -1.0);
+                .join(part, &v.own_board, &self.points[key], v.force_n, -1.0);
         }
     }
 
@@ -429,12 +428,12 @@ impl Policy for ExactPool {
     }
 
     fn board_energy_j(&self) -> f64 {
-        self.board.energy_j()
+        self.board.energy_j(&self.halves[0].part)
     }
 
     /// The shared part at rest, and every voice's own part with it (they are its terms).
     fn rest_board(&mut self) {
-        self.board.rest();
+        self.halves[0].part.rest();
         for v in &mut self.voices {
             v.own_board.fill_zero();
             v.force_n = [0.0; 3];
