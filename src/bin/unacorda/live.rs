@@ -169,7 +169,6 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     let (mut synth, handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
     if cores == 2 {
         synth.use_second_core()?;
-        synth.ask_real_time_priority();
     }
     let clock = handle.clock.clone();
     let stats = handle.stats.clone();
@@ -193,7 +192,6 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     }
     let started = Instant::now();
     let (mut injected, mut xruns, mut reopened) = (false, 0u64, 0u32);
-    let mut priority_reported = false;
     let mut last_watch = started;
     let mut deadline = args.seconds.map(|s| started + Duration::from_secs_f64(s));
     // The event source: a file fed in real time from this thread, or the MIDI input's callback.
@@ -231,25 +229,6 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         if args.lose_device_after.is_some_and(|after| n >= after) && !injected {
             injected = true;
             output.inject(cpal::Error::new(cpal::ErrorKind::DeviceNotAvailable));
-        }
-        if !priority_reported {
-            let helper = if cores == 2 {
-                stats.helper_priority.outcome()
-            } else {
-                Some(Ok(()))
-            };
-            if let (Some(audio), Some(helper)) = (callback_stats.priority.outcome(), helper) {
-                priority_reported = true;
-                match (audio, helper) {
-                    (Ok(()), Ok(())) => eprintln!(
-                        "real-time priority (SCHED_FIFO) granted to the audio thread{}",
-                        if cores == 2 { " and the helper" } else { "" }
-                    ),
-                    (Err(e), _) | (_, Err(e)) => eprintln!(
-                        "real-time priority not granted: {e}; other work may preempt a block"
-                    ),
-                }
-            }
         }
         let mut lost = None;
         while let Ok(e) = output.errors.try_recv() {
