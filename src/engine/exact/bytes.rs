@@ -74,6 +74,12 @@ impl Reader<'_> {
     fn array<const N: usize>(&mut self) -> Option<[f64; N]> {
         self.f64s()?.try_into().ok()
     }
+    /// An `R × C` matrix written row by row as one vector.
+    fn matrix<const R: usize, const C: usize>(&mut self) -> Option<[[f64; C]; R]> {
+        let flat = self.f64s()?;
+        (flat.len() == R * C)
+            .then(|| std::array::from_fn(|i| std::array::from_fn(|j| flat[i * C + j])))
+    }
     /// A split of exactly `modes` modes.
     fn split(&mut self, modes: usize) -> Option<Split> {
         let s = Split {
@@ -188,9 +194,7 @@ impl ExactKey {
         let feed_c = r.array::<3>()?;
         let follow = r.split_array::<3>(n)?;
         let block_alpha = r.split_array::<DIRECTIONS>(n)?;
-        let flat = r.array::<{ READS * DIRECTIONS }>()?;
-        let block_alpha_read =
-            std::array::from_fn(|i| std::array::from_fn(|d| flat[i * DIRECTIONS + d]));
+        let block_alpha_read = r.matrix()?;
         let e32 = r.split32(n)?;
         let e_block = r.split(n)?;
         let mut rows: [Split32; READS] = Default::default();
@@ -217,11 +221,8 @@ impl ExactKey {
                 }
                 let rows_from = r.array::<{ DAMPER_CHANNELS * DAMPER_CHANNELS }>()?;
                 let solve = r.array::<{ DAMPER_CHANNELS * DAMPER_CHANNELS }>()?;
-                let per_read = |flat: [f64; READS * DAMPER_CHANNELS]| {
-                    std::array::from_fn(|i| std::array::from_fn(|j| flat[i * DAMPER_CHANNELS + j]))
-                };
-                let reads_from = per_read(r.array()?);
-                let reads_to = per_read(r.array()?);
+                let reads_from = r.matrix()?;
+                let reads_to = r.matrix()?;
                 Some(DamperKey {
                     channels: c,
                     rows,

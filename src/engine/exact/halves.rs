@@ -145,10 +145,9 @@ pub(crate) fn end(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
 
 /// Sample `t` of a half's voices up to the board: a voice in the block from its free reads and
 /// its Markov parameters, any other by [`Voice::step`] (its fade moving); each voice's own board
-/// part advanced, its modal force summed into `scratch.force`. Returns the half's volume
-/// velocity.
-pub(crate) fn forces(cx: &Context<'_>, voices: &mut [Voice], scratch: &mut Half, t: usize) -> f64 {
-    scratch.force.iter_mut().for_each(|f| *f = 0.0);
+/// part advanced, its modal force summed into `half.force`. Returns the half's volume velocity.
+pub(crate) fn forces(cx: &Context<'_>, voices: &mut [Voice], half: &mut Half, t: usize) -> f64 {
+    half.force.iter_mut().for_each(|f| *f = 0.0);
     let mut total = 0.0;
     for v in voices.iter_mut() {
         let (true, Some(k)) = (v.state.active, v.state.key) else {
@@ -171,14 +170,14 @@ pub(crate) fn forces(cx: &Context<'_>, voices: &mut [Voice], scratch: &mut Half,
             v.finish(key, &u, read);
         } else {
             fade_step(&mut v.state, cx.fade_steps);
-            v.step(key, &mut scratch.stages, cx.fast);
+            v.step(key, &mut half.stages, cx.fast);
         }
         v.own_at_m = cx.board.step_own(
             cx.fast,
             &mut v.own_board,
             &cx.points[k],
             (before, v.force_n),
-            &mut scratch.force,
+            &mut half.force,
         );
         total += v.state.coupling * v.read[0];
     }

@@ -143,32 +143,25 @@ impl ExactPool {
     /// [`ExactKey::block_alpha`] describes. The others step one sample at a time, as in `step`.
     fn block(&mut self, out: &mut [f64], pair: Option<&dyn Pair>) {
         let len = out.len();
-        let mut work = [0usize; 2];
-        let mut total = 0;
         for v in self.voices.iter_mut() {
-            v.in_block = false;
-            if let (true, Some(key)) = (v.state.active, v.state.key) {
-                let key = &self.keys[key];
-                v.in_block = v.is_free(key);
-                // A voice stepped sample by sample costs about three in the block.
-                total += key.n_modes() * if v.in_block { 1 } else { 3 };
-            }
+            v.in_block = match (v.state.active, v.state.key) {
+                (true, Some(key)) => v.is_free(&self.keys[key]),
+                _ => false,
+            };
         }
+        // A voice's work over the block: its modes, a voice stepped sample by sample costing
+        // about three in the block.
+        let work = |v: &Voice| match (v.state.active, v.state.key) {
+            (true, Some(key)) => self.keys[key].n_modes() * if v.in_block { 1 } else { 3 },
+            _ => 0,
+        };
+        let total: usize = self.voices.iter().map(work).sum();
         // Two halves of about equal work, in voice order.
-        let mut at = 0;
-        for v in &self.voices {
-            if 2 * work[0] >= total {
-                break;
-            }
-            if let (true, Some(key)) = (v.state.active, v.state.key) {
-                work[0] += self.keys[key].n_modes() * if v.in_block { 1 } else { 3 };
-            }
+        let (mut at, mut first) = (0, 0);
+        while at < self.voices.len() && 2 * first < total {
+            first += work(&self.voices[at]);
             at += 1;
         }
-        work[1] = total - work[0];
-        let [h0, h1] = &mut self.halves;
-        h1.part.copy_from(&h0.part);
-        self.exchange.reset();
         let cx = Context {
             keys: &self.keys,
             points: &self.points,
@@ -178,7 +171,10 @@ impl ExactPool {
         };
         let (v0, v1) = self.voices.split_at_mut(at);
         let joined = match pair {
-            Some(pair) if work[0] > 0 && work[1] > 0 => {
+            Some(pair) if first > 0 && first < total => {
+                let [h0, h1] = &mut self.halves;
+                h1.part.copy_from(&h0.part);
+                self.exchange.reset();
                 let ex = &self.exchange;
                 // A panic on either side abandons the meetings, so the other side cannot wait
                 // forever, and is raised again here once both have stopped.
@@ -187,7 +183,6 @@ impl ExactPool {
                 let cx = &cx;
                 let out = &mut *out;
                 let (v0, v1) = (&mut *v0, &mut *v1);
-                let (h0, h1) = (&mut *h0, &mut *h1);
                 let mut there = || {
                     let run = AssertUnwindSafe(|| run_half(cx, 1, v1, h1, ex, None, len));
                     if let Err(e) = catch_unwind(run) {
