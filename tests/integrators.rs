@@ -120,7 +120,8 @@ fn band_levels_db(x: &[f64]) -> Vec<(f64, f64)> {
 }
 
 /// How far `fast` is from `reference`: hammer peak (relative), partials 1–20 (cents), decay
-/// rates of partials 1–10 (relative), third-octave bands of the bridge T force (dB).
+/// rates of partials 1–10 (relative, to at least 0.5 dB/s), third-octave bands of the bridge T
+/// force (dB).
 struct Distance {
     hammer: f64,
     cents: f64,
@@ -171,8 +172,11 @@ fn distance(spec: &UnisonSpec, reference: &Run, fast: &Run) -> Distance {
                 let den: f64 = t.iter().map(|t| (t - mt).powi(2)).sum();
                 num / den
             };
+            // Relative to the slope, or to 0.5 dB/s where it is smaller: a partial whose envelope
+            // barely moves in the window is one of a unison's beating modes (C4's partial 5,
+            // -0.2 dB/s), and a slope near zero is no measure of its decay.
             let (sr, sf) = (slope(xr, fr), slope(xf, ff));
-            let rel = (sf / sr - 1.0).abs();
+            let rel = (sf - sr).abs() / sr.abs().max(0.5);
             decay_worst = decay_worst.max(rel);
             if n <= 3 || rel > 0.02 {
                 println!("  partial {n}: {fr:.3} Hz vs {ff:.3} Hz ({cents:+.4} cents), decay {sr:.2} vs {sf:.2} dB/s");
@@ -263,42 +267,61 @@ fn exact_engine_at_48_khz_matches_rk4_at_96_khz_on_c2_c4_and_a0() {
 
 #[test]
 fn exact_engines_modes_are_the_linearised_systems_eigenvalues() {
-    // The exact engine assembles K and C itself (strings, duplex, contact, the board at the
-    // key's point); the reference is the paper's dense state matrix with the contact forces
-    // folded in (`analysis::modes`, from `DenseUnison`). Every oscillating mode of the reference
-    // has its eigenvalue among the engine's.
+    // The exact engine's one-step map of one key on the board (its own modes, the shared board's,
+    // the interface between: `analysis::stability`), against the paper's dense state matrix with
+    // the contact forces folded in (`analysis::modes`, from `DenseUnison`): every oscillating mode
+    // of the reference has a mode of the map beside it. The key's own modes are exact; the
+    // interface with the shared board is not (`engine::exact::interface`: an error of
+    // (omega h)^2 / 12 in the coupling), so the modes are held to half the gates above: the
+    // ringing string modes (most of their energy in the strings, decaying slower than 100 /s)
+    // within 0.5 cents and 1 % of their decay rate; the board's and the strongly damped ones
+    // (the duplex segment's, 800–2700 /s) within 1 % of their eigenvalue.
     use unacorda::analysis::modes::linear_modes;
+    use unacorda::analysis::stability::{one_step_map, step_eigenvalues};
+    use unacorda::engine::exact::ExactPool;
+    use unacorda::engine::{Policy, VoicePool};
     for (name, spec) in [("c2", c2()), ("C4", key("C4")), ("A0", key("A0"))] {
         let mut spec = spec;
         spec.sample_rate_hz = FS;
-        let engine = ExactUnison::new(&spec).unwrap();
-        let lambda = engine.eigenvalues();
+        let mut pool = ExactPool::build_pool(std::slice::from_ref(&spec), 1, FS).unwrap();
+        pool.assign(0, 0);
+        pool.set_active(0, true);
+        let (map, state) = one_step_map(&pool);
+        let engine = step_eigenvalues(&map, &state, 1.0 / FS);
         let exact = linear_modes(&spec).unwrap();
-        let (mut worst_f, mut worst_t60, mut worst_sigma) = (0f64, 0f64, 0f64);
-        for m in &exact {
-            let w = 2.0 * std::f64::consts::PI * m.freq_hz;
-            let nearest = lambda
+        let (mut cents, mut decay, mut others) = (0f64, 0f64, 0f64);
+        for m in exact.iter().filter(|m| m.freq_hz < 0.45 * FS) {
+            let nearest = engine
                 .iter()
                 .min_by(|a, b| {
-                    let da = (a.im - w).hypot(a.re + m.decay_per_s);
-                    let db = (b.im - w).hypot(b.re + m.decay_per_s);
-                    da.total_cmp(&db)
+                    let d = |e: &&unacorda::analysis::stability::StepEigen| {
+                        (e.freq_hz - m.freq_hz)
+                            .hypot((-e.rate_per_s - m.decay_per_s) / std::f64::consts::TAU)
+                    };
+                    d(a).total_cmp(&d(b))
                 })
                 .unwrap();
-            worst_f = worst_f.max((nearest.im / w - 1.0).abs());
-            let t60 = 6.0 * std::f64::consts::LN_10 / (2.0 * -nearest.re);
-            worst_t60 = worst_t60.max((t60 / m.t60_s() - 1.0).abs());
-            worst_sigma = worst_sigma.max((-nearest.re - m.decay_per_s).abs());
+            let df = 1200.0 * (nearest.freq_hz / m.freq_hz).log2();
+            let dd = (-nearest.rate_per_s / m.decay_per_s - 1.0).abs();
+            if m.shares[3] < 0.5 && m.decay_per_s < 100.0 {
+                cents = cents.max(df.abs());
+                decay = decay.max(dd);
+            } else {
+                // A mode that rings a few cycles at most: its eigenvalue's distance re its size.
+                let w = 2.0 * std::f64::consts::PI;
+                let d =
+                    (w * (nearest.freq_hz - m.freq_hz)).hypot(-nearest.rate_per_s - m.decay_per_s);
+                others = others.max(d / (w * m.freq_hz).hypot(m.decay_per_s));
+            }
         }
         println!(
-            "{name}: {} modes of the linearised system, {} in the engine; worst frequency {worst_f:.1e}, T60 {worst_t60:.1e} (relative), decay rate {worst_sigma:.1e} /s",
+            "{name}: {} modes of the linearised system, a one-step map of order {}; ringing string modes: worst {cents:.3} cents, decay {:.2} %; the others' eigenvalues within {:.2} %",
             exact.len(),
-            lambda.len()
+            map.nrows(),
+            100.0 * decay,
+            100.0 * others
         );
-        // Both sides are eigen-decompositions of matrices with entries up to omega_max^2 ~ 1e10:
-        // rounding leaves their eigenvalues up to ~1e-5 /s apart, a part in 1e4 of the slowest
-        // modes' decay (0.07 /s), and a part in 1e6 of the fastest (the duplex modes, 820 /s).
-        assert!(worst_f < 1e-6 && worst_t60 < 1e-3, "{name}");
+        assert!(cents < 0.5 && decay < 0.01 && others < 0.01, "{name}");
     }
 }
 

@@ -174,7 +174,7 @@ fn live_parser_agrees_with_a_reference_decoder_on_random_bytes() {
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
             let r = (state >> 33) as u32;
-            if r % 3 == 0 {
+            if r.is_multiple_of(3) {
                 0x80 | (r >> 8) as u8
             } else {
                 (r >> 8) as u8 & 0x7F

@@ -53,7 +53,7 @@ impl Clock {
             let frame = self.frame.load(Ordering::Acquire);
             let ns = self.at_ns.load(Ordering::Acquire);
             let block = self.block.load(Ordering::Acquire);
-            if s0 % 2 == 0 && self.seq.load(Ordering::Acquire) == s0 {
+            if s0.is_multiple_of(2) && self.seq.load(Ordering::Acquire) == s0 {
                 let now_ns = now.saturating_duration_since(self.origin).as_nanos() as u64;
                 let ahead = now_ns.saturating_sub(ns) as f64 * 1e-9 * self.rate_hz;
                 return frame + (ahead as u64).min(block) + block;

@@ -116,6 +116,7 @@ impl StoredKey for exact::ExactKey {
     const STORE: Option<&'static str> = Some("exact");
     const SOURCE: &'static [&'static str] = &[
         include_str!("exact/key.rs"),
+        include_str!("exact/interface.rs"),
         include_str!("exact/kernels.rs"),
         include_str!("exact/bytes.rs"),
         include_str!("modal.rs"),

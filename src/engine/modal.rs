@@ -28,14 +28,23 @@ pub(crate) struct Modal {
 impl Modal {
     /// Diagonalise `qdd = -K q - C qdot + ...` (dense `n × n`, row-major) for step `h`.
     pub(crate) fn new(k: &[f64], c: &[f64], n: usize, h: f64) -> Result<Modal, BuildError> {
+        // Balanced: velocities in units of `omega_s` (the highest undamped frequency), so that
+        // both blocks of the matrix are of one size (`x = (q, qdot / omega_s)`). Unbalanced, the
+        // entries span 1 to omega^2 ~ 1e10, and the QR iteration can fail to converge (it did
+        // not on key 63, B5, with the board's high modes alone).
+        let omega_s = (0..n).map(|i| k[i * n + i]).fold(1.0, f64::max).sqrt();
         let a = Mat::<f64>::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
             (true, true) => 0.0,
-            (true, false) => f64::from(u8::from(j - n == i)),
-            (false, true) => -k[(i - n) * n + j],
+            (true, false) => f64::from(u8::from(j - n == i)) * omega_s,
+            (false, true) => -k[(i - n) * n + j] / omega_s,
             (false, false) => -c[(i - n) * n + (j - n)],
         });
         let eig = a.eigen().map_err(|_| BuildError::Modes)?;
-        let (u, s) = (eig.U().to_owned(), eig.S().column_vector().to_owned());
+        let s = eig.S().column_vector().to_owned();
+        // Back to `x = (q, qdot)`.
+        let u = Mat::<c64>::from_fn(2 * n, 2 * n, |i, j| {
+            eig.U()[(i, j)] * if i < n { 1.0 } else { omega_s }
+        });
         // Representatives: Im > 0 of each pair (weight 2), real eigenvalues (weight 1).
         let scale = (0..2 * n).map(|i| s[i].norm()).fold(0.0, f64::max).max(1.0);
         let keep: Vec<(usize, f64)> = (0..2 * n)

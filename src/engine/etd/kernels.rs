@@ -122,7 +122,7 @@ pub(super) unsafe fn read_rows_avx2<const R: usize>(
 ) -> [[f64; 3]; R] {
     use std::arch::x86_64::*;
     let n = zr.len();
-    debug_assert!(n % LANES == 0 && zi.len() == n);
+    debug_assert!(n.is_multiple_of(LANES) && zi.len() == n);
     let mut ptr = [[[std::ptr::null::<f64>(); 2]; 3]; R];
     for r in 0..R {
         for which in 0..3 {

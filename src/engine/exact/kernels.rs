@@ -2,6 +2,7 @@
 //! propagation `z <- e ⊙ z`, the inputs that enter over the step and the rows read after it, in
 //! one pass (8-lane partial sums so that the loop vectorises; AVX2 + FMA where the CPU has them).
 
+use crate::engine::kernels::has_avx2_fma;
 use faer::c64;
 
 /// A complex vector per mode, real and imaginary parts apart (the kernels' layout).
@@ -26,9 +27,17 @@ impl Split {
         }
     }
 
-    pub(crate) fn times(a: &[c64], b: &[c64]) -> Split {
-        let p: Vec<c64> = a.iter().zip(b).map(|(x, y)| x * y).collect();
+    /// Mode `m` of `g` times `f(m)`.
+    pub(crate) fn weighted_by(g: &Split, f: impl Fn(usize) -> c64) -> Split {
+        let p: Vec<c64> = (0..g.len())
+            .map(|m| c64::new(g.re[m], g.im[m]) * f(m))
+            .collect();
         Split::new(&p)
+    }
+
+    /// Mode `m` of `g` times `f(weights[m])` (a mode's weights of an input over the step).
+    pub(crate) fn weighted(g: &Split, weights: &[[c64; 2]], f: impl Fn([c64; 2]) -> c64) -> Split {
+        Split::weighted_by(g, |m| f(weights[m]))
     }
 
     pub(crate) fn len(&self) -> usize {
@@ -53,6 +62,12 @@ impl Split {
         }
     }
 
+    /// `z *= x`.
+    pub(crate) fn scale(&mut self, x: f64) {
+        self.re.iter_mut().for_each(|v| *v *= x);
+        self.im.iter_mut().for_each(|v| *v *= x);
+    }
+
     pub(crate) fn fill_zero(&mut self) {
         self.re.iter_mut().for_each(|x| *x = 0.0);
         self.im.iter_mut().for_each(|x| *x = 0.0);
@@ -63,11 +78,8 @@ impl Split {
 /// chain).
 pub(crate) const LANES: usize = 8;
 
-/// Inputs that enter a step (the coupling's value and slope per direction) and rows read after it
-/// (the volume velocity and the total contact force per direction).
-pub(crate) const INPUTS: usize = 6;
-
-/// Directions of the coupling (T, L, P): a block's inputs, one per direction.
+/// Directions of the bridge's motion (T, L, P): a step's inputs, one per direction; and the rows
+/// read after a step (the volume velocity and the total contact force per direction).
 pub(crate) const DIRECTIONS: usize = 3;
 pub(crate) const READS: usize = 4;
 
@@ -79,8 +91,8 @@ pub(crate) fn advance(
     propagate: bool,
     e: &Split,
     z: &mut Split,
-    g: &[Split; INPUTS],
-    u: &[f64; INPUTS],
+    g: &[Split; DIRECTIONS],
+    u: &[f64; DIRECTIONS],
     rows: &[Split; READS],
 ) -> [f64; READS] {
     #[cfg(target_arch = "x86_64")]
@@ -98,8 +110,8 @@ unsafe fn advance_avx2(
     propagate: bool,
     e: &Split,
     z: &mut Split,
-    g: &[Split; INPUTS],
-    u: &[f64; INPUTS],
+    g: &[Split; DIRECTIONS],
+    u: &[f64; DIRECTIONS],
     rows: &[Split; READS],
 ) -> [f64; READS] {
     dispatch::<true>(propagate, e, z, g, u, rows)
@@ -112,8 +124,8 @@ fn dispatch<const FMA: bool>(
     propagate: bool,
     e: &Split,
     z: &mut Split,
-    g: &[Split; INPUTS],
-    u: &[f64; INPUTS],
+    g: &[Split; DIRECTIONS],
+    u: &[f64; DIRECTIONS],
     rows: &[Split; READS],
 ) -> [f64; READS] {
     let inputs = u.iter().any(|&x| x != 0.0);
@@ -139,15 +151,15 @@ pub(crate) fn fma<const FMA: bool>(a: f64, b: f64, c: f64) -> f64 {
 fn pass<const FMA: bool, const PROPAGATE: bool, const INPUT: bool>(
     e: &Split,
     z: &mut Split,
-    g: &[Split; INPUTS],
-    u: &[f64; INPUTS],
+    g: &[Split; DIRECTIONS],
+    u: &[f64; DIRECTIONS],
     rows: &[Split; READS],
 ) -> [f64; READS] {
     let n = e.len();
     let (er, ei) = (&e.re[..n], &e.im[..n]);
     let (zr, zi) = (&mut z.re[..n], &mut z.im[..n]);
-    let gr: [&[f64]; INPUTS] = std::array::from_fn(|j| &g[j].re[..n]);
-    let gi: [&[f64]; INPUTS] = std::array::from_fn(|j| &g[j].im[..n]);
+    let gr: [&[f64]; DIRECTIONS] = std::array::from_fn(|j| &g[j].re[..n]);
+    let gi: [&[f64]; DIRECTIONS] = std::array::from_fn(|j| &g[j].im[..n]);
     let rr: [&[f64]; READS] = std::array::from_fn(|i| &rows[i].re[..n]);
     let ri: [&[f64]; READS] = std::array::from_fn(|i| &rows[i].im[..n]);
     let mut acc = [[0.0; LANES]; READS];
@@ -163,7 +175,7 @@ fn pass<const FMA: bool, const PROPAGATE: bool, const INPUT: bool>(
             );
         }
         if INPUT {
-            for j in 0..INPUTS {
+            for j in 0..DIRECTIONS {
                 re = fma::<FMA>(gr[j][m], u[j], re);
                 im = fma::<FMA>(gi[j][m], u[j], im);
             }
@@ -175,55 +187,6 @@ fn pass<const FMA: bool, const PROPAGATE: bool, const INPUT: bool>(
         }
     }
     acc.map(|a| a.iter().sum())
-}
-
-/// `z <- e ⊙ z`, then `Re(r z)`, in one pass: 6 FLOP per mode to propagate, 4 to read; with
-/// AVX2 + FMA where the CPU has them (a key alone: nothing else enters, one row is read).
-pub(crate) fn propagate_read(e: &Split, z: &mut Split, r: &Split, fast: bool) -> f64 {
-    #[cfg(target_arch = "x86_64")]
-    if fast {
-        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
-        return unsafe { propagate_read_avx2(e, z, r) };
-    }
-    let _ = fast;
-    propagate_read_with::<false>(e, z, r)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn propagate_read_avx2(e: &Split, z: &mut Split, r: &Split) -> f64 {
-    propagate_read_with::<true>(e, z, r)
-}
-
-#[inline(always)]
-fn propagate_read_with<const FMA: bool>(e: &Split, z: &mut Split, r: &Split) -> f64 {
-    let n = e.len();
-    let (er, ei, rr, ri) = (&e.re[..n], &e.im[..n], &r.re[..n], &r.im[..n]);
-    let (zr, zi) = (&mut z.re[..n], &mut z.im[..n]);
-    let mut acc = [0.0; LANES];
-    let mut tail = 0.0;
-    let whole = n / LANES * LANES;
-    for base in (0..whole).step_by(LANES) {
-        for l in 0..LANES {
-            let m = base + l;
-            let (a, b) = (zr[m], zi[m]);
-            let (re, im) = (
-                fma::<FMA>(er[m], a, -ei[m] * b),
-                fma::<FMA>(er[m], b, ei[m] * a),
-            );
-            zr[m] = re;
-            zi[m] = im;
-            acc[l] = fma::<FMA>(rr[m], re, fma::<FMA>(-ri[m], im, acc[l]));
-        }
-    }
-    for m in whole..n {
-        let (a, b) = (zr[m], zi[m]);
-        let (re, im) = (er[m] * a - ei[m] * b, er[m] * b + ei[m] * a);
-        zr[m] = re;
-        zi[m] = im;
-        tail += rr[m] * re - ri[m] * im;
-    }
-    acc.iter().sum::<f64>() + tail
 }
 
 /// `z <- e ⊙ z` (complex, per mode) on the first `e.len()` modes.
@@ -249,25 +212,63 @@ pub(crate) fn stage(out: &mut Split, e2: &Split, from: &Split, q: &[Split], u: &
     }
 }
 
-/// Longest block advanced mode by mode ([`free_block`], [`fold_block`]).
-pub(crate) const BLOCK: usize = 64;
+/// Longest block advanced mode by mode ([`free_block`], [`fold_block`]). Its reads' inputs are
+/// convolved step by step ([`convolve`]: on average `BLOCK / 2` taps each), its coefficients
+/// loaded once: 32 balances the two (64: the convolution 30 % of the work; 16: the block's own
+/// overhead grows more than the convolution saves).
+pub(crate) const BLOCK: usize = 32;
+
+/// Modes of one AVX-512 pass ([`free_block`], [`fold_block`]): two registers of 16, two
+/// independent recursions to hide each one's latency. A key's block coefficients are padded to
+/// a whole number of them with modes that never move.
+pub(crate) const WIDE: usize = 32;
+
+/// Which form of the loops this CPU runs: portable, AVX2 + FMA, or (the block passes, the
+/// convolution) AVX-512. Chosen once, at run time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Simd {
+    Portable,
+    Avx2,
+    Avx512,
+}
+
+impl Simd {
+    pub(crate) fn detect() -> Simd {
+        #[cfg(target_arch = "x86_64")]
+        if has_avx2_fma() && is_x86_feature_detected!("avx512f") {
+            return Simd::Avx512;
+        }
+        if has_avx2_fma() {
+            Simd::Avx2
+        } else {
+            Simd::Portable
+        }
+    }
+
+    /// Whether the AVX2 + FMA forms may run.
+    pub(crate) fn avx2(self) -> bool {
+        self != Simd::Portable
+    }
+}
 
 /// A block's inputs per direction, step `t` at `BLOCK - 1 - t` (so that a convolution with
-/// Markov parameters is a forward dot product).
-pub(crate) type Reversed = [[f64; BLOCK]; DIRECTIONS];
+/// Markov parameters is a forward dot product), in single precision.
+pub(crate) type Reversed = [[f32; BLOCK]; DIRECTIONS];
 
 /// Markov parameters per read and direction, tap `k` (steps after the input) at `k`.
-pub(crate) type Taps = [[[f64; BLOCK]; DIRECTIONS]; READS];
+pub(crate) type Taps = [[[f32; BLOCK]; DIRECTIONS]; READS];
 
 /// What the inputs of steps `0..=t` add to each read after step `t`:
-/// `sum_d sum_{j<=t} taps[i][d][t-j] u_d(j)`; with AVX2 + FMA where `fast`.
-pub(crate) fn convolve(fast: bool, taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
+/// `sum_d sum_{j<=t} taps[i][d][t-j] u_d(j)`, in single precision.
+pub(crate) fn convolve(simd: Simd, taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
     #[cfg(target_arch = "x86_64")]
-    if fast {
-        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
-        return unsafe { convolve_avx2(taps, u, t) };
+    match simd {
+        // SAFETY: `Simd::detect` chose these only where the CPU has them.
+        Simd::Avx512 => return unsafe { convolve_avx512(taps, u, t) },
+        Simd::Avx2 => return unsafe { convolve_avx2(taps, u, t) },
+        Simd::Portable => {}
     }
-    let _ = fast;
+    let _ = simd;
     convolve_with::<false>(taps, u, t)
 }
 
@@ -279,28 +280,59 @@ unsafe fn convolve_avx2(taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
 
 #[inline(always)]
 fn convolve_with<const FMA: bool>(taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
-    const W: usize = 4;
+    const W: usize = 8;
     let start = BLOCK - 1 - t;
     std::array::from_fn(|i| {
-        let mut acc = [0.0; W];
+        let mut acc = [0f32; W];
         for d in 0..DIRECTIONS {
             let (a, b) = (&taps[i][d][..=t], &u[d][start..]);
             let whole = a.len() / W * W;
             for k in (0..whole).step_by(W) {
                 for l in 0..W {
-                    acc[l] = fma::<FMA>(a[k + l], b[k + l], acc[l]);
+                    acc[l] = fma32::<FMA>(a[k + l], b[k + l], acc[l]);
                 }
             }
             for k in whole..a.len() {
-                acc[0] = fma::<FMA>(a[k], b[k], acc[0]);
+                acc[0] = fma32::<FMA>(a[k], b[k], acc[0]);
             }
         }
-        acc.iter().sum()
+        acc.iter().map(|&x| f64::from(x)).sum()
     })
 }
 
+/// The convolution in 16-lane registers: each direction's inputs loaded once for the four reads,
+/// the last partial register masked.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn convolve_avx512(taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
+    use std::arch::x86_64::*;
+    let start = BLOCK - 1 - t;
+    let n = t + 1;
+    let mut acc = [_mm512_setzero_ps(); READS];
+    let mut k = 0;
+    while k < n {
+        let left = n - k;
+        let mask: __mmask16 = if left >= 16 {
+            0xffff
+        } else {
+            (1u16 << left) - 1
+        };
+        for d in 0..DIRECTIONS {
+            // SAFETY: lanes `k..k + 16` under `mask` lie within `u[d][start..]` (n values) and
+            // within each `taps[i][d]` (BLOCK values, n <= BLOCK).
+            let x = _mm512_maskz_loadu_ps(mask, u[d].as_ptr().add(start + k));
+            for i in 0..READS {
+                let a = _mm512_maskz_loadu_ps(mask, taps[i][d].as_ptr().add(k));
+                acc[i] = _mm512_fmadd_ps(a, x, acc[i]);
+            }
+        }
+        k += 16;
+    }
+    acc.map(|a| f64::from(_mm512_reduce_add_ps(a)))
+}
+
 /// A complex vector per mode in single precision, real and imaginary parts apart: the block
-/// kernels' coefficients (half the bytes and twice the lanes of [`Split`]).
+/// kernels' coefficients (half the bytes and twice the lanes of [`Split`]), padded to [`WIDE`].
 #[derive(Debug, Clone, Default, PartialEq)]
 pub(crate) struct Split32 {
     pub(crate) re: Vec<f32>,
@@ -309,14 +341,19 @@ pub(crate) struct Split32 {
 
 impl Split32 {
     pub(crate) fn new(v: &Split) -> Split32 {
+        let pad = |x: &[f64]| -> Vec<f32> {
+            let mut y: Vec<f32> = x.iter().map(|&x| x as f32).collect();
+            y.resize(x.len().div_ceil(WIDE) * WIDE, 0.0);
+            y
+        };
         Split32 {
-            re: v.re.iter().map(|&x| x as f32).collect(),
-            im: v.im.iter().map(|&x| x as f32).collect(),
+            re: pad(&v.re),
+            im: pad(&v.im),
         }
     }
 }
 
-/// Lanes of the single-precision block loops: two AVX2 registers, two independent recursions
+/// Lanes of the portable and AVX2 block loops: two AVX2 registers, two independent recursions
 /// to hide the latency of each.
 const LANES32: usize = 16;
 
@@ -338,7 +375,8 @@ fn power(re: f64, im: f64, n: usize) -> (f64, f64) {
 /// A key's coefficients for the block loops: per mode `e^{lambda h}` in single precision for the
 /// steps inside a block and `e^{lambda h BLOCK}` in double for the state carried from block to
 /// block, so that rounding inside a block is never compounded over a note's life (`e` rounded to
-/// f32 would shift the slowest modes' decay by ~8 %).
+/// f32 would shift the slowest modes' decay by ~8 %). Padded to [`WIDE`] modes (the padding
+/// never moves: its `e` is zero).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub(crate) struct BlockCoefficients {
     pub(crate) e: Split32,
@@ -354,7 +392,8 @@ impl BlockCoefficients {
         rows: &[Split; READS],
         inputs: &[Split; DIRECTIONS],
     ) -> BlockCoefficients {
-        let mut e_block = Split::zeros(e.len());
+        let padded = e.len().div_ceil(WIDE) * WIDE;
+        let mut e_block = Split::zeros(padded);
         for m in 0..e.len() {
             (e_block.re[m], e_block.im[m]) = power(e.re[m], e.im[m], BLOCK);
         }
@@ -365,13 +404,19 @@ impl BlockCoefficients {
             inputs: std::array::from_fn(|j| Split32::new(&inputs[j])),
         }
     }
+
+    /// Modes of the loops (padded).
+    pub(crate) fn modes(&self) -> usize {
+        self.e.re.len()
+    }
 }
 
 /// `len` free steps of every mode, mode by mode (each mode's coefficients loaded once):
 /// `out[i][t] = Re(r_i e^{t+1} z)` for `t < len` in single precision, then `z <- e^len ⊙ z` in
-/// double (`e_step` is the double-precision step, for a block shorter than [`BLOCK`]).
+/// double (`e_step` is the double-precision step, for a block shorter than [`BLOCK`]). `z` holds
+/// at least [`BlockCoefficients::modes`] modes.
 pub(crate) fn free_block(
-    fast: bool,
+    simd: Simd,
     c: &BlockCoefficients,
     e_step: &Split,
     z: &mut Split,
@@ -379,11 +424,13 @@ pub(crate) fn free_block(
     len: usize,
 ) {
     #[cfg(target_arch = "x86_64")]
-    if fast {
-        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
-        return unsafe { free_block_avx2(c, e_step, z, out, len) };
+    match simd {
+        // SAFETY: `Simd::detect` chose these only where the CPU has them.
+        Simd::Avx512 => return unsafe { free_block_avx512(c, e_step, z, out, len) },
+        Simd::Avx2 => return unsafe { free_block_avx2(c, e_step, z, out, len) },
+        Simd::Portable => {}
     }
-    let _ = fast;
+    let _ = simd;
     free_block_with::<false>(c, e_step, z, out, len)
 }
 
@@ -409,6 +456,29 @@ fn fma32<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {
     }
 }
 
+/// The state carried to the next block in double precision: `z <- e^len ⊙ z` on `range`.
+#[inline(always)]
+fn carry(
+    c: &BlockCoefficients,
+    e_step: &Split,
+    z: &mut Split,
+    range: std::ops::Range<usize>,
+    len: usize,
+) {
+    for m in range {
+        let (pr, pi) = if len == BLOCK {
+            (c.e_block.re[m], c.e_block.im[m])
+        } else if m < e_step.len() {
+            power(e_step.re[m], e_step.im[m], len)
+        } else {
+            (0.0, 0.0)
+        };
+        let (a, b) = (z.re[m], z.im[m]);
+        z.re[m] = pr * a - pi * b;
+        z.im[m] = pr * b + pi * a;
+    }
+}
+
 #[inline(always)]
 fn free_block_with<const FMA: bool>(
     c: &BlockCoefficients,
@@ -417,18 +487,16 @@ fn free_block_with<const FMA: bool>(
     out: &mut [[f64; BLOCK]; READS],
     len: usize,
 ) {
-    let n = c.e.re.len();
+    let n = c.modes();
     let mut acc = [[[0f32; LANES32]; BLOCK]; READS];
-    let mut base = 0;
-    while base < n {
-        let lanes = LANES32.min(n - base);
+    for base in (0..n).step_by(LANES32) {
         let mut er = [0f32; LANES32];
         let mut ei = [0f32; LANES32];
         let mut zr = [0f32; LANES32];
         let mut zi = [0f32; LANES32];
         let mut rr = [[0f32; LANES32]; READS];
         let mut ri = [[0f32; LANES32]; READS];
-        for l in 0..lanes {
+        for l in 0..LANES32 {
             let m = base + l;
             (er[l], ei[l]) = (c.e.re[m], c.e.im[m]);
             (zr[l], zi[l]) = (z.re[m] as f32, z.im[m] as f32);
@@ -450,21 +518,65 @@ fn free_block_with<const FMA: bool>(
                 }
             }
         }
-        for m in base..base + lanes {
-            let (pr, pi) = if len == BLOCK {
-                (c.e_block.re[m], c.e_block.im[m])
-            } else {
-                power(e_step.re[m], e_step.im[m], len)
-            };
-            let (a, b) = (z.re[m], z.im[m]);
-            z.re[m] = pr * a - pi * b;
-            z.im[m] = pr * b + pi * a;
-        }
-        base += lanes;
+        carry(c, e_step, z, base..base + LANES32, len);
     }
     for i in 0..READS {
         for t in 0..len {
             out[i][t] = acc[i][t].iter().map(|&x| f64::from(x)).sum();
+        }
+    }
+}
+
+/// [`free_block`] in AVX-512: [`WIDE`] modes a pass in two 16-lane registers, every read's sum
+/// over them in one register per step.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn free_block_avx512(
+    c: &BlockCoefficients,
+    e_step: &Split,
+    z: &mut Split,
+    out: &mut [[f64; BLOCK]; READS],
+    len: usize,
+) {
+    use std::arch::x86_64::*;
+    let n = c.modes();
+    let mut acc = [[_mm512_setzero_ps(); BLOCK]; READS];
+    // SAFETY (every load and store below): `base + 32 <= n`, the length of every coefficient
+    // (padded to WIDE) and at most that of `z` (sized for the largest key, padded).
+    let ld = |x: &[f32], at: usize| _mm512_loadu_ps(x.as_ptr().add(at));
+    let ld64 = |x: &[f64], at: usize| {
+        let lo = _mm512_cvtpd_ps(_mm512_loadu_pd(x.as_ptr().add(at)));
+        let hi = _mm512_cvtpd_ps(_mm512_loadu_pd(x.as_ptr().add(at + 8)));
+        _mm512_insertf32x8::<1>(_mm512_castps256_ps512(lo), hi)
+    };
+    for base in (0..n).step_by(WIDE) {
+        let h = [base, base + 16];
+        let er = h.map(|b| ld(&c.e.re, b));
+        let ei = h.map(|b| ld(&c.e.im, b));
+        let rr: [[__m512; 2]; READS] = std::array::from_fn(|i| h.map(|b| ld(&c.rows[i].re, b)));
+        let ri: [[__m512; 2]; READS] = std::array::from_fn(|i| h.map(|b| ld(&c.rows[i].im, b)));
+        let mut zr = h.map(|b| ld64(&z.re, b));
+        let mut zi = h.map(|b| ld64(&z.im, b));
+        for t in 0..len {
+            for k in 0..2 {
+                let (a, b) = (zr[k], zi[k]);
+                zr[k] = _mm512_fmsub_ps(er[k], a, _mm512_mul_ps(ei[k], b));
+                zi[k] = _mm512_fmadd_ps(er[k], b, _mm512_mul_ps(ei[k], a));
+            }
+            for i in 0..READS {
+                let mut a = acc[i][t];
+                for k in 0..2 {
+                    a = _mm512_fmadd_ps(rr[i][k], zr[k], a);
+                    a = _mm512_fnmadd_ps(ri[i][k], zi[k], a);
+                }
+                acc[i][t] = a;
+            }
+        }
+        carry(c, e_step, z, base..base + WIDE, len);
+    }
+    for i in 0..READS {
+        for t in 0..len {
+            out[i][t] = f64::from(_mm512_reduce_add_ps(acc[i][t]));
         }
     }
 }
@@ -474,18 +586,20 @@ fn free_block_with<const FMA: bool>(
 /// double — by superposition, what stepping the inputs in one at a time adds. The inputs are
 /// [`Reversed`].
 pub(crate) fn fold_block(
-    fast: bool,
+    simd: Simd,
     c: &BlockCoefficients,
     z: &mut Split,
     u: &Reversed,
     len: usize,
 ) {
     #[cfg(target_arch = "x86_64")]
-    if fast {
-        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
-        return unsafe { fold_block_avx2(c, z, u, len) };
+    match simd {
+        // SAFETY: `Simd::detect` chose these only where the CPU has them.
+        Simd::Avx512 => return unsafe { fold_block_avx512(c, z, u, len) },
+        Simd::Avx2 => return unsafe { fold_block_avx2(c, z, u, len) },
+        Simd::Portable => {}
     }
-    let _ = fast;
+    let _ = simd;
     fold_block_with::<false>(c, z, u, len)
 }
 
@@ -502,17 +616,15 @@ fn fold_block_with<const FMA: bool>(
     u: &Reversed,
     len: usize,
 ) {
-    let n = c.e.re.len();
-    let u32s: [[f32; DIRECTIONS]; BLOCK] =
-        std::array::from_fn(|t| std::array::from_fn(|j| u[j][BLOCK - 1 - t] as f32));
-    let mut base = 0;
-    while base < n {
-        let lanes = LANES32.min(n - base);
+    let n = c.modes();
+    let steps: [[f32; DIRECTIONS]; BLOCK] =
+        std::array::from_fn(|t| std::array::from_fn(|j| u[j][BLOCK - 1 - t]));
+    for base in (0..n).step_by(LANES32) {
         let mut er = [0f32; LANES32];
         let mut ei = [0f32; LANES32];
         let mut gr = [[0f32; LANES32]; DIRECTIONS];
         let mut gi = [[0f32; LANES32]; DIRECTIONS];
-        for l in 0..lanes {
+        for l in 0..LANES32 {
             let m = base + l;
             (er[l], ei[l]) = (c.e.re[m], c.e.im[m]);
             for j in 0..DIRECTIONS {
@@ -520,7 +632,7 @@ fn fold_block_with<const FMA: bool>(
             }
         }
         let (mut ar, mut ai) = ([0f32; LANES32], [0f32; LANES32]);
-        for ut in u32s.iter().take(len) {
+        for ut in steps.iter().take(len) {
             for l in 0..LANES32 {
                 let (a, b) = (ar[l], ai[l]);
                 let (mut re, mut im) = (
@@ -534,10 +646,62 @@ fn fold_block_with<const FMA: bool>(
                 (ar[l], ai[l]) = (re, im);
             }
         }
-        for l in 0..lanes {
+        for l in 0..LANES32 {
             z.re[base + l] += f64::from(ar[l]);
             z.im[base + l] += f64::from(ai[l]);
         }
-        base += lanes;
+    }
+}
+
+/// [`fold_block`] in AVX-512: [`WIDE`] modes a pass in two 16-lane registers, the step's inputs
+/// summed apart from the recursion (so that its chain is two operations long).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn fold_block_avx512(c: &BlockCoefficients, z: &mut Split, u: &Reversed, len: usize) {
+    use std::arch::x86_64::*;
+    let n = c.modes();
+    // SAFETY (every load and store below): `base + 32 <= n`, the length of every coefficient
+    // (padded to WIDE) and at most that of `z`.
+    let ld = |x: &[f32], at: usize| _mm512_loadu_ps(x.as_ptr().add(at));
+    for base in (0..n).step_by(WIDE) {
+        let h = [base, base + 16];
+        let er = h.map(|b| ld(&c.e.re, b));
+        let ei = h.map(|b| ld(&c.e.im, b));
+        let gr: [[__m512; 2]; DIRECTIONS] =
+            std::array::from_fn(|j| h.map(|b| ld(&c.inputs[j].re, b)));
+        let gi: [[__m512; 2]; DIRECTIONS] =
+            std::array::from_fn(|j| h.map(|b| ld(&c.inputs[j].im, b)));
+        let (mut ar, mut ai) = ([_mm512_setzero_ps(); 2], [_mm512_setzero_ps(); 2]);
+        for t in 0..len {
+            let x: [__m512; DIRECTIONS] =
+                std::array::from_fn(|j| _mm512_set1_ps(u[j][BLOCK - 1 - t]));
+            for k in 0..2 {
+                let mut ur = _mm512_mul_ps(gr[0][k], x[0]);
+                let mut ui = _mm512_mul_ps(gi[0][k], x[0]);
+                for j in 1..DIRECTIONS {
+                    ur = _mm512_fmadd_ps(gr[j][k], x[j], ur);
+                    ui = _mm512_fmadd_ps(gi[j][k], x[j], ui);
+                }
+                let (a, b) = (ar[k], ai[k]);
+                ar[k] = _mm512_fmadd_ps(er[k], a, _mm512_fnmadd_ps(ei[k], b, ur));
+                ai[k] = _mm512_fmadd_ps(er[k], b, _mm512_fmadd_ps(ei[k], a, ui));
+            }
+        }
+        // The sums added to the state in double precision, eight modes at a time.
+        for k in 0..2 {
+            let halves = [
+                (_mm512_castps512_ps256(ar[k]), _mm512_castps512_ps256(ai[k])),
+                (
+                    _mm512_extractf32x8_ps::<1>(ar[k]),
+                    _mm512_extractf32x8_ps::<1>(ai[k]),
+                ),
+            ];
+            for (part, (sr, si)) in halves.into_iter().enumerate() {
+                let at = h[k] + 8 * part;
+                let (pr, pi) = (z.re.as_mut_ptr().add(at), z.im.as_mut_ptr().add(at));
+                _mm512_storeu_pd(pr, _mm512_add_pd(_mm512_loadu_pd(pr), _mm512_cvtps_pd(sr)));
+                _mm512_storeu_pd(pi, _mm512_add_pd(_mm512_loadu_pd(pi), _mm512_cvtps_pd(si)));
+            }
+        }
     }
 }

@@ -1,9 +1,18 @@
-//! One key's coefficients for the exact engine: its coupled system (strings on their contact
-//! springs, the duplex felt, its copy of the board) in complex modes, and every row and input a
-//! voice reads and drives it through — the hammer (ETDRK4 weights), the other keys' board motion
-//! at its bridge point (the coupling), the damper felt, the radiated volume velocity.
+//! One key's coefficients for the exact engine: its strings on their contact springs, the duplex
+//! felt and the board's modes above [`SHARED_BELOW_HZ`] under its bridge point, diagonalised once
+//! into complex modes ([`KeyModes`], the costly part, kept between runs), and everything a voice
+//! derives from them for its step ([`ExactKey`]): the propagators, the hammer's ETDRK4 weights, the
+//! shared board's motion at the bridge entering as an input, the damper felt, the reads.
+//!
+//! The board's motion `D` at the bridge point (the shared low modes, [`super::interface`]) enters
+//! linear over each step, from `D^n` to `D^{n+1}`: `z' = e z + g_v D^n + g_s (D^{n+1} - D^n)/h`,
+//! exact for such an input. In the shifted state `w = z - a D` with `a = g_s/h` this has one input,
+//! the value known at the start of the step: `w' = e w + beta D^n`, `beta = g_v + (e - 1) a` — so a
+//! voice's reads after the step are known before `D^{n+1}` is, but for `Z D^{n+1}` with a 3×3 `Z`
+//! per key, and the interface solves for `D^{n+1}` ([`super::interface`]).
 
-use super::kernels::{BlockCoefficients, Split, Taps, BLOCK, DIRECTIONS, INPUTS, READS};
+use super::interface::SHARED_BELOW_HZ;
+use super::kernels::{BlockCoefficients, Split, Taps, BLOCK, DIRECTIONS, READS};
 use crate::engine::modal::{input_weights, Modal};
 use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::physics::hammer::HammerParams;
@@ -14,11 +23,13 @@ use std::ops::Range;
 /// Damper channels of a key at most: T and P of each string.
 pub(crate) const DAMPER_CHANNELS: usize = 2 * MAX_STRINGS;
 
-/// Where each string direction's modes and the board's lie in `q`.
+/// Where each string direction's modes and the key's board modes lie in `q`, and which of the
+/// board's modes the key carries (those at or above [`SHARED_BELOW_HZ`]).
 #[derive(Debug, Clone)]
 struct Layout {
     strings: [[Range<usize>; 3]; MAX_STRINGS],
     board: Range<usize>,
+    board_modes: Vec<usize>,
     n: usize,
 }
 
@@ -33,10 +44,14 @@ impl Layout {
                 at += n;
             }
         }
-        let board = at..at + spec.board.len();
+        let board_modes: Vec<usize> = (0..spec.board.len())
+            .filter(|&k| spec.board.freq_hz[k] >= SHARED_BELOW_HZ)
+            .collect();
+        let board = at..at + board_modes.len();
         Layout {
             strings,
             board: board.clone(),
+            board_modes,
             n: board.end,
         }
     }
@@ -49,10 +64,20 @@ impl Layout {
         }
         v
     }
+
+    /// A vector over `q` from a value per board mode of the whole board (the key's share).
+    fn board_vector(&self, x: &[f64]) -> Vec<f64> {
+        self.vector(
+            self.board
+                .clone()
+                .zip(&self.board_modes)
+                .map(|(i, &k)| (i, x[k])),
+        )
+    }
 }
 
 /// One key's second-order system `qdd = -K q - C qdot + ...` (dense, row-major), contact
-/// springs, duplex damping and the board at its point folded in.
+/// springs, duplex damping and its board modes at its point folded in.
 fn coupled_system(
     spec: &UnisonSpec,
     layout: &Layout,
@@ -105,7 +130,7 @@ fn coupled_system(
             }
         }
     }
-    for (m, i) in layout.board.clone().enumerate() {
+    for (i, &m) in layout.board.clone().zip(&layout.board_modes) {
         let mode = spec.board.oscillator(m);
         k[i * n + i] += mode.omega2();
         c[i * n + i] += mode.damping_per_s();
@@ -113,8 +138,8 @@ fn coupled_system(
     (k, c)
 }
 
-/// `w_sd`: string `s`'s end in direction `d` relative to the board under it, `psi(L_s)` on the
-/// string's modes and `-phi_d` on the board's (Eq. 6, 17).
+/// `w_sd`: string `s`'s end in direction `d` relative to the key's board modes under it,
+/// `psi(L_s)` on the string's modes and `-phi_d` on the board's (Eq. 6, 17).
 fn contact_vector(
     spec: &UnisonSpec,
     layout: &Layout,
@@ -123,19 +148,131 @@ fn contact_vector(
     d: usize,
 ) -> Vec<f64> {
     let string = &spec.strings[s];
-    layout.vector(
-        layout.strings[s][d]
-            .clone()
-            .enumerate()
-            .map(|(j, i)| (i, string.mode_shape(j + 1, string.speaking_length_m)))
-            .chain(
-                layout
-                    .board
+    let mut w = layout.board_vector(&point[d].iter().map(|x| -x).collect::<Vec<_>>());
+    for (j, i) in layout.strings[s][d].clone().enumerate() {
+        w[i] += string.mode_shape(j + 1, string.speaking_length_m);
+    }
+    w
+}
+
+/// A key's coupled system in complex modes: the eigenvalues and every row and input a voice
+/// reads or drives — the costly part of preparing a key (an eigen-decomposition of order
+/// `2 × modes`), kept between runs ([`super::bytes`]). Everything else is derived from it.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct KeyModes {
+    /// Every kept mode's eigenvalue `lambda` (1/s), one of each conjugate pair.
+    pub(crate) lambda: Vec<c64>,
+    /// Per string: the striking point's displacement row and the felt force's input (Eq. 14).
+    pub(crate) strike_row: Vec<Split>,
+    pub(crate) strike_input: Vec<Split>,
+    /// Per string and direction, the contact force's row (Eq. 6, relative to the key's board
+    /// modes); per direction, the key's board modes' velocity at the bridge point; the key's
+    /// board modes' net volume velocity.
+    pub(crate) force_row: Vec<[Split; 3]>,
+    pub(crate) bridge_velocity_row: [Split; 3],
+    pub(crate) volume_row: Split,
+    /// Per direction, the inputs of the shared board's motion `D` at the bridge: every string's
+    /// contact spring stretched by it (`k_d D`) and its damper (`c_d Ddot`).
+    pub(crate) bridge_input: [[Split; 2]; 3],
+    /// Per damper channel (T and P of each string at the felt): its velocity row and its force's
+    /// input.
+    pub(crate) damper_row: Vec<Split>,
+    pub(crate) damper_input: Vec<Split>,
+    /// Per mode, its mechanical energy per `|z|^2` (J, cycle-averaged).
+    pub(crate) energy: Vec<f64>,
+}
+
+impl KeyModes {
+    /// Diagonalise `spec`'s key at the step `1 / spec.sample_rate_hz`.
+    pub(crate) fn new(spec: &UnisonSpec) -> Result<KeyModes, BuildError> {
+        let ns = spec.strings.len();
+        if ns == 0 || ns > MAX_STRINGS {
+            return Err(BuildError::StringCount(ns));
+        }
+        let point = spec
+            .board
+            .points
+            .get(spec.bridge_point)
+            .ok_or(BuildError::BridgePoint(spec.bridge_point))?
+            .shape
+            .clone();
+        let layout = Layout::new(spec);
+        let (k, c) = coupled_system(spec, &layout, &point);
+        let modal = Modal::new(&k, &c, layout.n, 1.0 / spec.sample_rate_hz)?;
+        let s0 = &spec.strings[0];
+        let t_modes = |s: usize, x: f64| {
+            let string = &spec.strings[s];
+            layout.vector(
+                layout.strings[s][Direction::T.index()]
                     .clone()
                     .enumerate()
-                    .map(|(m, i)| (i, -point[d][m])),
-            ),
-    )
+                    .map(move |(j, i)| (i, string.mode_shape(j + 1, x))),
+            )
+        };
+        let strike_x = spec.hammer.strike_ratio * s0.speaking_length_m;
+        let (mut strike_row, mut strike_input, mut force_row) = (vec![], vec![], vec![]);
+        for s in 0..ns {
+            let psi_e = t_modes(s, strike_x);
+            strike_row.push(Split::new(&modal.row(&psi_e, false)));
+            strike_input.push(Split::new(&modal.input(&psi_e)));
+            force_row.push(std::array::from_fn(|d| {
+                let w = contact_vector(spec, &layout, &point, s, d);
+                let (kc, cc) = (spec.contact.stiffness_n_m[d], spec.contact.damping_n_s_m[d]);
+                let row: Vec<c64> = modal
+                    .row(&w, false)
+                    .iter()
+                    .zip(modal.row(&w, true))
+                    .map(|(q, v)| q * kc + v * cc)
+                    .collect();
+                Split::new(&row)
+            }));
+        }
+        let board_row = |x: &[f64]| Split::new(&modal.row(&layout.board_vector(x), true));
+        let bridge_input = std::array::from_fn(|d| {
+            let mut w = vec![0.0; layout.n];
+            for s in 0..ns {
+                let ws = contact_vector(spec, &layout, &point, s, d);
+                w.iter_mut().zip(ws).for_each(|(x, y)| *x += y);
+            }
+            [spec.contact.stiffness_n_m[d], spec.contact.damping_n_s_m[d]]
+                .map(|g| Split::new(&modal.input(&w.iter().map(|x| x * g).collect::<Vec<_>>())))
+        });
+        let (mut damper_row, mut damper_input) = (vec![], vec![]);
+        if let Some(damper) = spec.damper {
+            let x = damper.position_ratio * s0.speaking_length_m;
+            for s in 0..ns {
+                let string = &spec.strings[s];
+                for dir in [Direction::T, Direction::P] {
+                    let v = layout.vector(
+                        layout.strings[s][dir.index()]
+                            .clone()
+                            .enumerate()
+                            .map(|(j, i)| (i, string.mode_shape(j + 1, x))),
+                    );
+                    damper_row.push(Split::new(&modal.row(&v, true)));
+                    damper_input.push(Split::new(&modal.input(&v)));
+                }
+            }
+        }
+        let mut energy = modal.energy(&k);
+        energy.truncate(modal.keep.len());
+        Ok(KeyModes {
+            lambda: modal.lambda.clone(),
+            strike_row,
+            strike_input,
+            force_row,
+            bridge_velocity_row: std::array::from_fn(|d| board_row(&point[d])),
+            volume_row: board_row(&spec.board.volume_m2_per_sqrt_kg),
+            bridge_input,
+            damper_row,
+            damper_input,
+            energy,
+        })
+    }
+
+    pub(crate) fn n_modes(&self) -> usize {
+        self.lambda.len()
+    }
 }
 
 /// The damper felt of a key as an implicit feedback on its strings: channel `j` is the T or P
@@ -155,12 +292,82 @@ pub(crate) struct DamperKey {
     /// What each channel's `f^n` and `f^{n+1}` add to the step's reads (volume velocity, forces).
     pub(crate) reads_from: [[f64; DAMPER_CHANNELS]; READS],
     pub(crate) reads_to: [[f64; DAMPER_CHANNELS]; READS],
+    /// What a unit of `D^{n+1}_d` adds to each channel's `f^{n+1}` (through `a D` in the velocity).
+    pub(crate) settle: [[f64; DIRECTIONS]; DAMPER_CHANNELS],
 }
 
-/// `Re(r_i e^k g_j)` for `k < BLOCK`.
+impl DamperKey {
+    fn new(
+        modes: &KeyModes,
+        weights: &[[c64; 2]],
+        h: f64,
+        damping_n_s_m: f64,
+        reads: &[Split; READS],
+        settle: &[Split; DIRECTIONS],
+    ) -> DamperKey {
+        let rows = modes.damper_row.clone();
+        let r = rows.len();
+        let (mut from, mut to) = (vec![], vec![]);
+        for g in &modes.damper_input {
+            // f linear from f0 to f1: h phi1 f0 + h phi2 (f1 - f0).
+            from.push(Split::weighted(g, weights, |[w1, w2]| w1 - w2 / h));
+            to.push(Split::weighted(g, weights, |[_, w2]| w2 / h));
+        }
+        let cf = damping_n_s_m;
+        let mut rows_from = [0.0; DAMPER_CHANNELS * DAMPER_CHANNELS];
+        let mut a = faer::Mat::<f64>::zeros(r, r);
+        for i in 0..r {
+            for j in 0..r {
+                rows_from[i * DAMPER_CHANNELS + j] = rows[i].read(&from[j]);
+                a[(i, j)] = f64::from(u8::from(i == j)) + cf * rows[i].read(&to[j]);
+            }
+        }
+        let inv = faer::linalg::solvers::DenseSolveCore::inverse(&a.partial_piv_lu());
+        let mut solve = [0.0; DAMPER_CHANNELS * DAMPER_CHANNELS];
+        for i in 0..r {
+            for j in 0..r {
+                solve[i * DAMPER_CHANNELS + j] = -cf * inv[(i, j)];
+            }
+        }
+        let reads_from = std::array::from_fn(|i| {
+            std::array::from_fn(|j| if j < r { reads[i].read(&from[j]) } else { 0.0 })
+        });
+        let reads_to = std::array::from_fn(|i| {
+            std::array::from_fn(|j| if j < r { reads[i].read(&to[j]) } else { 0.0 })
+        });
+        let settle = std::array::from_fn(|i| {
+            std::array::from_fn(|d| {
+                (0..r)
+                    .map(|j| solve[i * DAMPER_CHANNELS + j] * rows[j].read(&settle[d]))
+                    .sum()
+            })
+        });
+        DamperKey {
+            channels: r,
+            rows,
+            from,
+            to,
+            rows_from,
+            solve,
+            reads_from,
+            reads_to,
+            settle,
+        }
+    }
+}
+
+/// How the reads after a step depend on `D^{n+1}`: `Z[i][d]` for the total contact force (N/m)
+/// and the volume velocity's `[d]`, with the damper lifted or down.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Settle {
+    pub(crate) force: [[f64; DIRECTIONS]; DIRECTIONS],
+    pub(crate) volume: [f64; DIRECTIONS],
+}
+
+/// `Re(r_i e^k g_d)` for `k < BLOCK`.
 fn markov_parameters(e: &[c64], rows: &[Split; READS], inputs: &[Split; DIRECTIONS]) -> Box<Taps> {
     let mut power: Vec<c64> = vec![c64::new(1.0, 0.0); e.len()];
-    let mut out = Box::new([[[0.0; BLOCK]; DIRECTIONS]; READS]);
+    let mut out = Box::new([[[0f32; BLOCK]; DIRECTIONS]; READS]);
     for k in 0..BLOCK {
         for (i, row) in rows.iter().enumerate() {
             for (j, input) in inputs.iter().enumerate() {
@@ -170,7 +377,7 @@ fn markov_parameters(e: &[c64], rows: &[Split; READS], inputs: &[Split; DIRECTIO
                         let g = c64::new(input.re[m], input.im[m]);
                         (r * power[m] * g).re
                     })
-                    .sum();
+                    .sum::<f64>() as f32;
             }
         }
         for (p, e) in power.iter_mut().zip(e) {
@@ -183,50 +390,44 @@ fn markov_parameters(e: &[c64], rows: &[Split; READS], inputs: &[Split; DIRECTIO
 /// One key's coefficients (module notes), shared by every voice that plays it.
 #[derive(Debug, Clone)]
 pub struct ExactKey {
+    /// What they are derived from (kept to be stored).
+    pub(crate) modes: KeyModes,
     pub(crate) n_strings: usize,
     pub(crate) h: f64,
-    /// Every mode's eigenvalue `lambda` (1/s), one of each conjugate pair.
-    pub(crate) lambda: Vec<c64>,
     /// `e^{lambda h/2}`, `e^{lambda h}`.
     pub(crate) eh: Split,
     pub(crate) ef: Split,
-    /// Per string: the striking point's displacement row, and the felt force's input through
-    /// ETDRK4's `Q`, `f1`, `f2`, `f3` (Eq. 14-15 in modal coordinates).
-    pub(crate) strike_row: Vec<Split>,
+    /// Per string, the felt force's input through ETDRK4's `Q`, `f1`, `f2`, `f3`.
     pub(crate) drive_q: Vec<Split>,
     pub(crate) drive_f: Vec<[Split; 3]>,
-    /// Per string and direction, the contact force's row (Eq. 6); per direction, the board's
-    /// velocity at the bridge point.
-    pub(crate) force_row: Vec<[Split; 3]>,
-    pub(crate) bridge_velocity_row: [Split; 3],
-    /// Read after every step: the board's net volume velocity, and the total contact force per
-    /// direction T, L, P (the force this key puts on the shared board).
+    /// Read after every step: the key's board modes' net volume velocity, and the total contact
+    /// force per direction T, L, P relative to them (the force on the shared board is this less
+    /// `feed_k D + feed_c Ddot`).
     pub(crate) reads: [Split; READS],
-    /// The other keys' board displacement `D_d` at this bridge point entering over the step as
-    /// `D_d + s_d tau`: inputs of `D_T, D_L, D_P, s_T, s_L, s_P` (the contact springs and dampers
-    /// stretched by it, Eq. 6), and its direct part in the total contact force,
-    /// `-n_s (k_d D_d + c_d s_d)`.
-    pub(crate) coupling: [Split; INPUTS],
     pub(crate) feed_k: [f64; 3],
     pub(crate) feed_c: [f64; 3],
+    /// Per direction: `a_d` (`z = w + a D`), `beta_d` (`w' = e w + beta D^n`) and `g_v - a`
+    /// (what `D^n` adds over a contact step taken on `z`).
+    pub(crate) settle: [Split; DIRECTIONS],
+    pub(crate) beta: [Split; DIRECTIONS],
+    pub(crate) hold: [Split; DIRECTIONS],
+    /// How the reads depend on `D^{n+1}`, damper lifted and down.
+    pub(crate) free: Settle,
+    pub(crate) damped: Settle,
+    /// `Re(r a_d)` of each string's striking-point row, and of each force and bridge-velocity row
+    /// (what `D` adds to them beside `w`).
+    pub(crate) strike_settle: Vec<[f64; DIRECTIONS]>,
+    pub(crate) force_settle: Vec<[[f64; DIRECTIONS]; 3]>,
+    pub(crate) velocity_settle: [[f64; DIRECTIONS]; 3],
     /// Per direction, the modes' static response to a unit `D` held (a key joining a moving
     /// board starts on it, not jolted by its contact springs).
     pub(crate) follow: [Split; 3],
-    /// The coupling over a block with one input per direction: the ramp's two inputs
-    /// `z' = e z + g_v D_n + g_s (D_n - D_{n-1})/h` become one, `w' = e w + beta D_n`, in the
-    /// shifted state `w_n = z_n + alpha D_{n-1}` with `alpha = -g_s/(h e)` and
-    /// `beta = g_v + g_s/h + alpha` (the reads corrected by `-Re(r_i alpha) D_n`).
-    pub(crate) block_alpha: [Split; DIRECTIONS],
-    pub(crate) block_alpha_read: [[f64; DIRECTIONS]; READS],
-    /// The block loops' coefficients: `e`, the reads and the inputs `beta_d`.
+    /// The block loops' coefficients: `e`, the reads and the inputs `beta_d`; what a unit of
+    /// `D_d` entering at one step adds to each read `k` steps later, `Re(r_i e^k beta_d)`
+    /// (a block advanced freely, mode by mode, gets its input back by superposition).
     pub(crate) block: BlockCoefficients,
-    /// What a unit of `D_d` entering at one step adds to each read `k` steps later,
-    /// `Re(r_i e^{lambda h k} beta_d)` for `k < BLOCK` (the key's Markov parameters: a block
-    /// advanced freely, mode by mode, gets its coupling back by superposition).
     pub(crate) markov: Box<Taps>,
     pub(crate) damper: Option<DamperKey>,
-    /// Per mode, its mechanical energy per `|z|^2` (J, cycle-averaged).
-    pub(crate) energy: Vec<f64>,
     pub(crate) hammer: HammerParams,
 }
 
@@ -234,208 +435,140 @@ impl ExactKey {
     /// Diagonalise `spec`'s key for the step `1 / spec.sample_rate_hz` and form its rows and
     /// inputs.
     pub fn new(spec: &UnisonSpec) -> Result<ExactKey, BuildError> {
-        let ns = spec.strings.len();
-        if ns == 0 || ns > MAX_STRINGS {
-            return Err(BuildError::StringCount(ns));
-        }
+        Ok(ExactKey::from_modes(spec, KeyModes::new(spec)?))
+    }
+
+    /// Everything a voice steps with, from the key's modes (cheap: no decomposition).
+    pub(crate) fn from_modes(spec: &UnisonSpec, modes: KeyModes) -> ExactKey {
         let h = 1.0 / spec.sample_rate_hz;
-        let point = spec
-            .board
-            .points
-            .get(spec.bridge_point)
-            .ok_or(BuildError::BridgePoint(spec.bridge_point))?
-            .shape
-            .clone();
-        let layout = Layout::new(spec);
-        let (k, c) = coupled_system(spec, &layout, &point);
-        let modal = Modal::new(&k, &c, layout.n, h)?;
-        let s0 = &spec.strings[0];
-        let strike_x = spec.hammer.strike_ratio * s0.speaking_length_m;
-        let t_modes = |s: usize, x: f64| {
-            let string = &spec.strings[s];
-            layout.vector(
-                layout.strings[s][Direction::T.index()]
-                    .clone()
-                    .enumerate()
-                    .map(move |(j, i)| (i, string.mode_shape(j + 1, x))),
-            )
-        };
-        let mut strike_row = Vec::new();
-        let mut drive_q = Vec::new();
-        let mut drive_f = Vec::new();
-        let mut force_row = Vec::new();
-        for s in 0..ns {
-            let psi_e = t_modes(s, strike_x);
-            strike_row.push(Split::new(&modal.row(&psi_e, false)));
-            let g = modal.input(&psi_e);
-            drive_q.push(Split::times(&g, &modal.etd[0]));
-            drive_f.push(std::array::from_fn(|w| Split::times(&g, &modal.etd[2 + w])));
-            force_row.push(std::array::from_fn(|d| {
-                let w = contact_vector(spec, &layout, &point, s, d);
-                let (kc, cc) = (spec.contact.stiffness_n_m[d], spec.contact.damping_n_s_m[d]);
-                let row: Vec<c64> = modal
-                    .row(&w, false)
-                    .iter()
-                    .zip(modal.row(&w, true))
-                    .map(|(q, v)| q * kc + v * cc)
-                    .collect();
-                Split::new(&row)
-            }));
-        }
-        let board_row = |x: &[f64]| -> Split {
-            let v = layout.vector(layout.board.clone().enumerate().map(|(m, i)| (i, x[m])));
-            Split::new(&modal.row(&v, true))
-        };
+        let n = modes.n_modes();
+        let exp = |t: f64| -> Vec<c64> { modes.lambda.iter().map(|&l| (l * t).exp()).collect() };
+        let (eh, ef) = (exp(0.5 * h), exp(h));
+        let etd: Vec<[c64; 5]> = modes
+            .lambda
+            .iter()
+            .map(|&l| crate::engine::modal::etd_weights(l, h))
+            .collect();
+        let weights: Vec<[c64; 2]> = modes.lambda.iter().map(|&l| input_weights(l, h)).collect();
+        let drive_q = modes
+            .strike_input
+            .iter()
+            .map(|g| Split::weighted_by(g, |m| etd[m][0]))
+            .collect();
+        let drive_f = modes
+            .strike_input
+            .iter()
+            .map(|g| std::array::from_fn(|w| Split::weighted_by(g, |m| etd[m][2 + w])))
+            .collect();
         let total_force = |d: usize| -> Split {
-            let mut t = Split::zeros(modal.keep.len());
-            for row in &force_row {
-                let row: &[Split; 3] = row;
+            let mut t = Split::zeros(n);
+            for row in &modes.force_row {
                 row[d].add_to(&mut t, 1.0);
             }
             t
         };
         let reads = [
-            board_row(&spec.board.volume_m2_per_sqrt_kg),
+            modes.volume_row.clone(),
             total_force(0),
             total_force(1),
             total_force(2),
         ];
-        // The coupling: D_d stretches every string's contact spring and damper in direction d.
-        let weights: Vec<[c64; 2]> = modal.lambda.iter().map(|&l| input_weights(l, h)).collect();
-        let coupling_inputs: [[Vec<c64>; 3]; 3] = std::array::from_fn(|d| {
-            let mut w = vec![0.0; layout.n];
-            for s in 0..ns {
-                for (x, y) in w
-                    .iter_mut()
-                    .zip(contact_vector(spec, &layout, &point, s, d))
-                {
-                    *x += y;
-                }
-            }
-            let gk = modal.input(
-                &w.iter()
-                    .map(|x| x * spec.contact.stiffness_n_m[d])
-                    .collect::<Vec<_>>(),
-            );
-            let gc = modal.input(
-                &w.iter()
-                    .map(|x| x * spec.contact.damping_n_s_m[d])
-                    .collect::<Vec<_>>(),
-            );
-            // D enters as k D + c Ddot with D = D0 + s tau: value h phi1 gk, slope
-            // h phi1 gc + h^2 phi2 gk.
-            let value: Vec<c64> = (0..gk.len()).map(|m| weights[m][0] * gk[m]).collect();
-            let slope: Vec<c64> = (0..gk.len())
-                .map(|m| weights[m][0] * gc[m] + weights[m][1] * gk[m])
-                .collect();
-            // Held at D, the modes settle at -gk D / lambda: the strings following the bridge.
-            let follow: Vec<c64> = (0..gk.len()).map(|m| -gk[m] / modal.lambda[m]).collect();
-            [value, slope, follow]
+        // D enters as k D + c Ddot with D = D^n + s tau: value h phi1 gk, slope
+        // h phi1 gc + h^2 phi2 gk.
+        let value: [Split; 3] = std::array::from_fn(|d| {
+            Split::weighted(&modes.bridge_input[d][0], &weights, |[w1, _]| w1)
         });
-        let coupling = std::array::from_fn(|j| Split::new(&coupling_inputs[j % 3][j / 3]));
-        let follow = std::array::from_fn(|d| Split::new(&coupling_inputs[d][2]));
-        let n_s = ns as f64;
-        let alpha: [Vec<c64>; DIRECTIONS] = std::array::from_fn(|d| {
-            (0..modal.ef.len())
-                .map(|m| -coupling_inputs[d][1][m] / (h * modal.ef[m]))
-                .collect()
+        let slope: [Split; 3] = std::array::from_fn(|d| {
+            let [gk, gc] = &modes.bridge_input[d];
+            let mut s = Split::weighted(gc, &weights, |[w1, _]| w1);
+            Split::weighted(gk, &weights, |[_, w2]| w2).add_to(&mut s, 1.0);
+            s
         });
-        let beta: [Vec<c64>; DIRECTIONS] = std::array::from_fn(|d| {
-            (0..modal.ef.len())
-                .map(|m| coupling_inputs[d][0][m] + coupling_inputs[d][1][m] / h + alpha[d][m])
-                .collect()
+        let settle: [Split; 3] =
+            std::array::from_fn(|d| Split::weighted_by(&slope[d], |_| c64::new(1.0 / h, 0.0)));
+        let beta = std::array::from_fn(|d| {
+            let mut b = value[d].clone();
+            Split::weighted_by(&settle[d], |m| ef[m] - c64::new(1.0, 0.0)).add_to(&mut b, 1.0);
+            b
         });
-        let block_beta = beta.map(|b| Split::new(&b));
-        let block_alpha = alpha.map(|a| Split::new(&a));
-        let block_alpha_read =
-            std::array::from_fn(|i| std::array::from_fn(|d| reads[i].read(&block_alpha[d])));
-        let markov = markov_parameters(&modal.ef, &reads, &block_beta);
-        let block = BlockCoefficients::new(&Split::new(&modal.ef), &reads, &block_beta);
+        let hold = std::array::from_fn(|d| {
+            let mut b = value[d].clone();
+            settle[d].add_to(&mut b, -1.0);
+            b
+        });
+        // Held at D, the modes settle at -gk D / lambda: the strings following the bridge.
+        let follow = std::array::from_fn(|d| {
+            Split::weighted_by(&modes.bridge_input[d][0], |m| -modes.lambda[m].inv())
+        });
+        let n_s = modes.force_row.len() as f64;
+        let feed_k = std::array::from_fn(|d| n_s * spec.contact.stiffness_n_m[d]);
+        let feed_c = std::array::from_fn(|d| n_s * spec.contact.damping_n_s_m[d]);
+        let free = Settle {
+            force: std::array::from_fn(|i| {
+                std::array::from_fn(|d| {
+                    let direct = if i == d {
+                        feed_k[d] + feed_c[d] / h
+                    } else {
+                        0.0
+                    };
+                    reads[1 + i].read(&settle[d]) - direct
+                })
+            }),
+            volume: std::array::from_fn(|d| reads[0].read(&settle[d])),
+        };
         let damper = spec.damper.map(|damper| {
-            let x = damper.position_ratio * s0.speaking_length_m;
-            let mut rows = Vec::new();
-            let mut from = Vec::new();
-            let mut to = Vec::new();
-            for s in 0..ns {
-                let string = &spec.strings[s];
-                for dir in [Direction::T, Direction::P] {
-                    let v = layout.vector(
-                        layout.strings[s][dir.index()]
-                            .clone()
-                            .enumerate()
-                            .map(|(j, i)| (i, string.mode_shape(j + 1, x))),
-                    );
-                    rows.push(Split::new(&modal.row(&v, true)));
-                    let g = modal.input(&v);
-                    // f linear from f0 to f1: h phi1 f0 + h phi2 (f1 - f0).
-                    let f0: Vec<c64> = (0..g.len())
-                        .map(|m| (weights[m][0] - weights[m][1] / h) * g[m])
-                        .collect();
-                    let f1: Vec<c64> = (0..g.len()).map(|m| weights[m][1] / h * g[m]).collect();
-                    from.push(Split::new(&f0));
-                    to.push(Split::new(&f1));
-                }
-            }
-            let r = rows.len();
-            let cf = damper.damping_n_s_m;
-            let mut rows_from = [0.0; DAMPER_CHANNELS * DAMPER_CHANNELS];
-            let mut a = faer::Mat::<f64>::zeros(r, r);
-            for i in 0..r {
-                for j in 0..r {
-                    rows_from[i * DAMPER_CHANNELS + j] = rows[i].read(&from[j]);
-                    a[(i, j)] = f64::from(u8::from(i == j)) + cf * rows[i].read(&to[j]);
-                }
-            }
-            let inv = faer::linalg::solvers::DenseSolveCore::inverse(&a.partial_piv_lu());
-            let mut solve = [0.0; DAMPER_CHANNELS * DAMPER_CHANNELS];
-            for i in 0..r {
-                for j in 0..r {
-                    solve[i * DAMPER_CHANNELS + j] = -cf * inv[(i, j)];
-                }
-            }
-            let reads_from = std::array::from_fn(|i| {
-                std::array::from_fn(|j| if j < r { reads[i].read(&from[j]) } else { 0.0 })
-            });
-            let reads_to = std::array::from_fn(|i| {
-                std::array::from_fn(|j| if j < r { reads[i].read(&to[j]) } else { 0.0 })
-            });
-            DamperKey {
-                channels: r,
-                rows,
-                from,
-                to,
-                rows_from,
-                solve,
-                reads_from,
-                reads_to,
+            DamperKey::new(&modes, &weights, h, damper.damping_n_s_m, &reads, &settle)
+        });
+        let damped = damper.as_ref().map_or(free, |dk| {
+            let through = |i: usize, d: usize| -> f64 {
+                (0..dk.channels)
+                    .map(|j| dk.reads_to[i][j] * dk.settle[j][d])
+                    .sum()
+            };
+            Settle {
+                force: std::array::from_fn(|i| {
+                    std::array::from_fn(|d| free.force[i][d] + through(1 + i, d))
+                }),
+                volume: std::array::from_fn(|d| free.volume[d] + through(0, d)),
             }
         });
-        let mut energy = modal.energy(&k);
-        energy.truncate(modal.keep.len());
-        Ok(ExactKey {
-            n_strings: ns,
+        let reads_of =
+            |row: &Split| -> [f64; DIRECTIONS] { std::array::from_fn(|d| row.read(&settle[d])) };
+        let strike_settle = modes.strike_row.iter().map(reads_of).collect();
+        let force_settle = modes
+            .force_row
+            .iter()
+            .map(|rows| std::array::from_fn(|d| reads_of(&rows[d])))
+            .collect();
+        let velocity_settle = std::array::from_fn(|d| reads_of(&modes.bridge_velocity_row[d]));
+        let markov = markov_parameters(&ef, &reads, &beta);
+        let ef = Split::new(&ef);
+        let block = BlockCoefficients::new(&ef, &reads, &beta);
+        ExactKey {
+            n_strings: modes.force_row.len(),
             h,
-            lambda: modal.lambda.clone(),
-            eh: Split::new(&modal.eh),
-            ef: Split::new(&modal.ef),
-            strike_row,
+            eh: Split::new(&eh),
+            ef,
             drive_q,
             drive_f,
-            force_row,
-            bridge_velocity_row: std::array::from_fn(|d| board_row(&point[d])),
             reads,
-            coupling,
-            feed_k: std::array::from_fn(|d| n_s * spec.contact.stiffness_n_m[d]),
-            feed_c: std::array::from_fn(|d| n_s * spec.contact.damping_n_s_m[d]),
+            feed_k,
+            feed_c,
+            settle,
+            beta,
+            hold,
+            free,
+            damped,
+            strike_settle,
+            force_settle,
+            velocity_settle,
             follow,
             block,
-            block_alpha,
-            block_alpha_read,
             markov,
             damper,
-            energy,
             hammer: spec.hammer,
-        })
+            modes,
+        }
     }
 
     /// Complex modes kept (one of each conjugate pair, and each real mode).
@@ -443,16 +576,27 @@ impl ExactKey {
         self.ef.len()
     }
 
-    /// Bytes of the coefficients.
+    /// How the reads depend on `D^{n+1}` with the damper down or lifted.
+    pub(crate) fn settle_for(&self, damper_down: bool) -> &Settle {
+        if damper_down && self.damper.is_some() {
+            &self.damped
+        } else {
+            &self.free
+        }
+    }
+
+    /// Bytes of the coefficients a voice steps with.
     pub fn bytes(&self) -> usize {
-        let split = |s: &Split| 16 * s.len();
-        let n = self.n_modes();
-        let damper = self.damper.as_ref().map_or(0, |d| 3 * d.channels * 16 * n);
-        (2 + self.n_strings * (1 + 1 + 3 + 3) + 3 + READS + INPUTS + 3 + DIRECTIONS + 1)
-            * split(&self.ef)
-            + (1 + READS + DIRECTIONS) * split(&self.ef) / 2
+        let split = 16 * self.n_modes();
+        let damper = self.damper.as_ref().map_or(0, |d| 3 * d.channels * split);
+        // eh, ef; per string the strike row, drive_q and drive_f, three force rows; reads, settle,
+        // beta, hold, follow, the bridge velocity rows; the block's f32 copies and e^BLOCK; the
+        // Markov taps; the energy; the stored modes (a dozen rows more).
+        (2 + self.n_strings * 8 + READS + 4 * DIRECTIONS + 3 + 12) * split
+            + (1 + READS + DIRECTIONS) * split / 2
+            + split
             + 8 * BLOCK * READS * DIRECTIONS
-            + 8 * n
+            + 8 * self.n_modes()
             + damper
     }
 }

@@ -1,38 +1,40 @@
-//! One key integrated exactly: its strings on their contact springs and dampers, the duplex
-//! damping and the soundboard under its bridge point form one linear time-invariant system,
+//! The exact engine: each key's strings on their contact springs, the duplex damping and the
+//! soundboard's high modes under its bridge point form one linear time-invariant system,
 //! diagonalised once into complex modes, so that between hammer contacts a voice advances by
-//! `z <- e^{lambda h} z` each sample — no stages, unconditionally stable, exact for the key.
+//! `z <- e^{lambda h} z` each sample — no stages, unconditionally stable, exact for its modes; the
+//! board's low modes are one system shared by every key, met at the bridges by an interface
+//! solved implicitly each step.
 //!
 //! Why this formulation (issue 16). The live integrator before it ([`crate::engine::etd`])
 //! diagonalises each string direction alone and couples every direction to the board explicitly
 //! at four ETDRK4 stages per sample; per voice and step that is ~42 FLOP per string mode plus
-//! ~9.4 kFLOP of board reads and writes, and 32 voices already ask 28 GFLOP/s. Here the board is
-//! part of each key's modes, so a sounding voice costs 6 FLOP per complex mode to propagate and
-//! ~4 per mode for each output it is read at (the board's volume velocity), with no stage and no
-//! board traffic. Only the felt hammer is nonlinear, and only for the few milliseconds it
-//! touches: then the step is ETDRK4 (Cox & Matthews 2002) with the felt force as the nonlinear
-//! term on the key's modes and on the hammer (whose linear part is zero, so its stages are
-//! classical RK4); after release, none.
+//! ~9.4 kFLOP of board reads and writes, and 32 voices already ask 28 GFLOP/s. Here a sounding
+//! voice costs 6 FLOP per complex mode to propagate and ~4 per mode for each row it is read at
+//! (its volume velocity and its force on the board in three directions), and 6 per shared board
+//! mode to meet the board (its force onto the modes, their displacement at its bridge); the board
+//! costs `2 m^2` a step for the whole pool ([`interface`]). Only the felt hammer is nonlinear,
+//! and only for the few milliseconds it touches: then the step is ETDRK4 (Cox & Matthews 2002)
+//! with the felt force as the nonlinear term on the key's modes and on the hammer (whose linear
+//! part is zero, so its stages are classical RK4); after release, none.
 //!
-//! The system (second-order form, `q` over the strings' T, L, P modes and the board's modes):
+//! A key's system (second-order form, `q` over the strings' T, L, P modes and the board's modes
+//! above [`interface::SHARED_BELOW_HZ`]):
 //! ```text
-//! qdd = -K q - C qdot + sum_i b_i F_e,i            (Eq. 10 with the contact forces folded in)
+//! qdd = -K q - C qdot + sum_i b_i F_e,i + sum_d g_d (k_d D_d + c_d Ddot_d)   (Eq. 10, contact folded in)
 //! K = diag(omega^2) + sum_{i,d} k_d w_id w_id^T,   C = diag(2 zeta omega) + C_d + sum c_d w_id w_id^T
-//! w_id = (psi(L_s) on string i's modes in direction d, -phi_d on the board's modes)   (Eq. 6, 17)
+//! w_id = (psi(L_s) on string i's modes in direction d, -phi_d on the key's board modes)   (Eq. 6, 17)
 //! m_H ydd_H = -sum_i F_e,i,   F_e,i = K_H max(y_H - y_e,i, 0)^p                       (Eq. 8-9)
 //! ```
-//! The board copy is this key's; the keys of a pool ([`ExactPool`]) are coupled through the
-//! shared board ([`board`]), and a key's damper felt acts as an implicit feedback on its modes
-//! ([`key`]).
+//! with `D` the shared board's displacement at the bridge point.
 //!
-//! Parts: [`key`] (one key's coefficients), [`voice`] (a voice's state and step), [`board`] (the
-//! coupling between keys), [`pool`] (the voice pool), [`halves`] (a block of the pool in two
-//! halves, on one core or two), [`kernels`] (the loops over modes), [`bytes`] (a key's
-//! coefficients as bytes and back, to be kept between runs).
+//! Parts: [`key`] (one key's coefficients), [`voice`] (a voice's state and step), [`interface`]
+//! (the shared board and the keys' interface with it), [`pool`] (the voice pool), [`block`] (a
+//! block of the pool: its passes, on one core or two, and its steps), [`kernels`] (the loops over modes),
+//! [`bytes`] (a key's modes as bytes and back, to be kept between runs).
 
-mod board;
+mod block;
 mod bytes;
-mod halves;
+mod interface;
 mod kernels;
 mod key;
 mod pool;
@@ -41,136 +43,90 @@ mod voice;
 pub use key::ExactKey;
 pub use pool::ExactPool;
 
-use crate::engine::kernels::has_avx2_fma;
+use crate::engine::pool::Policy;
 use crate::engine::spec::{BuildError, Observation, Strike, UnisonSpec};
-use faer::c64;
-use kernels::{propagate_read, Split};
-use voice::Voice;
 
-/// One unison on its own copy of the board, integrated exactly in the complex modes of the
-/// coupled system (module notes); the hammer staged with ETDRK4 while it touches.
+/// One unison alone on the board, on the exact engine: a pool of one voice ([`ExactPool`]), so
+/// that a key rendered alone sounds as it does in the pool.
 #[derive(Debug, Clone)]
 pub struct ExactUnison {
-    key: ExactKey,
-    voice: Voice,
-    scratch: [Split; 3],
-    /// Whether the CPU has AVX2 + FMA (the mode loops then use them).
-    fast_path: bool,
+    pool: ExactPool,
+    modes: usize,
 }
 
 impl ExactUnison {
-    /// Diagonalise `spec`'s key (strings, contact, duplex, the board at its point) for the step
-    /// `1 / spec.sample_rate_hz`.
+    /// Diagonalise `spec`'s key for the step `1 / spec.sample_rate_hz` and set it on the board,
+    /// its damper lifted.
     pub fn new(spec: &UnisonSpec) -> Result<ExactUnison, BuildError> {
         let key = ExactKey::new(spec)?;
-        let n = key.n_modes();
-        let mut voice = Voice::new(n, 0);
-        voice.state.active = true;
-        Ok(ExactUnison {
-            key,
-            voice,
-            scratch: std::array::from_fn(|_| Split::zeros(n)),
-            fast_path: has_avx2_fma(),
-        })
+        let modes = key.n_modes();
+        let mut pool = ExactPool::from_keys(std::slice::from_ref(spec), vec![key], 1)?;
+        pool.assign(0, 0);
+        pool.set_active(0, true);
+        let modes = modes + pool.shared_modes();
+        Ok(ExactUnison { pool, modes })
     }
 
-    /// Complex modes kept (one of each conjugate pair, and each real mode).
+    /// Complex modes: the key's (one of each conjugate pair, and each real mode) and the shared
+    /// board's.
     pub fn n_modes(&self) -> usize {
-        self.key.n_modes()
-    }
-
-    /// Every kept mode's eigenvalue `lambda` (1/s): `-sigma + i omega`.
-    pub fn eigenvalues(&self) -> &[c64] {
-        &self.key.lambda
+        self.modes
     }
 
     pub fn step_s(&self) -> f64 {
-        self.key.h
+        self.pool.step_s()
     }
 
     /// Whether the hammer is still part of the system.
     pub fn hammer_engaged(&self) -> bool {
-        self.voice.state.hammer_on
+        self.pool.hammer_on(0)
     }
 
     /// Launch the hammer in contact with the struck strings' current displacement, moving at the
     /// strike's speed (as the other engines do).
     pub fn strike(&mut self, strike: Strike) {
-        let n_struck = strike.strings_struck(self.key.n_strings);
-        let s = &mut self.voice.state;
-        s.struck = std::array::from_fn(|i| i < n_struck);
-        self.voice.hammer_y = self.voice.strike_contact_m(&self.key, n_struck);
-        self.voice.hammer_v = strike.velocity_m_s;
-        self.voice.state.hammer_on = true;
+        self.pool.strike_voice(0, strike);
     }
 
     /// Lower or lift the damper (a key without one ignores it).
     pub fn set_damper(&mut self, down: bool) {
-        self.voice.state.damper_down = down && self.key.damper.is_some();
+        self.pool.set_damper_voice(0, down);
     }
 
     /// Advance one step: exactly while the hammer is away, by ETDRK4 while it touches.
     pub fn step(&mut self) {
-        self.voice
-            .step(&self.key, &mut self.scratch, self.fast_path);
+        self.pool.step();
     }
 
     /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity (m^3/s)
-    /// after each; once the hammer is released (damper lifted), each step and its read are one
-    /// pass over the modes ([`kernels::propagate_read`]).
+    /// after each (by whole blocks once the hammer has left, as the pool does).
     pub fn run(&mut self, volume_velocity: &mut [f64]) {
-        for out in volume_velocity {
-            *out = if self.voice.state.hammer_on || self.voice.state.damper_down {
-                self.step();
-                self.voice.read[0]
-            } else {
-                self.voice.read[0] = propagate_read(
-                    &self.key.ef,
-                    &mut self.voice.z,
-                    &self.key.reads[0],
-                    self.fast_path,
-                );
-                self.voice.read[0]
-            };
-        }
+        self.pool.run(volume_velocity, None);
     }
 
-    /// Floating-point operations of one step and of reading the volume velocity after it: 6 per
-    /// complex mode to propagate and 4 to read, once the hammer is released; with the hammer,
-    /// ETDRK4's four reads of each struck string's point (4 each), three stage states (6 each,
-    /// and 2 per struck string), the final drive (6 per struck string) and the forces' reads.
+    /// Floating-point operations of one free step in a block: per complex mode of the key 6 to
+    /// propagate and 4 per row read (volume velocity, three forces) in the block's first pass, 6
+    /// and 4 per input (three directions) in its last; the Markov convolution (12 sums of
+    /// `BLOCK / 2` taps on average); per shared mode 12 for the key's part of the interface and
+    /// 20 for the board's step; and the solve, `2 m^2`.
     pub fn flops_per_step(&self) -> f64 {
-        let m = self.n_modes() as f64;
-        let free = 10.0 * m;
-        if !self.voice.state.hammer_on {
-            return free;
-        }
-        let struck = self.voice.state.struck.iter().filter(|&&s| s).count() as f64;
-        free + m * (4.0 * 4.0 * struck + 3.0 * (6.0 + 2.0 * struck) + 6.0 * struck + 12.0)
+        let shared = self.pool.shared_modes() as f64;
+        let own = self.modes as f64 - shared;
+        let convolution = 2.0 * 12.0 * kernels::BLOCK as f64 / 2.0;
+        own * (6.0 + 4.0 * 4.0 + 6.0 + 3.0 * 4.0) + convolution + shared * (32.0 + 2.0 * shared)
     }
 
-    /// Net volume velocity of the board (m^3/s) after the last step (read by the step itself).
+    /// Net volume velocity of the board (m^3/s) after the last step.
     pub fn volume_velocity_m3_s(&self) -> f64 {
-        self.voice.read[0]
+        self.pool.volume_velocity_m3_s()
     }
 
     /// Forces and volume velocity now (Eq. 19).
     pub fn observe(&self) -> Observation {
-        let (key, v) = (&self.key, &self.voice);
-        let mut obs = Observation {
+        Observation {
             volume_velocity_m3_s: self.volume_velocity_m3_s(),
-            hammer_force_n: v.hammer_force_n(key),
-            ..Observation::default()
-        };
-        for d in 0..3 {
-            obs.bridge_velocity_m_s[d] = key.bridge_velocity_row[d].read(&v.z);
-            for s in 0..key.n_strings {
-                let f = key.force_row[s][d].read(&v.z);
-                obs.bridge_force_n[s][d] = f;
-                obs.total_force_n[d] += f;
-            }
+            ..self.pool.observe_voice(0)
         }
-        obs
     }
 }
 
@@ -179,20 +135,25 @@ mod tests {
     use super::*;
     use crate::config::preset::Preset;
 
-    /// c2 cut down to a few modes (so that five decompositions take no time), at `rate_hz`.
+    /// c2 cut down to a few modes (so that five decompositions take no time), at `rate_hz`: its
+    /// board's 24 highest modes, all in the key's own (no shared mode: the interface's
+    /// second-order error left out of the contact step's).
     fn small_c2(rate_hz: f64) -> UnisonSpec {
         let mut spec = Preset::resolve("c2").unwrap().unison_spec();
         spec.modes.modes_t = 24;
         spec.modes.modes_p = 24;
         spec.modes.modes_l = 2;
-        let keep = 24;
         let b = &mut spec.board;
-        b.freq_hz.truncate(keep);
-        b.damping_ratio.truncate(keep);
-        b.volume_m2_per_sqrt_kg.truncate(keep);
+        let drop = b.len() - 24;
+        b.freq_hz.drain(..drop);
+        b.damping_ratio.drain(..drop);
+        b.volume_m2_per_sqrt_kg.drain(..drop);
         for p in &mut b.points {
-            p.shape.iter_mut().for_each(|s| s.truncate(keep));
+            p.shape.iter_mut().for_each(|s| {
+                s.drain(..drop);
+            });
         }
+        assert!(b.freq_hz.iter().all(|&f| f >= interface::SHARED_BELOW_HZ));
         spec.sample_rate_hz = rate_hz;
         spec
     }
@@ -208,38 +169,48 @@ mod tests {
             u.step();
         }
         assert!(u.hammer_engaged());
-        u.voice.hammer_y
+        u.pool.hammer_position_m(0)
     }
 
     #[test]
-    fn the_fused_step_agrees_with_the_portable_one() {
-        // 2 s of c2's tail (hammer released) through the AVX2 + FMA pass and the portable one.
+    fn the_fast_passes_agree_with_the_portable_ones() {
+        // 2 s of c2's tail (hammer released) through the AVX2 and AVX-512 passes (where the CPU
+        // has them) and the portable ones: the same to single-precision rounding (the block
+        // passes run in f32).
         let mut spec = Preset::resolve("c2").unwrap().unison_spec();
         spec.sample_rate_hz = 48_000.0;
-        let mut fast = ExactUnison::new(&spec).unwrap();
-        fast.strike(Strike {
+        let mut warm = ExactUnison::new(&spec).unwrap();
+        warm.strike(Strike {
             velocity_m_s: 2.5,
             una_corda: false,
         });
-        let mut warm = [0.0; 480];
-        fast.run(&mut warm);
-        assert!(!fast.hammer_engaged());
-        let mut slow = fast.clone();
-        slow.fast_path = false;
-        let (mut a, mut b) = (vec![0.0; 96_000], vec![0.0; 96_000]);
-        fast.run(&mut a);
-        slow.run(&mut b);
-        let peak = b.iter().fold(0f64, |m, x| m.max(x.abs()));
-        let worst = a
-            .iter()
-            .zip(&b)
-            .fold(0f64, |m, (x, y)| m.max((x - y).abs()))
-            / peak;
-        println!(
-            "fused step, AVX2 + FMA (used: {}) vs portable: {worst:.1e} of the peak over 2 s",
-            has_avx2_fma()
-        );
-        assert!(worst < 1e-12, "{worst:e}");
+        warm.run(&mut [0.0; 480]);
+        assert!(!warm.hammer_engaged());
+        let render = |simd: kernels::Simd| {
+            let mut u = warm.clone();
+            u.pool.set_simd(simd);
+            let mut x = vec![0.0; 96_000];
+            u.run(&mut x);
+            x
+        };
+        let portable = render(kernels::Simd::Portable);
+        let peak = portable.iter().fold(0f64, |m, x| m.max(x.abs()));
+        let detected = kernels::Simd::detect();
+        for simd in [kernels::Simd::Avx2, kernels::Simd::Avx512] {
+            if detected == kernels::Simd::Portable
+                || (simd == kernels::Simd::Avx512 && detected != simd)
+            {
+                println!("{simd:?}: not on this CPU");
+                continue;
+            }
+            let worst = render(simd)
+                .iter()
+                .zip(&portable)
+                .fold(0f64, |m, (x, y)| m.max((x - y).abs()))
+                / peak;
+            println!("{simd:?} vs portable: {worst:.1e} of the peak over 2 s");
+            assert!(worst < 1e-5, "{simd:?}: {worst:e}");
+        }
     }
 
     #[test]

@@ -2,35 +2,33 @@
 //! shared board, with the same behaviour as the other pools ([`Policy`]: assign, steal with a
 //! fade, strike in the current motion, dampers, silent voices retired, runaways reset).
 
-use super::board::BoardCoupling;
-use super::halves::{run_alone, run_half, Context, Exchange, Half};
-use super::kernels::BLOCK;
+use super::block::{begin, end, run, Context, Steps};
+use super::interface::SharedBoard;
+use super::kernels::{Simd, BLOCK};
 use super::key::ExactKey;
 use super::voice::Voice;
-use crate::engine::kernels::has_avx2_fma;
 use crate::engine::pool::{Policy, VoiceState};
 use crate::engine::spec::{BuildError, LinearState, Observation, UnisonSpec, STEAL_FADE_S};
 use crate::engine::Pair;
 use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
-use std::sync::atomic::Ordering;
 
-/// Voices of up to 88 keys on one shared soundboard, each key integrated exactly in its coupled
-/// modes, the keys coupled through the board ([`super::board`]). Stepped by the thread that owns it.
+/// Voices of up to 88 keys on one shared soundboard: each key's strings and the board's high
+/// modes at its bridge integrated exactly in their coupled modes ([`super::key`]), the board's
+/// low modes shared, the keys meeting them at an interface solved implicitly each step
+/// ([`super::interface`]). Stepped by the thread that owns it.
 #[derive(Debug, Clone)]
 pub struct ExactPool {
     keys: Vec<ExactKey>,
-    /// Each key's mode shapes at its bridge point, on the modes the keys are coupled through.
+    /// Each key's mode shapes at its bridge point, on the shared modes.
     points: Vec<[Vec<f64>; 3]>,
     voices: Vec<Voice>,
     voice_of_key: Vec<Option<usize>>,
-    board: BoardCoupling,
-    /// Each half's working values and replica of the board's shared part (half 0's is the
-    /// pool's between blocks), and what the halves hand each other on two cores.
-    halves: [Half; 2],
-    exchange: Exchange,
+    board: SharedBoard,
+    /// The steps' working values and the shared board's state.
+    steps: Steps,
     h: f64,
     fade_steps: u32,
-    fast_path: bool,
+    simd: Simd,
     /// The board's net volume velocity after the last step (m^3/s).
     volume_velocity_m3_s: f64,
 }
@@ -50,8 +48,8 @@ impl ExactPool {
     ) -> Result<ExactPool, BuildError> {
         let first = crate::engine::pool::check_keys(specs, keys.len(), voices)?;
         let h = 1.0 / first.sample_rate_hz;
-        let modes = keys.iter().map(ExactKey::n_modes).max().unwrap_or(0);
-        let board = BoardCoupling::new(&first.board, h);
+        let modes = keys.iter().map(|k| k.block.modes()).max().unwrap_or(0);
+        let board = SharedBoard::new(&first.board, h);
         let points = specs
             .iter()
             .map(|s| {
@@ -65,14 +63,13 @@ impl ExactPool {
         Ok(ExactPool {
             points,
             voice_of_key: vec![None; keys.len()],
-            voices: vec![Voice::new(modes, board.modes()); voices],
+            voices: vec![Voice::new(modes); voices],
             keys,
-            halves: [Half::new(modes, &board), Half::new(modes, &board)],
-            exchange: Exchange::new(board.modes()),
+            steps: Steps::new(modes, &board),
             board,
             h,
             fade_steps: ((STEAL_FADE_S / h).round() as u32).max(1),
-            fast_path: has_avx2_fma(),
+            simd: Simd::detect(),
             volume_velocity_m3_s: 0.0,
         })
     }
@@ -81,28 +78,27 @@ impl ExactPool {
         self.h
     }
 
-    /// One step of every active voice, each one sample at a time ([`Voice::step`]), then of the
-    /// board coupling.
+    /// Modes of the shared board (padded to whole lanes).
+    pub fn shared_modes(&self) -> usize {
+        self.board.modes()
+    }
+
+    /// One step of every active voice, each one sample at a time ([`Voice::pre_step`],
+    /// [`Voice::post_step`]), the interface solved between.
     pub fn step(&mut self) {
+        self.sync_loads();
         for v in self.voices.iter_mut() {
             v.in_block = false;
         }
-        let mut out = [0.0];
         let cx = Context {
             keys: &self.keys,
             points: &self.points,
             board: &self.board,
             fade_steps: self.fade_steps,
-            fast: self.fast_path,
+            simd: self.simd,
         };
-        run_alone(
-            &cx,
-            [&mut self.voices, &mut []],
-            &mut self.halves,
-            &mut out,
-            false,
-        );
-        self.volume_velocity_m3_s = out[0];
+        run(&cx, [&mut self.voices, &mut []], &mut self.steps, 1);
+        self.volume_velocity_m3_s = self.steps.volume[0];
         self.finish_fades();
     }
 
@@ -134,14 +130,47 @@ impl ExactPool {
         }
     }
 
+    /// The interface holds every active voice's `Z` as its damper is: what changed since the
+    /// last block (a voice joined, left, changed key, had its damper lowered or lifted) is added
+    /// or taken out, a rank-3 update each ([`SharedBoard::update`]).
+    fn sync_loads(&mut self) {
+        for v in self.voices.iter_mut() {
+            let want = match (v.state.active, v.state.key) {
+                (true, Some(key)) => Some((key, v.damped(&self.keys[key]))),
+                _ => None,
+            };
+            if want == v.loads {
+                continue;
+            }
+            let settle = |(key, damped): (usize, bool)| self.keys[key].settle_for(damped).force;
+            match (v.loads, want) {
+                (Some(old), Some(new)) if old.0 == new.0 => {
+                    let (a, b) = (settle(old), settle(new));
+                    let dz = std::array::from_fn(|i| std::array::from_fn(|d| b[i][d] - a[i][d]));
+                    self.board.update(&self.points[new.0], &dz);
+                }
+                (old, new) => {
+                    if let Some(old) = old {
+                        let z = settle(old).map(|r| r.map(|x| -x));
+                        self.board.update(&self.points[old.0], &z);
+                    }
+                    if let Some(new) = new {
+                        self.board.update(&self.points[new.0], &settle(new));
+                    }
+                }
+            }
+            v.loads = want;
+        }
+    }
+
     /// `out.len()` (at most [`BLOCK`]) steps, the same as as many [`ExactPool::step`]s but for
     /// rounding. A voice whose steps are linear and time-invariant ([`Voice::is_free`]: no hammer,
     /// damper or fade) is advanced mode by mode over the whole block — each mode's coefficients
-    /// loaded once, not once a step — and gets the coupling back by superposition: its reads
-    /// from its own Markov parameters step by step (the board needs them), its modes from the
-    /// inputs folded in at the end — one input per direction, in the shifted state
-    /// [`ExactKey::block_alpha`] describes. The others step one sample at a time, as in `step`.
+    /// loaded once, not once a step — and gets its input back by superposition: its reads step
+    /// by step from its Markov parameters (the interface needs them every step), its modes from
+    /// the inputs folded in at the end. The others step one sample at a time, as in `step`.
     fn block(&mut self, out: &mut [f64], pair: Option<&dyn Pair>) {
+        self.sync_loads();
         let len = out.len();
         for v in self.voices.iter_mut() {
             v.in_block = match (v.state.active, v.state.key) {
@@ -149,65 +178,34 @@ impl ExactPool {
                 _ => false,
             };
         }
-        // A voice's work over the block: its modes, a voice stepped sample by sample costing
-        // about three in the block.
-        let work = |v: &Voice| match (v.state.active, v.state.key) {
-            (true, Some(key)) => self.keys[key].n_modes() * if v.in_block { 1 } else { 3 },
-            _ => 0,
-        };
-        let total: usize = self.voices.iter().map(work).sum();
-        // Two halves of about equal work, in voice order.
-        let (mut at, mut first) = (0, 0);
-        while at < self.voices.len() && 2 * first < total {
-            first += work(&self.voices[at]);
-            at += 1;
-        }
         let cx = Context {
             keys: &self.keys,
             points: &self.points,
             board: &self.board,
             fade_steps: self.fade_steps,
-            fast: self.fast_path,
+            simd: self.simd,
         };
-        let (v0, v1) = self.voices.split_at_mut(at);
-        let joined = match pair {
-            Some(pair) if first > 0 && first < total => {
-                let [h0, h1] = &mut self.halves;
-                h1.part.copy_from(&h0.part);
-                self.exchange.reset();
-                let ex = &self.exchange;
-                // A panic on either side abandons the meetings, so the other side cannot wait
-                // forever, and is raised again here once both have stopped.
-                let mut panic = [None, None];
-                let [p0, p1] = &mut panic;
-                let cx = &cx;
-                let out = &mut *out;
-                let (v0, v1) = (&mut *v0, &mut *v1);
-                let mut there = || {
-                    let run = AssertUnwindSafe(|| run_half(cx, 1, v1, h1, ex, None, len));
-                    if let Err(e) = catch_unwind(run) {
-                        ex.abandoned.store(true, Ordering::Relaxed);
-                        *p1 = Some(e);
-                    }
-                };
-                let mut here = || {
-                    let run = AssertUnwindSafe(|| run_half(cx, 0, v0, h0, ex, Some(out), len));
-                    if let Err(e) = catch_unwind(run) {
-                        ex.abandoned.store(true, Ordering::Relaxed);
-                        *p0 = Some(e);
-                    }
-                };
-                let joined = pair.join(&mut there, &mut here);
-                if let Some(e) = panic.into_iter().flatten().next() {
-                    resume_unwind(e);
-                }
-                joined
-            }
-            _ => false,
+        // The block-long passes split over two cores where there is a second, in two halves of
+        // about equal work (the voices' modes, in voice order); the steps between them — every
+        // voice's sample by sample, the interface's solve — on this core.
+        let work = |v: &Voice| match (v.in_block, v.state.key) {
+            (true, Some(key)) => self.keys[key].n_modes(),
+            _ => 0,
         };
-        if !joined {
-            run_alone(&cx, [v0, v1], &mut self.halves, out, true);
+        let total: usize = self.voices.iter().map(work).sum();
+        let (mut at, mut first) = (0, 0);
+        while at < self.voices.len() && 2 * first < total {
+            first += work(&self.voices[at]);
+            at += 1;
         }
+        let split = pair.filter(|_| first > 0 && first < total);
+        let (v0, v1) = self.voices.split_at_mut(at);
+        both(split, &mut || begin(&cx, v1, len), &mut || {
+            begin(&cx, v0, len)
+        });
+        run(&cx, [v0, v1], &mut self.steps, len);
+        both(split, &mut || end(&cx, v1, len), &mut || end(&cx, v0, len));
+        out.copy_from_slice(&self.steps.volume[..len]);
         self.volume_velocity_m3_s = out[len - 1];
     }
 
@@ -215,28 +213,33 @@ impl ExactPool {
         self.volume_velocity_m3_s
     }
 
-    /// Voice `k`'s forces and its part of the volume velocity now (Eq. 19).
+    /// Voice `k`'s forces, the bridge's velocity under it and the volume velocity of its key's
+    /// board modes now (Eq. 19).
     pub fn observe_voice(&self, k: usize) -> Observation {
         let v = &self.voices[k];
-        let (true, Some(key)) = (v.state.active, v.state.key) else {
+        let (true, Some(key_index)) = (v.state.active, v.state.key) else {
             return Observation::default();
         };
-        let key = &self.keys[key];
-        let c = v.state.coupling;
+        let key = &self.keys[key_index];
         let mut obs = Observation {
-            volume_velocity_m3_s: c * v.read[0],
+            volume_velocity_m3_s: v.read[0],
             hammer_force_n: v.hammer_force_n(key),
             ..Observation::default()
         };
+        let shared = self
+            .board
+            .velocity_at(&self.steps.part, &self.points[key_index]);
         let ns = key.n_strings as f64;
         for d in 0..3 {
-            let slope = (v.other_m[d] - v.other_before_m[d]) / self.h;
-            obs.bridge_velocity_m_s[d] = key.bridge_velocity_row[d].read(&v.z) + slope;
+            let own = v.read_z(&key.modes.bridge_velocity_row[d], &key.velocity_settle[d]);
+            obs.bridge_velocity_m_s[d] = own + shared[d];
             obs.total_force_n[d] = v.force_n[d];
-            // The total's direct part, shared equally: every string's spring sees the same D.
-            let direct = (key.feed_k[d] * v.other_m[d] + key.feed_c[d] * slope) / ns;
+            // Every string's spring sees the same D: the direct part shared equally.
+            let slope = (v.d[d] - v.d_before[d]) / self.h;
+            let direct = (key.feed_k[d] * v.d[d] + key.feed_c[d] * slope) / ns;
             for s in 0..key.n_strings {
-                obs.bridge_force_n[s][d] = c * (key.force_row[s][d].read(&v.z) - direct);
+                obs.bridge_force_n[s][d] =
+                    v.read_z(&key.modes.force_row[s][d], &key.force_settle[s][d]) - direct;
             }
         }
         obs
@@ -244,13 +247,12 @@ impl ExactPool {
 
     /// Bytes per voice of its state, and of the coefficients of the largest key it may play.
     pub fn bytes_per_voice(&self) -> usize {
-        let v = &self.voices[0];
-        let state = 16 * (v.z.len() + v.own_board.len());
+        let state = 16 * self.voices[0].w.len();
         state + self.keys.iter().map(ExactKey::bytes).max().unwrap_or(0)
     }
 
-    /// The linear state: per active voice its modes (real, imaginary), its own board part, the
-    /// coupling input it remembers and its last forces; then the shared board part.
+    /// The linear state: per active voice its modes (real, imaginary, shifted: [`super::key`])
+    /// and what it remembers (`D^n`, the damper's force); then the shared board (modes, force).
     pub fn linear_state(&self) -> LinearState {
         let mut state = LinearState::default();
         for (k, v) in self.voices.iter().enumerate() {
@@ -259,25 +261,15 @@ impl ExactPool {
             };
             let key = &self.keys[key];
             let n = key.n_modes();
-            state.push(Some(k), &v.z.re[..n], &key.energy);
-            state.push(Some(k), &v.z.im[..n], &key.energy);
-            let rest = Self::memory(v);
+            state.push(Some(k), &v.w.re[..n], &key.modes.energy);
+            state.push(Some(k), &v.w.im[..n], &key.modes.energy);
+            let mut rest = v.d.to_vec();
+            rest.extend_from_slice(&v.damper_n);
             state.push(Some(k), &rest, &vec![0.0; rest.len()]);
         }
-        let board = self.halves[0].part.state();
+        let board = self.steps.part.values();
         state.push(None, &board, &vec![1.0; board.len()]);
         state
-    }
-
-    /// A voice's memory beyond its modes, as plain numbers.
-    fn memory(v: &Voice) -> Vec<f64> {
-        let mut x = v.own_board.re.clone();
-        x.extend_from_slice(&v.own_board.im);
-        x.extend_from_slice(&v.other_m);
-        x.extend_from_slice(&v.other_before_m);
-        x.extend_from_slice(&v.force_n);
-        x.extend_from_slice(&v.damper_n);
-        x
     }
 
     /// Set the state [`ExactPool::linear_state`] reads, in the same layout.
@@ -292,38 +284,67 @@ impl ExactPool {
                 continue;
             };
             let n = self.keys[key].n_modes();
-            v.z.re[..n].copy_from_slice(take(n));
-            v.z.im[..n].copy_from_slice(take(n));
-            let m = v.own_board.len();
-            v.own_board.re.copy_from_slice(take(m));
-            v.own_board.im.copy_from_slice(take(m));
-            v.other_m.copy_from_slice(take(3));
-            v.other_before_m.copy_from_slice(take(3));
-            v.force_n.copy_from_slice(take(3));
+            v.w.re[..n].copy_from_slice(take(n));
+            v.w.im[..n].copy_from_slice(take(n));
+            v.d.copy_from_slice(take(3));
+            v.d_before = v.d;
             let c = v.damper_n.len();
             v.damper_n.copy_from_slice(take(c));
         }
         let m = 3 * self.board.modes();
-        self.halves[0].part.set_state(take(m));
+        self.steps.part.set_values(take(m));
     }
 
-    /// Mechanical energy of every active key's modes (J; each key's copy of the board in it,
-    /// cycle-averaged per mode).
+    /// Mechanical energy of every active key's modes and of the shared board (J, cycle-averaged
+    /// per mode).
     pub fn mechanical_energy_j(&self) -> f64 {
-        (0..self.voices.len()).map(|k| self.voice_energy_j(k)).sum()
+        (0..self.voices.len())
+            .map(|k| self.voice_energy_j(k))
+            .sum::<f64>()
+            + self.board_energy_j()
     }
 
-    /// Remove voice `k`'s part from the shared board and set it at rest.
+    /// Take voice `k` off the board and set it at rest.
     fn rest_voice(&mut self, k: usize) {
-        let v = &mut self.voices[k];
-        if v.state.active {
-            if let Some(key) = v.state.key {
-                let part = &mut self.halves[0].part;
-                self.board
-                    .join(part, &v.own_board, &self.points[key], v.force_n, -1.0);
-            }
+        if self.voices[k].state.active {
+            self.leave(k);
         }
-        v.rest();
+        self.voices[k].rest();
+    }
+}
+
+/// `there` and `here` on two cores through `pair` where it takes them, else both on this one. A
+/// panic on either side is raised again here once both have stopped.
+fn both(pair: Option<&dyn Pair>, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut()) {
+    let joined = pair.is_some_and(|pair| {
+        let mut panic = None;
+        let mut guarded = || {
+            if let Err(e) = catch_unwind(AssertUnwindSafe(&mut *there)) {
+                panic = Some(e);
+            }
+        };
+        let joined = pair.join(&mut guarded, here);
+        if let Some(e) = panic {
+            resume_unwind(e);
+        }
+        joined
+    });
+    if !joined {
+        there();
+        here();
+    }
+}
+
+#[cfg(test)]
+impl ExactPool {
+    /// Voice `k`'s hammer position (m).
+    pub(crate) fn hammer_position_m(&self, k: usize) -> f64 {
+        self.voices[k].hammer_y
+    }
+
+    /// Which form of the loops to run.
+    pub(crate) fn set_simd(&mut self, simd: Simd) {
+        self.simd = simd;
     }
 }
 
@@ -370,30 +391,32 @@ impl Policy for ExactPool {
         self.rest_voice(k);
     }
 
-    /// A voice joins on the board as the other keys move it: its strings at their static
-    /// deflection by the change in that motion since it left, its own part added to the shared.
+    /// A voice joins the board as it moves: its strings at their static deflection by the change
+    /// in the board's motion under them since they left, its force added to the board's.
     fn enter(&mut self, k: usize) {
         let v = &mut self.voices[k];
         let Some(key) = v.state.key else {
             return;
         };
         let (point, key) = (&self.points[key], &self.keys[key]);
-        let part = &mut self.halves[0].part;
-        let now = self.board.shared_at(part, self.fast_path, point);
-        for (d, follow) in key.follow.iter().enumerate() {
-            follow.add_to(&mut v.z, now[d] - v.other_m[d]);
+        let part = &mut self.steps.part;
+        let now = self.board.at(part, point, self.simd);
+        for d in 0..3 {
+            let change = now[d] - v.d[d];
+            key.follow[d].add_to(&mut v.w, change);
+            key.settle[d].add_to(&mut v.w, -change);
         }
-        v.other_m = now;
-        v.other_before_m = now;
-        self.board.join(part, &v.own_board, point, v.force_n, 1.0);
+        v.d = now;
+        v.d_before = now;
+        v.force_n = v.static_force_n(key);
+        self.board.join(part, point, v.force_n, 1.0);
     }
 
     fn leave(&mut self, k: usize) {
         let v = &self.voices[k];
         if let Some(key) = v.state.key {
-            let part = &mut self.halves[0].part;
-            self.board
-                .join(part, &v.own_board, &self.points[key], v.force_n, -1.0);
+            let part = &mut self.steps.part;
+            self.board.join(part, &self.points[key], v.force_n, -1.0);
         }
     }
 
@@ -423,14 +446,13 @@ impl Policy for ExactPool {
     }
 
     fn board_energy_j(&self) -> f64 {
-        self.board.energy_j(&self.halves[0].part)
+        self.board.energy_j(&self.steps.part)
     }
 
-    /// The shared part at rest, and every voice's own part with it (they are its terms).
+    /// The shared board at rest, and the voices' forces on it with it (they are its terms).
     fn rest_board(&mut self) {
-        self.halves[0].part.rest();
+        self.steps.part.rest();
         for v in &mut self.voices {
-            v.own_board.fill_zero();
             v.force_n = [0.0; 3];
         }
     }

@@ -1,204 +1,292 @@
-//! One sounding key of the exact engine: its modal state, its hammer, the coupling input it
-//! receives and the damper force it feels, and the step that advances them.
+//! One sounding key of the exact engine: its modal state, its hammer, the board's motion it
+//! feels at its bridge and the damper force, and the step that advances them — in two halves
+//! around the interface's solve ([`super::interface`]): [`Voice::pre_step`] takes the step with
+//! what is known (`D^n`), [`Voice::post_step`] adds what `D^{n+1}` brings.
 
-use super::kernels::{
-    advance, propagate, stage, Reversed, Split, BLOCK, DIRECTIONS, INPUTS, READS,
-};
+use super::kernels::{advance, propagate, stage, Reversed, Simd, Split, BLOCK, DIRECTIONS, READS};
 use super::key::{ExactKey, DAMPER_CHANNELS};
 use crate::engine::pool::VoiceState;
 use crate::engine::spec::MAX_STRINGS;
 
-/// A voice's state. Written by the thread that owns the pool (the audio thread).
+/// A voice's state. Written by the thread that owns the pool (the audio thread), or by the core
+/// that runs its half of a block.
 #[derive(Debug, Clone)]
 pub(crate) struct Voice {
     pub(crate) state: VoiceState,
-    /// Modal amplitudes (sized for the largest key; the key's first `n_modes` are used).
-    pub(crate) z: Split,
+    /// Modal amplitudes in the shifted state `w = z - a D` ([`super::key`]; sized for the largest
+    /// key, the key's first `n_modes` used).
+    pub(crate) w: Split,
     pub(crate) hammer_y: f64,
     pub(crate) hammer_v: f64,
-    /// The other keys' board displacement at this bridge point now and a step ago (m), per
-    /// direction.
-    pub(crate) other_m: [f64; 3],
-    pub(crate) other_before_m: [f64; 3],
-    /// The total contact force this key put on the board at the end of the last step (N).
+    /// The shared board's displacement at the bridge point after the last step and the one
+    /// before (m, per direction): `D^n`, `D^{n-1}`.
+    pub(crate) d: [f64; 3],
+    pub(crate) d_before: [f64; 3],
+    /// The total contact force this key put on the board at the end of the last step (N), part
+    /// of the shared board's modal force.
     pub(crate) force_n: [f64; 3],
     /// The damper felt's force per channel at the end of the last step (N).
     pub(crate) damper_n: [f64; DAMPER_CHANNELS],
-    /// This key's part of the shared board's motion as the board coupling integrates it
-    /// ([`super::board`]).
-    pub(crate) own_board: Split,
-    /// The own part's displacement at the bridge point after the last step (m, per direction;
-    /// taken from the shared part's to leave the other keys').
-    pub(crate) own_at_m: [f64; 3],
-    /// What the last step read: volume velocity (m^3/s), total contact force T, L, P (N).
+    /// What the last step read: the volume velocity of the key's board modes (m^3/s) and the
+    /// total contact force T, L, P on the shared board (N).
     pub(crate) read: [f64; READS],
-    /// Over a block advanced mode by mode ([`super::pool`]): whether this voice is, what its
-    /// modes read with no input, and the coupling input of each step (`c D_d`, m, [`Reversed`]).
+    /// Within a step, before the interface's solve: the reads without `Z D^{n+1}`, and the
+    /// damper's force without what `D^{n+1}` adds.
+    pub(crate) known: [f64; READS],
+    pub(crate) damper_known: [f64; DAMPER_CHANNELS],
+    /// Over a block advanced mode by mode ([`super::halves`]): whether this voice is, what its
+    /// modes read with no input, and the input of each step (`D^t`, m, [`Reversed`]).
     pub(crate) in_block: bool,
     pub(crate) block_read: [[f64; BLOCK]; READS],
     pub(crate) block_inputs: Reversed,
+    /// What the interface holds for this voice: its key's `Z`, damper down or lifted.
+    pub(crate) loads: Option<(usize, bool)>,
 }
 
 impl Voice {
-    pub(crate) fn new(modes: usize, board_modes: usize) -> Voice {
+    pub(crate) fn new(modes: usize) -> Voice {
         Voice {
             state: VoiceState::default(),
-            z: Split::zeros(modes),
+            w: Split::zeros(modes),
             hammer_y: 0.0,
             hammer_v: 0.0,
-            other_m: [0.0; 3],
-            other_before_m: [0.0; 3],
+            d: [0.0; 3],
+            d_before: [0.0; 3],
             force_n: [0.0; 3],
             damper_n: [0.0; DAMPER_CHANNELS],
-            own_board: Split::zeros(board_modes),
-            own_at_m: [0.0; 3],
             read: [0.0; READS],
+            known: [0.0; READS],
+            damper_known: [0.0; DAMPER_CHANNELS],
             in_block: false,
             block_read: [[0.0; BLOCK]; READS],
             block_inputs: [[0.0; BLOCK]; DIRECTIONS],
+            loads: None,
         }
     }
 
     /// Whether the next steps are linear and time-invariant: no hammer, no damper on the strings,
     /// no fade (a block of them may then be advanced mode by mode).
     pub(crate) fn is_free(&self, key: &ExactKey) -> bool {
-        let damped = self.state.damper_down && key.damper.is_some();
-        !(self.state.hammer_on || damped) && self.state.fade_left == 0
+        !(self.state.hammer_on || self.damped(key)) && self.state.fade_left == 0
     }
 
-    /// The coupling inputs of the next step: the other keys' board motion `D` now and its slope
-    /// over the last step, scaled by the voice's coupling.
-    pub(crate) fn inputs(&self, h: f64) -> [f64; INPUTS] {
-        let c = self.state.coupling;
-        let mut u = [0.0; INPUTS];
-        for d in 0..3 {
-            u[d] = c * self.other_m[d];
-            u[3 + d] = c * (self.other_m[d] - self.other_before_m[d]) / h;
-        }
-        u
+    /// Whether the damper felt is on the strings.
+    pub(crate) fn damped(&self, key: &ExactKey) -> bool {
+        self.state.damper_down && key.damper.is_some()
     }
 
-    /// The step's reads with the contact springs' direct part, stretched by the other keys'
-    /// board motion: the total contact force this key puts on the board.
-    pub(crate) fn finish(&mut self, key: &ExactKey, u: &[f64; INPUTS], mut read: [f64; READS]) {
-        for d in 0..3 {
-            let at_end = u[d] + key.h * u[3 + d];
-            read[1 + d] -= key.feed_k[d] * at_end + key.feed_c[d] * u[3 + d];
-            self.force_n[d] = self.state.coupling * read[1 + d];
-        }
-        self.read = read;
+    /// `Re(r z)` of a row `r` whose `Re(r a_d)` is `settle`: `z = w + a D`.
+    pub(crate) fn read_z(&self, row: &Split, settle: &[f64; DIRECTIONS]) -> f64 {
+        row.read(&self.w) + (0..DIRECTIONS).map(|d| settle[d] * self.d[d]).sum::<f64>()
     }
 
-    /// Strings, board copy and everything they remember at rest.
+    /// The total contact force on the board with the strings as they are and the bridge held at
+    /// `D` (no slope): what a joining voice adds to the board.
+    pub(crate) fn static_force_n(&self, key: &ExactKey) -> [f64; 3] {
+        std::array::from_fn(|i| {
+            let direct: f64 = (0..DIRECTIONS)
+                .map(|d| key.reads[1 + i].read(&key.settle[d]) * self.d[d])
+                .sum();
+            key.reads[1 + i].read(&self.w) + direct - key.feed_k[i] * self.d[i]
+        })
+    }
+
+    /// Strings, board modes and everything they remember at rest.
     pub(crate) fn rest(&mut self) {
-        self.z.fill_zero();
-        self.own_board.fill_zero();
-        self.own_at_m = [0.0; 3];
-        self.other_m = [0.0; 3];
-        self.other_before_m = [0.0; 3];
+        self.w.fill_zero();
+        self.d = [0.0; 3];
+        self.d_before = [0.0; 3];
         self.force_n = [0.0; 3];
         self.damper_n = [0.0; DAMPER_CHANNELS];
         self.read = [0.0; READS];
         self.in_block = false;
     }
 
-    /// Mechanical energy of the key's modes (J, cycle-averaged per mode).
+    /// Mechanical energy of the key's modes (J, cycle-averaged per mode), at `z = w + a D`.
     pub(crate) fn energy_j(&self, key: &ExactKey) -> f64 {
-        (0..key.n_modes())
-            .map(|m| key.energy[m] * (self.z.re[m] * self.z.re[m] + self.z.im[m] * self.z.im[m]))
-            .sum()
+        const L: usize = 8;
+        let n = key.n_modes();
+        let d = self.d;
+        let [a0, a1, a2] = &key.settle;
+        let mut acc = [0.0; L];
+        let whole = n / L * L;
+        fn chunks(x: &[f64], whole: usize) -> std::slice::ChunksExact<'_, f64> {
+            x[..whole].chunks_exact(L)
+        }
+        for ((((((((wr, wi), r0), i0), r1), i1), r2), i2), e) in chunks(&self.w.re, whole)
+            .zip(chunks(&self.w.im, whole))
+            .zip(chunks(&a0.re, whole))
+            .zip(chunks(&a0.im, whole))
+            .zip(chunks(&a1.re, whole))
+            .zip(chunks(&a1.im, whole))
+            .zip(chunks(&a2.re, whole))
+            .zip(chunks(&a2.im, whole))
+            .zip(chunks(&key.modes.energy, whole))
+        {
+            for l in 0..L {
+                let re = wr[l] + r0[l] * d[0] + r1[l] * d[1] + r2[l] * d[2];
+                let im = wi[l] + i0[l] * d[0] + i1[l] * d[1] + i2[l] * d[2];
+                acc[l] += e[l] * (re * re + im * im);
+            }
+        }
+        let tail: f64 = (whole..n)
+            .map(|m| {
+                let re = self.w.re[m] + a0.re[m] * d[0] + a1.re[m] * d[1] + a2.re[m] * d[2];
+                let im = self.w.im[m] + a0.im[m] * d[0] + a1.im[m] * d[1] + a2.im[m] * d[2];
+                key.modes.energy[m] * (re * re + im * im)
+            })
+            .sum();
+        acc.iter().sum::<f64>() + tail
     }
 
     /// The felt force on each string (Eq. 8) with the hammer at `y` and the modes at `z`.
     fn felt(&self, key: &ExactKey, z: &Split, y: f64) -> [f64; MAX_STRINGS] {
         std::array::from_fn(|s| {
             if s < key.n_strings && self.state.struck[s] {
-                key.hammer.felt_force_n(y - key.strike_row[s].read(z))
+                key.hammer.felt_force_n(y - key.modes.strike_row[s].read(z))
             } else {
                 0.0
             }
         })
     }
 
+    /// String `s`'s displacement at the striking point (m).
+    fn strike_point_m(&self, key: &ExactKey, s: usize) -> f64 {
+        self.read_z(&key.modes.strike_row[s], &key.strike_settle[s])
+    }
+
     pub(crate) fn hammer_force_n(&self, key: &ExactKey) -> [f64; MAX_STRINGS] {
-        if self.state.hammer_on {
-            self.felt(key, &self.z, self.hammer_y)
-        } else {
-            [0.0; MAX_STRINGS]
-        }
+        std::array::from_fn(|s| {
+            if self.state.hammer_on && s < key.n_strings && self.state.struck[s] {
+                key.hammer
+                    .felt_force_n(self.hammer_y - self.strike_point_m(key, s))
+            } else {
+                0.0
+            }
+        })
     }
 
     /// The highest of the first `struck` strings' displacements at the striking point.
     pub(crate) fn strike_contact_m(&self, key: &ExactKey, struck: usize) -> f64 {
         (0..struck.min(key.n_strings))
-            .map(|s| key.strike_row[s].read(&self.z))
+            .map(|s| self.strike_point_m(key, s))
             .fold(f64::NEG_INFINITY, f64::max)
     }
 
-    /// Advance one step (`scratch`: three stage states): the hammer by ETDRK4 while it touches,
-    /// the modes exactly, the other keys' board motion entering as a ramp extrapolated from its
-    /// last two values, the damper felt implicitly. Fills `self.read` and `self.force_n`.
-    pub(crate) fn step(&mut self, key: &ExactKey, scratch: &mut [Split; 3], fast: bool) {
-        let u = self.inputs(key.h);
-        let contact = self.state.hammer_on;
-        if contact {
+    /// The step up to the interface (`scratch`: three stage states): the hammer by ETDRK4 while
+    /// it touches, the modes exactly with `D^n` entering, the damper's known part. Fills
+    /// `self.known` (the reads less `Z D^{n+1}`).
+    pub(crate) fn pre_step(&mut self, key: &ExactKey, scratch: &mut [Split; 3], simd: Simd) {
+        let fast = simd.avx2();
+        let dn = self.d;
+        let mut read = if self.state.hammer_on {
+            // The contact step is taken on z^n = w + a D^n; what D^n adds over it then follows.
+            for (d, a) in key.settle.iter().enumerate() {
+                a.add_to(&mut self.w, dn[d]);
+            }
             self.contact_step(key, scratch);
-        }
-        let mut read = advance(
-            fast,
-            !contact,
-            &key.ef,
-            &mut self.z,
-            &key.coupling,
-            &u,
-            &key.reads,
-        );
-        if self.state.damper_down {
-            if let Some(damper) = &key.damper {
-                let r = damper.channels;
-                let before = self.damper_n;
-                let v: [f64; DAMPER_CHANNELS] = std::array::from_fn(|i| {
-                    if i < r {
-                        damper.rows[i].read(&self.z)
-                            + (0..r)
-                                .map(|j| damper.rows_from[i * DAMPER_CHANNELS + j] * before[j])
-                                .sum::<f64>()
-                    } else {
-                        0.0
-                    }
-                });
-                let after: [f64; DAMPER_CHANNELS] = std::array::from_fn(|i| {
-                    (0..r)
-                        .map(|j| damper.solve[i * DAMPER_CHANNELS + j] * v[j])
-                        .sum()
-                });
+            advance(
+                fast,
+                false,
+                &key.ef,
+                &mut self.w,
+                &key.hold,
+                &dn,
+                &key.reads,
+            )
+        } else {
+            advance(fast, true, &key.ef, &mut self.w, &key.beta, &dn, &key.reads)
+        };
+        if let (true, Some(damper)) = (self.state.damper_down, &key.damper) {
+            let r = damper.channels;
+            let before = self.damper_n;
+            let v: [f64; DAMPER_CHANNELS] = std::array::from_fn(|i| {
+                if i < r {
+                    damper.rows[i].read(&self.w)
+                        + (0..r)
+                            .map(|j| damper.rows_from[i * DAMPER_CHANNELS + j] * before[j])
+                            .sum::<f64>()
+                } else {
+                    0.0
+                }
+            });
+            let after: [f64; DAMPER_CHANNELS] = std::array::from_fn(|i| {
+                (0..r)
+                    .map(|j| damper.solve[i * DAMPER_CHANNELS + j] * v[j])
+                    .sum()
+            });
+            for (i, x) in read.iter_mut().enumerate() {
                 for j in 0..r {
-                    damper.from[j].add_to(&mut self.z, before[j]);
-                    damper.to[j].add_to(&mut self.z, after[j]);
+                    *x += damper.reads_from[i][j] * before[j] + damper.reads_to[i][j] * after[j];
                 }
-                for (i, x) in read.iter_mut().enumerate() {
-                    for j in 0..r {
-                        *x +=
-                            damper.reads_from[i][j] * before[j] + damper.reads_to[i][j] * after[j];
-                    }
-                }
-                self.damper_n = after;
+            }
+            self.damper_known = after;
+        }
+        self.known = self.with_feed(key, read);
+    }
+
+    /// The reads known before `D^{n+1}` of a voice in a block: its free reads and what its
+    /// inputs so far add, `D^t` stored as this step's input.
+    pub(crate) fn pre_block_step(&mut self, key: &ExactKey, t: usize, simd: Simd) {
+        for d in 0..DIRECTIONS {
+            self.block_inputs[d][BLOCK - 1 - t] = self.d[d] as f32;
+        }
+        let mut read = super::kernels::convolve(simd, &key.markov, &self.block_inputs, t);
+        for (i, r) in read.iter_mut().enumerate() {
+            *r += self.block_read[i][t];
+        }
+        self.known = self.with_feed(key, read);
+    }
+
+    /// The force's part from the contact dampers' `c D^n / h` (the slope's known end).
+    fn with_feed(&self, key: &ExactKey, mut read: [f64; READS]) -> [f64; READS] {
+        for d in 0..DIRECTIONS {
+            read[1 + d] += key.feed_c[d] * self.d[d] / key.h;
+        }
+        read
+    }
+
+    /// The rest of the step once the interface has solved for `D^{n+1}` (`next`): the reads, the
+    /// damper's force and its input, the hammer's release.
+    pub(crate) fn post_step(&mut self, key: &ExactKey, next: [f64; 3]) {
+        let damped = self.damped(key);
+        let settle = key.settle_for(damped);
+        if let (true, Some(damper)) = (damped, &key.damper) {
+            let before = self.damper_n;
+            for j in 0..damper.channels {
+                let after = self.damper_known[j]
+                    + (0..DIRECTIONS)
+                        .map(|d| damper.settle[j][d] * next[d])
+                        .sum::<f64>();
+                damper.from[j].add_to(&mut self.w, before[j]);
+                damper.to[j].add_to(&mut self.w, after);
+                self.damper_n[j] = after;
             }
         } else {
             self.damper_n = [0.0; DAMPER_CHANNELS];
         }
-        self.finish(key, &u, read);
-        if contact {
+        let mut read = self.known;
+        for d in 0..DIRECTIONS {
+            read[0] += settle.volume[d] * next[d];
+            for i in 0..DIRECTIONS {
+                read[1 + i] += settle.force[i][d] * next[d];
+            }
+        }
+        self.read = read;
+        self.force_n = [read[1], read[2], read[3]];
+        self.d_before = self.d;
+        self.d = next;
+        if self.state.hammer_on {
             let points = (0..key.n_strings)
                 .filter(|&s| self.state.struck[s])
-                .map(|s| key.strike_row[s].read(&self.z));
+                .map(|s| self.strike_point_m(key, s));
             if key.hammer.is_clear(self.hammer_y, self.hammer_v, points) {
                 self.state.hammer_on = false;
             }
         }
     }
 
-    /// ETDRK4 (Cox & Matthews): `a = E_2 u + Q N(u)`, `b = E_2 u + Q N(a)`,
+    /// ETDRK4 (Cox & Matthews) on `z` (held in `w`): `a = E_2 u + Q N(u)`, `b = E_2 u + Q N(a)`,
     /// `c = E_2 a + Q (2 N(b) - N(u))`, `u' = E u + f1 N(u) + f2 (N(a) + N(b)) + f3 N(c)`, the
     /// felt force `N` entering the modes through each struck string's input, and the hammer's
     /// own linear part zero (its stages are classical RK4).
@@ -207,11 +295,11 @@ impl Voice {
         let (y, v) = (self.hammer_y, self.hammer_v);
         let accel = |f: &[f64; MAX_STRINGS]| -> f64 { -f.iter().sum::<f64>() / m_h };
         let [za, zb, zc] = scratch;
-        let fu = self.felt(key, &self.z, y);
-        stage(za, &key.eh, &self.z, &key.drive_q, &fu);
+        let fu = self.felt(key, &self.w, y);
+        stage(za, &key.eh, &self.w, &key.drive_q, &fu);
         let (ya, va) = (y + 0.5 * h * v, v + 0.5 * h * accel(&fu));
         let fa = self.felt(key, za, ya);
-        stage(zb, &key.eh, &self.z, &key.drive_q, &fa);
+        stage(zb, &key.eh, &self.w, &key.drive_q, &fa);
         let (yb, vb) = (y + 0.5 * h * va, v + 0.5 * h * accel(&fa));
         let fb = self.felt(key, zb, yb);
         let mixed: [f64; MAX_STRINGS] = std::array::from_fn(|s| 2.0 * fb[s] - fu[s]);
@@ -221,12 +309,12 @@ impl Voice {
             va + 0.5 * h * (2.0 * accel(&fb) - accel(&fu)),
         );
         let fc = self.felt(key, zc, yc);
-        propagate(&key.ef, &mut self.z);
+        propagate(&key.ef, &mut self.w);
         for s in (0..key.n_strings).filter(|&s| self.state.struck[s]) {
             let [g1, g2, g3] = &key.drive_f[s];
-            g1.add_to(&mut self.z, fu[s]);
-            g2.add_to(&mut self.z, fa[s] + fb[s]);
-            g3.add_to(&mut self.z, fc[s]);
+            g1.add_to(&mut self.w, fu[s]);
+            g2.add_to(&mut self.w, fa[s] + fb[s]);
+            g3.add_to(&mut self.w, fc[s]);
         }
         self.hammer_y = y + h / 6.0 * v + h / 3.0 * (va + vb) + h / 6.0 * vc;
         self.hammer_v =

@@ -1,0 +1,559 @@
+//! The board's low modes, one system shared by every sounding key, and the interface at the
+//! bridges solved implicitly each step.
+//!
+//! Why this split (issue 16). Keys are coupled through the board, and the coupling is stiff: a
+//! contact spring (4.8e6 N/m per string and direction) ties each string's end to the board under
+//! it. Put a whole copy of the board in every key's modes and the stiff part is exact, but every
+//! key then carries the board's 130 modes (40 % of an average key's, 85 % of a treble key's)
+//! and the keys' copies must be kept apart from their sum by integrating each key's own part
+//! again, sample by sample (89 modes per key). Here the board's modes below [`SHARED_BELOW_HZ`]
+//! (89 of 130, where every key meets every other) are integrated once, for all keys; each key
+//! keeps only the board's modes above it, local to its bridge (the key's own modes,
+//! [`super::key`]). Over a step every key's force `F_k` on the board and the board's
+//! displacement `D_k` under it are taken linear in time — exact for the modes on both sides, an
+//! error of `(omega h)^2 / 12` at the interface: 1.3 % of the coupling at 3 kHz, 0.1 % at 1 kHz —
+//! and solved together, implicitly: each key's reads after the step are known but for
+//! `Z_k D_k^{n+1}` (3×3, [`super::key::Settle`]), so the board's displacement after the step
+//! solves
+//! ```text
+//! (I - T W) q^{n+1} = q_known,   W = sum_k Phi_k Z_k Phi_k^T,   T = diag(2 Re to_m)
+//! ```
+//! with `q_known` what the board would do under the keys' known forces alone. `W` and the inverse
+//! change only when a key joins, leaves or has its damper lowered or lifted: a rank-3 update of
+//! both (Woodbury, ~9 m² FLOP, m = 89: ~70 kFLOP). Each step costs 2 m² (the inverse and `W`
+//! applied) for the whole pool, and 6 m per key (its force onto the modes, their displacement at
+//! its bridge). Measured against the exact continuous system of one key (`tests/integrators.rs`):
+//! c2's partials within 0.33 cents and 0.5 % of their decay; the one-step map of the nine-key
+//! chord and of the 23 stiffest keys stays inside the unit circle (`tests/stability.rs`).
+
+use super::kernels::{fma, Simd, Split, LANES};
+use crate::engine::modal::input_weights;
+use crate::engine::physics::soundboard::SoundboardModes;
+use faer::c64;
+
+/// The board's modes below this frequency (Hz) are shared by every key; each key carries those
+/// above in its own modes. Higher, the interface's error grows as `(omega h)^2`: with every mode
+/// shared (7 kHz) C7's fundamental decays 3.6 % off, at 3 kHz 1.2 % (module notes).
+pub(crate) const SHARED_BELOW_HZ: f64 = 3000.0;
+
+/// The shared modes' coefficients and the interface's matrices. Built off the audio thread;
+/// updated by the thread that owns the pool (between blocks), read by both halves of a block.
+#[derive(Debug, Clone)]
+pub(crate) struct SharedBoard {
+    /// The board's modes that are shared (indices into the board's modes).
+    modes: Vec<usize>,
+    /// Per mode (padded to whole lanes with modes that never move): `e^{lambda h}`, the weights
+    /// of the modal force at the start and the end of the step, `lambda`, `omega^2`, `2 Re(to)`,
+    /// and the net volume velocity per unit modal velocity (m^3/s per sqrt(kg) m/s).
+    e: Split,
+    from: Split,
+    to: Split,
+    lambda: Vec<c64>,
+    omega2: Vec<f64>,
+    t: Vec<f64>,
+    volume: Vec<f64>,
+    /// `(I - T W)^{-1}`, `m × m`, column by column (the step applies it a column at a time:
+    /// [`matvec`]). `W` itself is never needed: `T W q = q - q_known`.
+    inverse: Vec<f64>,
+    /// The Woodbury update's working values (`m × 3`, `3 × m`).
+    x: Vec<f64>,
+    y: Vec<f64>,
+    c: Vec<f64>,
+}
+
+/// The shared modes' state. Written by the thread that steps the pool.
+#[derive(Debug, Clone)]
+pub(crate) struct BoardState {
+    /// `z_m` with `q_m = 2 Re z_m` (`z' = lambda z + f / (2 i omega_d)`).
+    z: Split,
+    /// The modal force at the end of the last step, and the displacement after it.
+    force: Vec<f64>,
+    q: Vec<f64>,
+    /// Working values of a step.
+    known: Vec<f64>,
+}
+
+impl SharedBoard {
+    /// The shared modes of `board` for the step `h`, no key on them yet.
+    pub(crate) fn new(board: &SoundboardModes, h: f64) -> SharedBoard {
+        let modes: Vec<usize> = (0..board.len())
+            .filter(|&k| board.freq_hz[k] < SHARED_BELOW_HZ)
+            .collect();
+        let m = modes.len().div_ceil(LANES) * LANES;
+        let zero = c64::new(0.0, 0.0);
+        let (mut e, mut from, mut to, mut lambda) =
+            (vec![zero; m], vec![zero; m], vec![zero; m], vec![zero; m]);
+        let (mut omega2, mut volume) = (vec![0.0; m], vec![0.0; m]);
+        for (i, &k) in modes.iter().enumerate() {
+            let osc = board.oscillator(k);
+            let (w, zeta) = (osc.omega_rad_s, osc.damping_ratio);
+            let wd = w * (1.0 - zeta * zeta).sqrt();
+            let l = c64::new(-zeta * w, wd);
+            let g = c64::new(0.0, -0.5 / wd); // 1 / (2 i omega_d)
+            let [w1, w2] = input_weights(l, h);
+            e[i] = (l * h).exp();
+            from[i] = g * (w1 - w2 / h);
+            to[i] = g * (w2 / h);
+            lambda[i] = l;
+            omega2[i] = w * w;
+            volume[i] = board.volume_m2_per_sqrt_kg[k];
+        }
+        let t = to.iter().map(|x| 2.0 * x.re).collect();
+        let mut inverse = vec![0.0; m * m];
+        (0..m).for_each(|a| inverse[a * m + a] = 1.0);
+        SharedBoard {
+            modes,
+            e: Split::new(&e),
+            from: Split::new(&from),
+            to: Split::new(&to),
+            lambda,
+            omega2,
+            t,
+            volume,
+            inverse,
+            x: vec![0.0; 3 * m],
+            y: vec![0.0; 3 * m],
+            c: vec![0.0; 3 * m],
+        }
+    }
+
+    /// Modes (padded).
+    pub(crate) fn modes(&self) -> usize {
+        self.e.len()
+    }
+
+    /// The shared modes at rest.
+    pub(crate) fn state(&self) -> BoardState {
+        let m = self.modes();
+        BoardState {
+            z: Split::zeros(m),
+            force: vec![0.0; m],
+            q: vec![0.0; m],
+            known: vec![0.0; m],
+        }
+    }
+
+    /// A key's mode shapes at its bridge point (all the board's modes) restricted to the shared
+    /// ones (zero on the padding).
+    pub(crate) fn restrict(&self, shape: &[Vec<f64>; 3]) -> [Vec<f64>; 3] {
+        std::array::from_fn(|d| {
+            let mut phi: Vec<f64> = self.modes.iter().map(|&k| shape[d][k]).collect();
+            phi.resize(self.modes(), 0.0);
+            phi
+        })
+    }
+
+    /// A key at `phi` starts (`dz = Z`) or stops (`dz = -Z`) loading the board through the
+    /// interface, or its `Z` changes by `dz`: `W += Phi dz Phi^T`, the inverse updated (Woodbury,
+    /// rank 3). Allocates nothing.
+    pub(crate) fn update(&mut self, phi: &[Vec<f64>; 3], dz: &[[f64; 3]; 3]) {
+        let m = self.modes();
+        // Entry (a, b) of an m × m matrix stored column by column.
+        let at = |a: usize, b: usize| b * m + a;
+        // C = dz Phi^T (3 × m), U = T Phi (m × 3).
+        for i in 0..3 {
+            for b in 0..m {
+                self.c[i * m + b] = (0..3).map(|d| dz[i][d] * phi[d][b]).sum();
+            }
+        }
+        // X = inverse U (m × 3), Y = C inverse (3 × m).
+        self.x.iter_mut().for_each(|x| *x = 0.0);
+        self.y.iter_mut().for_each(|y| *y = 0.0);
+        for b in 0..m {
+            let u = [0, 1, 2].map(|i| self.t[b] * phi[i][b]);
+            let col = &self.inverse[b * m..(b + 1) * m];
+            for a in 0..m {
+                for i in 0..3 {
+                    self.x[a * 3 + i] += col[a] * u[i];
+                }
+            }
+            for i in 0..3 {
+                self.y[i * m + b] = (0..m).map(|a| self.c[i * m + a] * col[a]).sum();
+            }
+        }
+        // S = I - C X (3 × 3); inverse += X S^-1 Y.
+        let s: [[f64; 3]; 3] = std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                let cx: f64 = (0..m).map(|a| self.c[i * m + a] * self.x[a * 3 + j]).sum();
+                f64::from(u8::from(i == j)) - cx
+            })
+        });
+        let s_inv = inverse3(&s);
+        for a in 0..m {
+            let xs: [f64; 3] =
+                std::array::from_fn(|j| (0..3).map(|i| self.x[a * 3 + i] * s_inv[i][j]).sum());
+            for b in 0..m {
+                self.inverse[at(a, b)] +=
+                    xs[0] * self.y[b] + xs[1] * self.y[m + b] + xs[2] * self.y[2 * m + b];
+            }
+        }
+    }
+
+    /// One step of the shared modes under the keys' known forces `known` (modal, the sum of
+    /// every key's `Phi_k F_k` with `D^{n+1}` left out), solved with the keys' `Z D^{n+1}`
+    /// (module notes); returns the board's net volume velocity after it (m^3/s). The keys then
+    /// read `D^{n+1}` with [`SharedBoard::at`].
+    pub(crate) fn step(&self, state: &mut BoardState, known: &[f64], simd: Simd) -> f64 {
+        let m = self.modes();
+        let (e, from, to) = (&self.e, &self.from, &self.to);
+        for k in 0..m {
+            let (a, b, f0, f1) = (state.z.re[k], state.z.im[k], state.force[k], known[k]);
+            let re = e.re[k] * a - e.im[k] * b + from.re[k] * f0 + to.re[k] * f1;
+            let im = e.re[k] * b + e.im[k] * a + from.im[k] * f0 + to.im[k] * f1;
+            (state.z.re[k], state.z.im[k]) = (re, im);
+            state.known[k] = 2.0 * re;
+        }
+        matvec(simd.avx2(), &self.inverse, &state.known, &mut state.q);
+        let mut volume = 0.0;
+        for k in 0..m {
+            // W q from T W q = q - q_known (T > 0 on every mode but the padding, where q = 0).
+            let wq = if self.t[k] > 0.0 {
+                (state.q[k] - state.known[k]) / self.t[k]
+            } else {
+                0.0
+            };
+            state.z.re[k] += to.re[k] * wq;
+            state.z.im[k] += to.im[k] * wq;
+            state.force[k] = known[k] + wq;
+            let l = self.lambda[k];
+            volume += self.volume[k] * 2.0 * (l.re * state.z.re[k] - l.im * state.z.im[k]);
+        }
+        volume
+    }
+
+    /// The shared modes' displacement at a key's point `phi` after the last step (m, per
+    /// direction).
+    pub(crate) fn at(&self, state: &BoardState, phi: &[Vec<f64>; 3], simd: Simd) -> [f64; 3] {
+        project(simd, &state.q, phi)
+    }
+
+    /// Their velocity at `phi` (m/s, per direction).
+    pub(crate) fn velocity_at(&self, state: &BoardState, phi: &[Vec<f64>; 3]) -> [f64; 3] {
+        std::array::from_fn(|d| {
+            (0..self.modes())
+                .map(|k| {
+                    let l = self.lambda[k];
+                    phi[d][k] * 2.0 * (l.re * state.z.re[k] - l.im * state.z.im[k])
+                })
+                .sum()
+        })
+    }
+
+    /// `sum += Phi f`: a key's force `f` (N, per direction) at its point onto the modes.
+    pub(crate) fn add_force(&self, simd: Simd, phi: &[Vec<f64>; 3], f: [f64; 3], sum: &mut [f64]) {
+        spread(simd, phi, f, sum)
+    }
+
+    /// A key joins (`sign` 1) or leaves (`sign` -1) the board with the force it puts on it.
+    pub(crate) fn join(&self, state: &mut BoardState, phi: &[Vec<f64>; 3], f: [f64; 3], sign: f64) {
+        for k in 0..self.modes() {
+            state.force[k] += sign * (phi[0][k] * f[0] + phi[1][k] * f[1] + phi[2][k] * f[2]);
+        }
+    }
+
+    /// The shared modes' energy (J).
+    pub(crate) fn energy_j(&self, state: &BoardState) -> f64 {
+        (0..self.modes())
+            .map(|k| {
+                let z = c64::new(state.z.re[k], state.z.im[k]);
+                let (q, v) = (2.0 * z.re, 2.0 * (self.lambda[k] * z).re);
+                0.5 * (v * v + self.omega2[k] * q * q)
+            })
+            .sum()
+    }
+
+    /// `(I - T W)^{-1}` formed afresh for `W = sum Phi Z Phi^T` over `loads` (a test of the
+    /// updates).
+    #[cfg(test)]
+    pub(crate) fn fresh_inverse(&self, loads: &[Load<'_>]) -> Vec<f64> {
+        let m = self.modes();
+        let w = |i: usize, j: usize| -> f64 {
+            loads
+                .iter()
+                .map(|(phi, z)| {
+                    (0..3)
+                        .map(|a| (0..3).map(|b| phi[a][i] * z[a][b] * phi[b][j]).sum::<f64>())
+                        .sum::<f64>()
+                })
+                .sum()
+        };
+        let a = faer::Mat::<f64>::from_fn(m, m, |i, j| {
+            f64::from(u8::from(i == j)) - self.t[i] * w(i, j)
+        });
+        let inv = faer::linalg::solvers::DenseSolveCore::inverse(&a.partial_piv_lu());
+        (0..m * m).map(|k| inv[(k % m, k / m)]).collect()
+    }
+
+    #[cfg(test)]
+    pub(crate) fn inverse(&self) -> &[f64] {
+        &self.inverse
+    }
+}
+
+impl BoardState {
+    pub(crate) fn rest(&mut self) {
+        self.z.fill_zero();
+        for v in [&mut self.force, &mut self.q, &mut self.known] {
+            v.iter_mut().for_each(|x| *x = 0.0);
+        }
+    }
+
+    /// The state as plain numbers (modes, force at the step's end), and back; the displacement
+    /// follows from the modes.
+    pub(crate) fn values(&self) -> Vec<f64> {
+        let mut x = self.z.re.clone();
+        x.extend_from_slice(&self.z.im);
+        x.extend_from_slice(&self.force);
+        x
+    }
+
+    pub(crate) fn set_values(&mut self, x: &[f64]) {
+        let m = self.force.len();
+        self.z.re.copy_from_slice(&x[..m]);
+        self.z.im.copy_from_slice(&x[m..2 * m]);
+        self.force.copy_from_slice(&x[2 * m..3 * m]);
+        for k in 0..m {
+            self.q[k] = 2.0 * self.z.re[k];
+        }
+    }
+}
+
+/// A key's mode shapes on the shared modes and its `Z` (a test's account of `W`).
+#[cfg(test)]
+pub(crate) type Load<'a> = (&'a [Vec<f64>; 3], [[f64; 3]; 3]);
+
+/// The inverse of a 3×3 matrix (by its adjugate).
+fn inverse3(a: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let cof = |i: usize, j: usize| {
+        let (r0, r1) = ((i + 1) % 3, (i + 2) % 3);
+        let (c0, c1) = ((j + 1) % 3, (j + 2) % 3);
+        a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0]
+    };
+    let det = a[0][0] * cof(0, 0) + a[0][1] * cof(0, 1) + a[0][2] * cof(0, 2);
+    std::array::from_fn(|i| std::array::from_fn(|j| cof(j, i) / det))
+}
+
+/// `y = A x` of a square `A` stored column by column, its order a whole number of lanes: `y`
+/// in chunks held in registers, each column's chunk added in (independent sums, so that the
+/// loop runs at the FMA units' rate rather than their latency).
+fn matvec(fast: bool, a: &[f64], x: &[f64], y: &mut [f64]) {
+    #[cfg(target_arch = "x86_64")]
+    if fast {
+        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
+        return unsafe { matvec_avx2(a, x, y) };
+    }
+    let _ = fast;
+    matvec_with::<false>(a, x, y)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn matvec_avx2(a: &[f64], x: &[f64], y: &mut [f64]) {
+    matvec_with::<true>(a, x, y)
+}
+
+#[inline(always)]
+fn matvec_with<const FMA: bool>(a: &[f64], x: &[f64], y: &mut [f64]) {
+    let m = x.len();
+    let mut base = 0;
+    while base + 4 * LANES <= m {
+        matvec_chunk::<FMA, { 4 * LANES }>(a, x, &mut y[base..base + 4 * LANES], base);
+        base += 4 * LANES;
+    }
+    while base < m {
+        matvec_chunk::<FMA, LANES>(a, x, &mut y[base..base + LANES], base);
+        base += LANES;
+    }
+}
+
+/// Rows `base..base + C` of `y = A x`.
+#[inline(always)]
+fn matvec_chunk<const FMA: bool, const C: usize>(a: &[f64], x: &[f64], y: &mut [f64], base: usize) {
+    let m = x.len();
+    let mut acc = [0.0; C];
+    for (b, &xb) in x.iter().enumerate() {
+        let col: &[f64; C] = a[b * m + base..b * m + base + C].try_into().unwrap();
+        for l in 0..C {
+            acc[l] = fma::<FMA>(col[l], xb, acc[l]);
+        }
+    }
+    y.copy_from_slice(&acc);
+}
+
+/// `Phi^T q` (per direction) over modes padded to whole lanes.
+fn project(simd: Simd, q: &[f64], phi: &[Vec<f64>; 3]) -> [f64; 3] {
+    #[cfg(target_arch = "x86_64")]
+    match simd {
+        // SAFETY: `Simd::detect` chose these only where the CPU has them.
+        Simd::Avx512 => return unsafe { project_avx512(q, phi) },
+        Simd::Avx2 => return unsafe { project_avx2(q, phi) },
+        Simd::Portable => {}
+    }
+    let _ = simd;
+    project_with::<false>(q, phi)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn project_avx2(q: &[f64], phi: &[Vec<f64>; 3]) -> [f64; 3] {
+    project_with::<true>(q, phi)
+}
+
+#[inline(always)]
+fn project_with<const FMA: bool>(q: &[f64], phi: &[Vec<f64>; 3]) -> [f64; 3] {
+    let m = q.len();
+    let mut at = [[0.0; LANES]; 3];
+    for (((q, p0), p1), p2) in q[..m]
+        .chunks_exact(LANES)
+        .zip(phi[0][..m].chunks_exact(LANES))
+        .zip(phi[1][..m].chunks_exact(LANES))
+        .zip(phi[2][..m].chunks_exact(LANES))
+    {
+        for l in 0..LANES {
+            at[0][l] = fma::<FMA>(p0[l], q[l], at[0][l]);
+            at[1][l] = fma::<FMA>(p1[l], q[l], at[1][l]);
+            at[2][l] = fma::<FMA>(p2[l], q[l], at[2][l]);
+        }
+    }
+    at.map(|a| a.iter().sum())
+}
+
+/// [`project`] in AVX-512: a register of [`LANES`] modes a pass.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn project_avx512(q: &[f64], phi: &[Vec<f64>; 3]) -> [f64; 3] {
+    use std::arch::x86_64::*;
+    let m = q.len();
+    assert!(phi.iter().all(|p| p.len() >= m) && m.is_multiple_of(LANES));
+    let mut at = [_mm512_setzero_pd(); 3];
+    for k in (0..m).step_by(LANES) {
+        // SAFETY: `k + LANES <= m`, within `q` and every `phi[d]` (asserted above).
+        let x = _mm512_loadu_pd(q.as_ptr().add(k));
+        for d in 0..3 {
+            at[d] = _mm512_fmadd_pd(_mm512_loadu_pd(phi[d].as_ptr().add(k)), x, at[d]);
+        }
+    }
+    at.map(|a| _mm512_reduce_add_pd(a))
+}
+
+/// `sum += Phi f` over modes padded to whole lanes.
+fn spread(simd: Simd, phi: &[Vec<f64>; 3], f: [f64; 3], sum: &mut [f64]) {
+    #[cfg(target_arch = "x86_64")]
+    match simd {
+        // SAFETY: `Simd::detect` chose these only where the CPU has them.
+        Simd::Avx512 => return unsafe { spread_avx512(phi, f, sum) },
+        Simd::Avx2 => return unsafe { spread_avx2(phi, f, sum) },
+        Simd::Portable => {}
+    }
+    let _ = simd;
+    spread_with::<false>(phi, f, sum)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn spread_avx2(phi: &[Vec<f64>; 3], f: [f64; 3], sum: &mut [f64]) {
+    spread_with::<true>(phi, f, sum)
+}
+
+#[inline(always)]
+fn spread_with<const FMA: bool>(phi: &[Vec<f64>; 3], f: [f64; 3], sum: &mut [f64]) {
+    let m = sum.len();
+    for (((s, p0), p1), p2) in sum
+        .chunks_exact_mut(LANES)
+        .zip(phi[0][..m].chunks_exact(LANES))
+        .zip(phi[1][..m].chunks_exact(LANES))
+        .zip(phi[2][..m].chunks_exact(LANES))
+    {
+        for l in 0..LANES {
+            s[l] = fma::<FMA>(
+                p0[l],
+                f[0],
+                fma::<FMA>(p1[l], f[1], fma::<FMA>(p2[l], f[2], s[l])),
+            );
+        }
+    }
+}
+
+/// [`spread`] in AVX-512: a register of [`LANES`] modes a pass.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn spread_avx512(phi: &[Vec<f64>; 3], f: [f64; 3], sum: &mut [f64]) {
+    use std::arch::x86_64::*;
+    let m = sum.len();
+    assert!(phi.iter().all(|p| p.len() >= m) && m.is_multiple_of(LANES));
+    let g = f.map(|x| _mm512_set1_pd(x));
+    for k in (0..m).step_by(LANES) {
+        // SAFETY: `k + LANES <= m`, within `sum` and every `phi[d]` (asserted above).
+        let at = sum.as_mut_ptr().add(k);
+        let mut s = _mm512_loadu_pd(at);
+        s = _mm512_fmadd_pd(_mm512_loadu_pd(phi[2].as_ptr().add(k)), g[2], s);
+        s = _mm512_fmadd_pd(_mm512_loadu_pd(phi[1].as_ptr().add(k)), g[1], s);
+        s = _mm512_fmadd_pd(_mm512_loadu_pd(phi[0].as_ptr().add(k)), g[0], s);
+        _mm512_storeu_pd(at, s);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::preset::Preset;
+
+    #[test]
+    fn the_woodbury_updates_keep_the_inverse() {
+        // Thirty keys' worth of rank-3 updates (joins, damper changes, leaves) on the c2 board,
+        // against the inverse formed afresh.
+        let spec = Preset::resolve("c2").unwrap().unison_spec();
+        let mut board = SharedBoard::new(&spec.board, 1.0 / 48_000.0);
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let points: Vec<[Vec<f64>; 3]> = spec
+            .board
+            .points
+            .iter()
+            .take(30)
+            .map(|p| board.restrict(&p.shape))
+            .collect();
+        // A key's Z: the contact springs' direct part (about -2 k_c per direction) and a little
+        // more.
+        let zs: Vec<[[f64; 3]; 3]> = (0..30)
+            .map(|_| {
+                std::array::from_fn(|i| {
+                    std::array::from_fn(|d| {
+                        let direct = if i == d { -1.0e7 } else { 0.0 };
+                        direct + 1.0e5 * next()
+                    })
+                })
+            })
+            .collect();
+        for (p, z) in points.iter().zip(&zs) {
+            board.update(p, z);
+        }
+        for (p, z) in points.iter().zip(&zs).step_by(3) {
+            board.update(p, &z.map(|r| r.map(|x| -x)));
+        }
+        let kept: Vec<_> = points
+            .iter()
+            .zip(&zs)
+            .enumerate()
+            .filter(|(k, _)| k % 3 != 0)
+            .map(|(_, (p, z))| (p, *z))
+            .collect();
+        let fresh = board.fresh_inverse(&kept);
+        let worst = board
+            .inverse()
+            .iter()
+            .zip(&fresh)
+            .fold(0f64, |m, (a, b)| m.max((a - b).abs()));
+        let scale = fresh.iter().fold(0f64, |m, x| m.max(x.abs()));
+        println!(
+            "40 rank-3 updates vs the inverse formed afresh: {:.1e} of its largest entry",
+            worst / scale
+        );
+        assert!(worst / scale < 1e-10, "{}", worst / scale);
+    }
+}
