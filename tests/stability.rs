@@ -212,13 +212,17 @@ fn quarter_seconds<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> Vec<f64>
         scaling: &scaling,
         cache: None,
     };
+    let offline = unacorda::render::Offline {
+        tail_s,
+        voices: 32,
+        cores: 1,
+    };
     let r = render_midi_into::<E>(
         keyboard,
         events,
-        tail_s,
-        32,
+        offline,
         |_| {},
-        |_, _| {},
+        None,
         |block| {
             samples.extend_from_slice(block);
             std::ops::ControlFlow::Continue(())

@@ -20,6 +20,8 @@ pub enum RenderError {
     NoKeys,
     #[error("the voice pool needs 1 to {max} voices, got {0}", max = crate::play::MAX_VOICES)]
     Voices(usize),
+    #[error("could not start the second core's thread: {0}")]
+    Helper(std::io::Error),
 }
 
 /// A MIDI performance rendered offline, its sound in memory.
@@ -79,11 +81,22 @@ pub fn render_midi_with(
         scaling,
         cache: None,
     };
-    let r =
-        render_midi_into::<Rk4Pool>(keyboard, events, tail_s, voices, progress, tap, |block| {
+    let mut tap = tap;
+    let r = render_midi_into::<Rk4Pool>(
+        keyboard,
+        events,
+        Offline {
+            tail_s,
+            voices,
+            cores: 1,
+        },
+        progress,
+        Some(&mut tap),
+        |block| {
             samples.extend_from_slice(block);
             ControlFlow::Continue(())
-        })?;
+        },
+    )?;
     Ok(Performance {
         rate_hz: r.rate_hz,
         samples,
@@ -92,20 +105,39 @@ pub fn render_midi_with(
     })
 }
 
-/// [`render_midi_with`] on the engine `E` (RK4 [`Rk4Pool`] or the live integrator,
-/// [`crate::engine::etd::EtdPool`]), handing each block of samples to `sink`
+/// What a render calls after every output frame: `tap(instrument, frame)`.
+pub type Tap<'a, E> = &'a mut dyn FnMut(&E, u64);
+
+/// How an offline render runs: seconds of sound after the last event, the voice pool's size, and
+/// the cores the engine may use (1, or 2 with a helper thread, as `play`'s callback).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Offline {
+    pub tail_s: f64,
+    pub voices: usize,
+    pub cores: usize,
+}
+
+/// A MIDI performance on the engine `E` (RK4 [`Rk4Pool`], the live integrator
+/// [`crate::engine::etd::EtdPool`] or the exact engine), handing each block of samples to `sink`
 /// as it is made (a WAV being written) instead of keeping them, the prepared keys read from and
-/// kept in the keyboard's cache where it has one; the render stops early when
-/// `sink` breaks (interrupted, or the disk is full).
+/// kept in the keyboard's cache where it has one; the render stops early when `sink` breaks
+/// (interrupted, or the disk is full). Without `tap` the engine runs from event to event (in
+/// whole blocks, as the live callback does); with it one frame at a time, `tap(instrument,
+/// frame)` called after each — the same sound either way but for the exact engine's
+/// single-precision rounding inside a block.
 pub fn render_midi_into<E: crate::engine::VoicePool>(
     keyboard: crate::play::Keyboard<'_>,
     events: &[crate::midi::file::TimedEvent],
-    tail_s: f64,
-    voices: usize,
+    offline: Offline,
     mut progress: impl FnMut(f64),
-    mut tap: impl FnMut(&E, u64),
+    mut tap: Option<Tap<'_, E>>,
     mut sink: impl FnMut(&[f32]) -> ControlFlow<()>,
 ) -> Result<Rendered, RenderError> {
+    let Offline {
+        tail_s,
+        voices,
+        cores,
+    } = offline;
     use crate::audio::synth::{Synth, EVENT_QUEUE};
     use crate::midi::{piano_key, Event};
     if !(1..=crate::play::MAX_VOICES).contains(&voices) {
@@ -129,6 +161,9 @@ pub fn render_midi_into<E: crate::engine::VoicePool>(
     let settings = scaling.base.output_settings();
     let fs = settings.rate_hz;
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
+    if cores >= 2 {
+        synth.use_second_core().map_err(RenderError::Helper)?;
+    }
     let end_s = events.last().map_or(0.0, |e| e.time_s) + tail_s;
     let total_frames = (end_s * fs).round() as u64;
     let n_blocks = total_frames.div_ceil(OFFLINE_BLOCK as u64).max(1);
@@ -137,7 +172,10 @@ pub fn render_midi_into<E: crate::engine::VoicePool>(
     for b in 0..n_blocks {
         let n = (total_frames - frames).min(OFFLINE_BLOCK as u64) as usize;
         next = handle.schedule_timed(events, next, 0);
-        synth.process_with(&mut block[..n], 1, &mut tap);
+        match tap.as_deref_mut() {
+            Some(tap) => synth.process_with(&mut block[..n], 1, tap),
+            None => synth.process(&mut block[..n], 1),
+        }
         frames += n as u64;
         if sink(&block[..n]).is_break() {
             break;

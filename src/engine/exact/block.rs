@@ -7,7 +7,7 @@
 //! displacement at its bridge.
 
 use super::interface::{BoardState, SharedBoard};
-use super::kernels::{fold_block, free_block, Simd, Split, BLOCK};
+use super::kernels::{fold_block, free_block, Reversed, Simd, Split, BLOCK, DIRECTIONS, READS};
 use super::key::ExactKey;
 use super::voice::Voice;
 use crate::engine::pool::fade_step;
@@ -45,28 +45,58 @@ impl Steps {
 }
 
 /// The first pass of a block over `voices`: each voice in the block advanced freely over it, its
-/// free reads kept ([`free_block`]).
+/// free reads kept ([`free_block`]); a damped one first shifted to `u = w - sum_j to_j f_j`, in
+/// which the felt's force is an input ([`super::key::DamperKey`]).
 pub(crate) fn begin(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
     for v in voices.iter_mut() {
-        if let (true, Some(key)) = (v.in_block, v.state.key) {
-            let key = &cx.keys[key];
-            free_block(
-                cx.simd,
-                &key.block,
-                &key.ef,
-                &mut v.w,
-                &mut v.block_read,
-                len,
-            );
+        let (true, Some(key)) = (v.in_block, v.state.key) else {
+            continue;
+        };
+        let key = &cx.keys[key];
+        match (v.damped(key), &key.damper) {
+            (true, Some(damper)) => {
+                for (j, to) in damper.to.iter().enumerate() {
+                    to.add_to(&mut v.w, -v.damper_n[j]);
+                }
+                free_block(
+                    cx.simd,
+                    &damper.block,
+                    &key.ef,
+                    &mut v.w,
+                    &mut v.block_read,
+                    len,
+                );
+            }
+            _ => {
+                let out: &mut [[f64; BLOCK]; READS] = (&mut v.block_read[..READS])
+                    .try_into()
+                    .expect("the first reads are the four rows");
+                free_block(cx.simd, &key.block, &key.ef, &mut v.w, out, len);
+            }
         }
     }
 }
 
-/// The last pass: each voice in the block gets the block's inputs folded into its modes.
+/// The last pass: each voice in the block gets the block's inputs folded into its modes (a
+/// damped one shifted back to `w`).
 pub(crate) fn end(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
     for v in voices.iter_mut() {
         if let (true, Some(key)) = (v.in_block, v.state.key) {
-            fold_block(cx.simd, &cx.keys[key].block, &mut v.w, &v.block_inputs, len);
+            let key = &cx.keys[key];
+            match (v.damped(key), &key.damper) {
+                (true, Some(damper)) => {
+                    fold_block(cx.simd, &damper.block, &mut v.w, &v.block_inputs, len);
+                    for (j, to) in damper.to.iter().enumerate() {
+                        to.add_to(&mut v.w, v.damper_n[j]);
+                    }
+                }
+                _ => {
+                    let inputs: &Reversed<DIRECTIONS> = v.block_inputs[..DIRECTIONS]
+                        .try_into()
+                        .expect("the first inputs are the bridge's");
+                    fold_block(cx.simd, &key.block, &mut v.w, inputs, len);
+                }
+            }
         }
         v.in_block = false;
     }

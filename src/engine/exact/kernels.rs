@@ -3,6 +3,7 @@
 //! one pass (8-lane partial sums so that the loop vectorises; AVX2 + FMA where the CPU has them).
 
 use crate::engine::kernels::has_avx2_fma;
+use crate::engine::spec::MAX_STRINGS;
 use faer::c64;
 
 /// A complex vector per mode, real and imaginary parts apart (the kernels' layout).
@@ -251,40 +252,61 @@ impl Simd {
     }
 }
 
-/// A block's inputs per direction, step `t` at `BLOCK - 1 - t` (so that a convolution with
-/// Markov parameters is a forward dot product), in single precision.
-pub(crate) type Reversed = [[f32; BLOCK]; DIRECTIONS];
+/// Damper channels of a key at most: T and P of each string.
+pub(crate) const DAMPER_CHANNELS: usize = 2 * MAX_STRINGS;
 
-/// Markov parameters per read and direction, tap `k` (steps after the input) at `k`.
-pub(crate) type Taps = [[[f32; BLOCK]; DIRECTIONS]; READS];
+/// Inputs of a damped voice's block: the bridge's motion in three directions and the damper
+/// felt's force on each channel; rows it reads: [`READS`] and the felt's velocity per channel.
+pub(crate) const DAMPED_INPUTS: usize = DIRECTIONS + DAMPER_CHANNELS;
+pub(crate) const DAMPED_READS: usize = READS + DAMPER_CHANNELS;
+
+/// A block's inputs, step `t` at `BLOCK - 1 - t` (so that a convolution with Markov parameters
+/// is a forward dot product), in single precision.
+pub(crate) type Reversed<const I: usize> = [[f32; BLOCK]; I];
+
+/// Markov parameters per read and input, tap `k` (steps after the input) at `k`.
+pub(crate) type Taps<const R: usize, const I: usize> = [[[f32; BLOCK]; I]; R];
 
 /// What the inputs of steps `0..=t` add to each read after step `t`:
 /// `sum_d sum_{j<=t} taps[i][d][t-j] u_d(j)`, in single precision.
-pub(crate) fn convolve(simd: Simd, taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
+pub(crate) fn convolve<const R: usize, const I: usize>(
+    simd: Simd,
+    taps: &Taps<R, I>,
+    u: &Reversed<I>,
+    t: usize,
+) -> [f64; R] {
     #[cfg(target_arch = "x86_64")]
     match simd {
         // SAFETY: `Simd::detect` chose these only where the CPU has them.
-        Simd::Avx512 => return unsafe { convolve_avx512(taps, u, t) },
-        Simd::Avx2 => return unsafe { convolve_avx2(taps, u, t) },
+        Simd::Avx512 => return unsafe { convolve_avx512::<R, I>(taps, u, t) },
+        Simd::Avx2 => return unsafe { convolve_avx2::<R, I>(taps, u, t) },
         Simd::Portable => {}
     }
     let _ = simd;
-    convolve_with::<false>(taps, u, t)
+    convolve_with::<false, R, I>(taps, u, t)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn convolve_avx2(taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
-    convolve_with::<true>(taps, u, t)
+unsafe fn convolve_avx2<const R: usize, const I: usize>(
+    taps: &Taps<R, I>,
+    u: &Reversed<I>,
+    t: usize,
+) -> [f64; R] {
+    convolve_with::<true, R, I>(taps, u, t)
 }
 
 #[inline(always)]
-fn convolve_with<const FMA: bool>(taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
+fn convolve_with<const FMA: bool, const R: usize, const I: usize>(
+    taps: &Taps<R, I>,
+    u: &Reversed<I>,
+    t: usize,
+) -> [f64; R] {
     const W: usize = 8;
     let start = BLOCK - 1 - t;
     std::array::from_fn(|i| {
         let mut acc = [0f32; W];
-        for d in 0..DIRECTIONS {
+        for d in 0..I {
             let (a, b) = (&taps[i][d][..=t], &u[d][start..]);
             let whole = a.len() / W * W;
             for k in (0..whole).step_by(W) {
@@ -304,11 +326,15 @@ fn convolve_with<const FMA: bool>(taps: &Taps, u: &Reversed, t: usize) -> [f64; 
 /// the last partial register masked.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn convolve_avx512(taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
+unsafe fn convolve_avx512<const R: usize, const I: usize>(
+    taps: &Taps<R, I>,
+    u: &Reversed<I>,
+    t: usize,
+) -> [f64; R] {
     use std::arch::x86_64::*;
     let start = BLOCK - 1 - t;
     let n = t + 1;
-    let mut acc = [_mm512_setzero_ps(); READS];
+    let mut acc = [_mm512_setzero_ps(); R];
     let mut k = 0;
     while k < n {
         let left = n - k;
@@ -317,11 +343,11 @@ unsafe fn convolve_avx512(taps: &Taps, u: &Reversed, t: usize) -> [f64; READS] {
         } else {
             (1u16 << left) - 1
         };
-        for d in 0..DIRECTIONS {
+        for d in 0..I {
             // SAFETY: lanes `k..k + 16` under `mask` lie within `u[d][start..]` (n values) and
             // within each `taps[i][d]` (BLOCK values, n <= BLOCK).
             let x = _mm512_maskz_loadu_ps(mask, u[d].as_ptr().add(start + k));
-            for i in 0..READS {
+            for i in 0..R {
                 let a = _mm512_maskz_loadu_ps(mask, taps[i][d].as_ptr().add(k));
                 acc[i] = _mm512_fmadd_ps(a, x, acc[i]);
             }
@@ -377,21 +403,21 @@ fn power(re: f64, im: f64, n: usize) -> (f64, f64) {
 /// block, so that rounding inside a block is never compounded over a note's life (`e` rounded to
 /// f32 would shift the slowest modes' decay by ~8 %). Padded to [`WIDE`] modes (the padding
 /// never moves: its `e` is zero).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub(crate) struct BlockCoefficients {
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct BlockCoefficients<const R: usize, const I: usize> {
     pub(crate) e: Split32,
     pub(crate) e_block: Split,
-    /// The rows read after every step ([`READS`]) and the inputs folded in ([`DIRECTIONS`]).
-    pub(crate) rows: [Split32; READS],
-    pub(crate) inputs: [Split32; DIRECTIONS],
+    /// The rows read after every step and the inputs folded in.
+    pub(crate) rows: [Split32; R],
+    pub(crate) inputs: [Split32; I],
 }
 
-impl BlockCoefficients {
+impl<const R: usize, const I: usize> BlockCoefficients<R, I> {
     pub(crate) fn new(
         e: &Split,
-        rows: &[Split; READS],
-        inputs: &[Split; DIRECTIONS],
-    ) -> BlockCoefficients {
+        rows: &[&Split; R],
+        inputs: &[&Split; I],
+    ) -> BlockCoefficients<R, I> {
         let padded = e.len().div_ceil(WIDE) * WIDE;
         let mut e_block = Split::zeros(padded);
         for m in 0..e.len() {
@@ -400,8 +426,8 @@ impl BlockCoefficients {
         BlockCoefficients {
             e: Split32::new(e),
             e_block,
-            rows: std::array::from_fn(|i| Split32::new(&rows[i])),
-            inputs: std::array::from_fn(|j| Split32::new(&inputs[j])),
+            rows: std::array::from_fn(|i| Split32::new(rows[i])),
+            inputs: std::array::from_fn(|j| Split32::new(inputs[j])),
         }
     }
 
@@ -415,35 +441,38 @@ impl BlockCoefficients {
 /// `out[i][t] = Re(r_i e^{t+1} z)` for `t < len` in single precision, then `z <- e^len ⊙ z` in
 /// double (`e_step` is the double-precision step, for a block shorter than [`BLOCK`]). `z` holds
 /// at least [`BlockCoefficients::modes`] modes.
-pub(crate) fn free_block(
+pub(crate) fn free_block<const R: usize, const I: usize>(
     simd: Simd,
-    c: &BlockCoefficients,
+    c: &BlockCoefficients<R, I>,
     e_step: &Split,
     z: &mut Split,
-    out: &mut [[f64; BLOCK]; READS],
+    out: &mut [[f64; BLOCK]; R],
     len: usize,
 ) {
     #[cfg(target_arch = "x86_64")]
     match simd {
         // SAFETY: `Simd::detect` chose these only where the CPU has them.
-        Simd::Avx512 => return unsafe { free_block_avx512(c, e_step, z, out, len) },
+        Simd::Avx512 if R <= READS => {
+            return unsafe { free_block_avx512::<R, I, 2>(c, e_step, z, out, len) }
+        }
+        Simd::Avx512 => return unsafe { free_block_avx512::<R, I, 1>(c, e_step, z, out, len) },
         Simd::Avx2 => return unsafe { free_block_avx2(c, e_step, z, out, len) },
         Simd::Portable => {}
     }
     let _ = simd;
-    free_block_with::<false>(c, e_step, z, out, len)
+    free_block_with::<false, R, I>(c, e_step, z, out, len)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn free_block_avx2(
-    c: &BlockCoefficients,
+unsafe fn free_block_avx2<const R: usize, const I: usize>(
+    c: &BlockCoefficients<R, I>,
     e_step: &Split,
     z: &mut Split,
-    out: &mut [[f64; BLOCK]; READS],
+    out: &mut [[f64; BLOCK]; R],
     len: usize,
 ) {
-    free_block_with::<true>(c, e_step, z, out, len)
+    free_block_with::<true, R, I>(c, e_step, z, out, len)
 }
 
 /// `a b + c` in single precision, fused with `FMA`.
@@ -458,8 +487,8 @@ fn fma32<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {
 
 /// The state carried to the next block in double precision: `z <- e^len ⊙ z` on `range`.
 #[inline(always)]
-fn carry(
-    c: &BlockCoefficients,
+fn carry<const R: usize, const I: usize>(
+    c: &BlockCoefficients<R, I>,
     e_step: &Split,
     z: &mut Split,
     range: std::ops::Range<usize>,
@@ -480,27 +509,27 @@ fn carry(
 }
 
 #[inline(always)]
-fn free_block_with<const FMA: bool>(
-    c: &BlockCoefficients,
+fn free_block_with<const FMA: bool, const R: usize, const I: usize>(
+    c: &BlockCoefficients<R, I>,
     e_step: &Split,
     z: &mut Split,
-    out: &mut [[f64; BLOCK]; READS],
+    out: &mut [[f64; BLOCK]; R],
     len: usize,
 ) {
     let n = c.modes();
-    let mut acc = [[[0f32; LANES32]; BLOCK]; READS];
+    let mut acc = [[[0f32; LANES32]; BLOCK]; R];
     for base in (0..n).step_by(LANES32) {
         let mut er = [0f32; LANES32];
         let mut ei = [0f32; LANES32];
         let mut zr = [0f32; LANES32];
         let mut zi = [0f32; LANES32];
-        let mut rr = [[0f32; LANES32]; READS];
-        let mut ri = [[0f32; LANES32]; READS];
+        let mut rr = [[0f32; LANES32]; R];
+        let mut ri = [[0f32; LANES32]; R];
         for l in 0..LANES32 {
             let m = base + l;
             (er[l], ei[l]) = (c.e.re[m], c.e.im[m]);
             (zr[l], zi[l]) = (z.re[m] as f32, z.im[m] as f32);
-            for i in 0..READS {
+            for i in 0..R {
                 (rr[i][l], ri[i][l]) = (c.rows[i].re[m], c.rows[i].im[m]);
             }
         }
@@ -509,7 +538,7 @@ fn free_block_with<const FMA: bool>(
                 let (a, b) = (zr[l], zi[l]);
                 zr[l] = fma32::<FMA>(er[l], a, -ei[l] * b);
                 zi[l] = fma32::<FMA>(er[l], b, ei[l] * a);
-                for i in 0..READS {
+                for i in 0..R {
                     acc[i][t][l] = fma32::<FMA>(
                         rr[i][l],
                         zr[l],
@@ -520,61 +549,63 @@ fn free_block_with<const FMA: bool>(
         }
         carry(c, e_step, z, base..base + LANES32, len);
     }
-    for i in 0..READS {
+    for i in 0..R {
         for t in 0..len {
             out[i][t] = acc[i][t].iter().map(|&x| f64::from(x)).sum();
         }
     }
 }
 
-/// [`free_block`] in AVX-512: [`WIDE`] modes a pass in two 16-lane registers, every read's sum
-/// over them in one register per step.
+/// [`free_block`] in AVX-512: `16 W` modes a pass in `W` registers of 16 lanes (two
+/// independent recursions where the rows leave registers for them, one where they do not),
+/// every read's sum over them in one register per step.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn free_block_avx512(
-    c: &BlockCoefficients,
+unsafe fn free_block_avx512<const R: usize, const I: usize, const W: usize>(
+    c: &BlockCoefficients<R, I>,
     e_step: &Split,
     z: &mut Split,
-    out: &mut [[f64; BLOCK]; READS],
+    out: &mut [[f64; BLOCK]; R],
     len: usize,
 ) {
     use std::arch::x86_64::*;
     let n = c.modes();
-    let mut acc = [[_mm512_setzero_ps(); BLOCK]; READS];
-    // SAFETY (every load and store below): `base + 32 <= n`, the length of every coefficient
-    // (padded to WIDE) and at most that of `z` (sized for the largest key, padded).
+    let mut acc = [[_mm512_setzero_ps(); BLOCK]; R];
+    // SAFETY (every load and store below): `base + 16 W <= n`, the length of every coefficient
+    // (padded to WIDE, a multiple of 16 W) and at most that of `z` (sized for the largest key,
+    // padded).
     let ld = |x: &[f32], at: usize| _mm512_loadu_ps(x.as_ptr().add(at));
     let ld64 = |x: &[f64], at: usize| {
         let lo = _mm512_cvtpd_ps(_mm512_loadu_pd(x.as_ptr().add(at)));
         let hi = _mm512_cvtpd_ps(_mm512_loadu_pd(x.as_ptr().add(at + 8)));
         _mm512_insertf32x8::<1>(_mm512_castps256_ps512(lo), hi)
     };
-    for base in (0..n).step_by(WIDE) {
-        let h = [base, base + 16];
+    for base in (0..n).step_by(16 * W) {
+        let h: [usize; W] = std::array::from_fn(|k| base + 16 * k);
         let er = h.map(|b| ld(&c.e.re, b));
         let ei = h.map(|b| ld(&c.e.im, b));
-        let rr: [[__m512; 2]; READS] = std::array::from_fn(|i| h.map(|b| ld(&c.rows[i].re, b)));
-        let ri: [[__m512; 2]; READS] = std::array::from_fn(|i| h.map(|b| ld(&c.rows[i].im, b)));
+        let rr: [[__m512; W]; R] = std::array::from_fn(|i| h.map(|b| ld(&c.rows[i].re, b)));
+        let ri: [[__m512; W]; R] = std::array::from_fn(|i| h.map(|b| ld(&c.rows[i].im, b)));
         let mut zr = h.map(|b| ld64(&z.re, b));
         let mut zi = h.map(|b| ld64(&z.im, b));
         for t in 0..len {
-            for k in 0..2 {
+            for k in 0..W {
                 let (a, b) = (zr[k], zi[k]);
                 zr[k] = _mm512_fmsub_ps(er[k], a, _mm512_mul_ps(ei[k], b));
                 zi[k] = _mm512_fmadd_ps(er[k], b, _mm512_mul_ps(ei[k], a));
             }
-            for i in 0..READS {
+            for i in 0..R {
                 let mut a = acc[i][t];
-                for k in 0..2 {
+                for k in 0..W {
                     a = _mm512_fmadd_ps(rr[i][k], zr[k], a);
                     a = _mm512_fnmadd_ps(ri[i][k], zi[k], a);
                 }
                 acc[i][t] = a;
             }
         }
-        carry(c, e_step, z, base..base + WIDE, len);
+        carry(c, e_step, z, base..base + 16 * W, len);
     }
-    for i in 0..READS {
+    for i in 0..R {
         for t in 0..len {
             out[i][t] = f64::from(_mm512_reduce_add_ps(acc[i][t]));
         }
@@ -585,49 +616,57 @@ unsafe fn free_block_avx512(
 /// u_j(t))`, the sum formed in single precision (it starts from zero each block) and added in
 /// double — by superposition, what stepping the inputs in one at a time adds. The inputs are
 /// [`Reversed`].
-pub(crate) fn fold_block(
+pub(crate) fn fold_block<const R: usize, const I: usize>(
     simd: Simd,
-    c: &BlockCoefficients,
+    c: &BlockCoefficients<R, I>,
     z: &mut Split,
-    u: &Reversed,
+    u: &Reversed<I>,
     len: usize,
 ) {
     #[cfg(target_arch = "x86_64")]
     match simd {
         // SAFETY: `Simd::detect` chose these only where the CPU has them.
-        Simd::Avx512 => return unsafe { fold_block_avx512(c, z, u, len) },
+        Simd::Avx512 if I <= DIRECTIONS => {
+            return unsafe { fold_block_avx512::<R, I, 2>(c, z, u, len) }
+        }
+        Simd::Avx512 => return unsafe { fold_block_avx512::<R, I, 1>(c, z, u, len) },
         Simd::Avx2 => return unsafe { fold_block_avx2(c, z, u, len) },
         Simd::Portable => {}
     }
     let _ = simd;
-    fold_block_with::<false>(c, z, u, len)
+    fold_block_with::<false, R, I>(c, z, u, len)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn fold_block_avx2(c: &BlockCoefficients, z: &mut Split, u: &Reversed, len: usize) {
-    fold_block_with::<true>(c, z, u, len)
+unsafe fn fold_block_avx2<const R: usize, const I: usize>(
+    c: &BlockCoefficients<R, I>,
+    z: &mut Split,
+    u: &Reversed<I>,
+    len: usize,
+) {
+    fold_block_with::<true, R, I>(c, z, u, len)
 }
 
 #[inline(always)]
-fn fold_block_with<const FMA: bool>(
-    c: &BlockCoefficients,
+fn fold_block_with<const FMA: bool, const R: usize, const I: usize>(
+    c: &BlockCoefficients<R, I>,
     z: &mut Split,
-    u: &Reversed,
+    u: &Reversed<I>,
     len: usize,
 ) {
     let n = c.modes();
-    let steps: [[f32; DIRECTIONS]; BLOCK] =
+    let steps: [[f32; I]; BLOCK] =
         std::array::from_fn(|t| std::array::from_fn(|j| u[j][BLOCK - 1 - t]));
     for base in (0..n).step_by(LANES32) {
         let mut er = [0f32; LANES32];
         let mut ei = [0f32; LANES32];
-        let mut gr = [[0f32; LANES32]; DIRECTIONS];
-        let mut gi = [[0f32; LANES32]; DIRECTIONS];
+        let mut gr = [[0f32; LANES32]; I];
+        let mut gi = [[0f32; LANES32]; I];
         for l in 0..LANES32 {
             let m = base + l;
             (er[l], ei[l]) = (c.e.re[m], c.e.im[m]);
-            for j in 0..DIRECTIONS {
+            for j in 0..I {
                 (gr[j][l], gi[j][l]) = (c.inputs[j].re[m], c.inputs[j].im[m]);
             }
         }
@@ -639,7 +678,7 @@ fn fold_block_with<const FMA: bool>(
                     fma32::<FMA>(er[l], a, -ei[l] * b),
                     fma32::<FMA>(er[l], b, ei[l] * a),
                 );
-                for j in 0..DIRECTIONS {
+                for j in 0..I {
                     re = fma32::<FMA>(gr[j][l], ut[j], re);
                     im = fma32::<FMA>(gi[j][l], ut[j], im);
                 }
@@ -653,32 +692,34 @@ fn fold_block_with<const FMA: bool>(
     }
 }
 
-/// [`fold_block`] in AVX-512: [`WIDE`] modes a pass in two 16-lane registers, the step's inputs
-/// summed apart from the recursion (so that its chain is two operations long).
+/// [`fold_block`] in AVX-512: `16 W` modes a pass in `W` registers of 16 lanes, the step's
+/// inputs summed apart from the recursion (so that its chain is two operations long).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn fold_block_avx512(c: &BlockCoefficients, z: &mut Split, u: &Reversed, len: usize) {
+unsafe fn fold_block_avx512<const R: usize, const I: usize, const W: usize>(
+    c: &BlockCoefficients<R, I>,
+    z: &mut Split,
+    u: &Reversed<I>,
+    len: usize,
+) {
     use std::arch::x86_64::*;
     let n = c.modes();
-    // SAFETY (every load and store below): `base + 32 <= n`, the length of every coefficient
+    // SAFETY (every load and store below): `base + 16 W <= n`, the length of every coefficient
     // (padded to WIDE) and at most that of `z`.
     let ld = |x: &[f32], at: usize| _mm512_loadu_ps(x.as_ptr().add(at));
-    for base in (0..n).step_by(WIDE) {
-        let h = [base, base + 16];
+    for base in (0..n).step_by(16 * W) {
+        let h: [usize; W] = std::array::from_fn(|k| base + 16 * k);
         let er = h.map(|b| ld(&c.e.re, b));
         let ei = h.map(|b| ld(&c.e.im, b));
-        let gr: [[__m512; 2]; DIRECTIONS] =
-            std::array::from_fn(|j| h.map(|b| ld(&c.inputs[j].re, b)));
-        let gi: [[__m512; 2]; DIRECTIONS] =
-            std::array::from_fn(|j| h.map(|b| ld(&c.inputs[j].im, b)));
-        let (mut ar, mut ai) = ([_mm512_setzero_ps(); 2], [_mm512_setzero_ps(); 2]);
+        let gr: [[__m512; W]; I] = std::array::from_fn(|j| h.map(|b| ld(&c.inputs[j].re, b)));
+        let gi: [[__m512; W]; I] = std::array::from_fn(|j| h.map(|b| ld(&c.inputs[j].im, b)));
+        let (mut ar, mut ai) = ([_mm512_setzero_ps(); W], [_mm512_setzero_ps(); W]);
         for t in 0..len {
-            let x: [__m512; DIRECTIONS] =
-                std::array::from_fn(|j| _mm512_set1_ps(u[j][BLOCK - 1 - t]));
-            for k in 0..2 {
+            let x: [__m512; I] = std::array::from_fn(|j| _mm512_set1_ps(u[j][BLOCK - 1 - t]));
+            for k in 0..W {
                 let mut ur = _mm512_mul_ps(gr[0][k], x[0]);
                 let mut ui = _mm512_mul_ps(gi[0][k], x[0]);
-                for j in 1..DIRECTIONS {
+                for j in 1..I {
                     ur = _mm512_fmadd_ps(gr[j][k], x[j], ur);
                     ui = _mm512_fmadd_ps(gi[j][k], x[j], ui);
                 }
@@ -688,7 +729,7 @@ unsafe fn fold_block_avx512(c: &BlockCoefficients, z: &mut Split, u: &Reversed, 
             }
         }
         // The sums added to the state in double precision, eight modes at a time.
-        for k in 0..2 {
+        for k in 0..W {
             let halves = [
                 (_mm512_castps512_ps256(ar[k]), _mm512_castps512_ps256(ai[k])),
                 (

@@ -12,16 +12,16 @@
 //! per key, and the interface solves for `D^{n+1}` ([`super::interface`]).
 
 use super::interface::SHARED_BELOW_HZ;
-use super::kernels::{BlockCoefficients, Split, Taps, BLOCK, DIRECTIONS, READS};
+pub(crate) use super::kernels::DAMPER_CHANNELS;
+use super::kernels::{
+    BlockCoefficients, Split, Taps, BLOCK, DAMPED_INPUTS, DAMPED_READS, DIRECTIONS, READS,
+};
 use crate::engine::modal::{input_weights, Modal};
 use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::physics::hammer::HammerParams;
 use crate::engine::spec::{BuildError, Direction, UnisonSpec, MAX_STRINGS};
 use faer::c64;
 use std::ops::Range;
-
-/// Damper channels of a key at most: T and P of each string.
-pub(crate) const DAMPER_CHANNELS: usize = 2 * MAX_STRINGS;
 
 /// Where each string direction's modes and the key's board modes lie in `q`, and which of the
 /// board's modes the key carries (those at or above [`SHARED_BELOW_HZ`]).
@@ -294,17 +294,24 @@ pub(crate) struct DamperKey {
     pub(crate) reads_to: [[f64; DAMPER_CHANNELS]; READS],
     /// What a unit of `D^{n+1}_d` adds to each channel's `f^{n+1}` (through `a D` in the velocity).
     pub(crate) settle: [[f64; DIRECTIONS]; DAMPER_CHANNELS],
+    /// The damped key over a block: in the state `u = w - sum_j to_j f_j` the felt's force
+    /// enters with the value known at the start of each step, `u' = e u + beta D^n + gamma f^n`,
+    /// `gamma = from + e to`; the block reads the four rows and the felt's velocity per channel,
+    /// and folds in `D` and `f` (channels beyond the key's, zero).
+    pub(crate) block: BlockCoefficients<DAMPED_READS, DAMPED_INPUTS>,
+    pub(crate) markov: Box<Taps<DAMPED_READS, DAMPED_INPUTS>>,
 }
 
 impl DamperKey {
-    fn new(
-        modes: &KeyModes,
-        weights: &[[c64; 2]],
-        h: f64,
-        damping_n_s_m: f64,
-        reads: &[Split; READS],
-        settle: &[Split; DIRECTIONS],
-    ) -> DamperKey {
+    fn new(modes: &KeyModes, key: &Undamped<'_>, damping_n_s_m: f64) -> DamperKey {
+        let Undamped {
+            weights,
+            h,
+            ef,
+            reads,
+            settle,
+            beta,
+        } = *key;
         let rows = modes.damper_row.clone();
         let r = rows.len();
         let (mut from, mut to) = (vec![], vec![]);
@@ -342,8 +349,33 @@ impl DamperKey {
                     .sum()
             })
         });
+        let zero = Split::zeros(ef.len());
+        let gamma: Vec<Split> = (0..r)
+            .map(|j| {
+                let mut g = from[j].clone();
+                Split::weighted_by(&to[j], |m| ef[m]).add_to(&mut g, 1.0);
+                g
+            })
+            .collect();
+        let block_rows: [&Split; DAMPED_READS] = std::array::from_fn(|i| {
+            if i < READS {
+                &reads[i]
+            } else {
+                rows.get(i - READS).unwrap_or(&zero)
+            }
+        });
+        let block_inputs: [&Split; DAMPED_INPUTS] = std::array::from_fn(|j| {
+            if j < DIRECTIONS {
+                &beta[j]
+            } else {
+                gamma.get(j - DIRECTIONS).unwrap_or(&zero)
+            }
+        });
+        let e = Split::new(ef);
         DamperKey {
             channels: r,
+            block: BlockCoefficients::new(&e, &block_rows, &block_inputs),
+            markov: markov_parameters(ef, &block_rows, &block_inputs),
             rows,
             from,
             to,
@@ -356,6 +388,18 @@ impl DamperKey {
     }
 }
 
+/// What the damper's coefficients are formed from: the key's step with the damper lifted.
+#[derive(Clone, Copy)]
+struct Undamped<'a> {
+    /// Each mode's weights of an input linear over the step, the step, `e^{lambda h}`.
+    weights: &'a [[c64; 2]],
+    h: f64,
+    ef: &'a [c64],
+    reads: &'a [Split; READS],
+    settle: &'a [Split; DIRECTIONS],
+    beta: &'a [Split; DIRECTIONS],
+}
+
 /// How the reads after a step depend on `D^{n+1}`: `Z[i][d]` for the total contact force (N/m)
 /// and the volume velocity's `[d]`, with the damper lifted or down.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -365,9 +409,13 @@ pub(crate) struct Settle {
 }
 
 /// `Re(r_i e^k g_d)` for `k < BLOCK`.
-fn markov_parameters(e: &[c64], rows: &[Split; READS], inputs: &[Split; DIRECTIONS]) -> Box<Taps> {
+fn markov_parameters<const R: usize, const I: usize>(
+    e: &[c64],
+    rows: &[&Split; R],
+    inputs: &[&Split; I],
+) -> Box<Taps<R, I>> {
     let mut power: Vec<c64> = vec![c64::new(1.0, 0.0); e.len()];
-    let mut out = Box::new([[[0f32; BLOCK]; DIRECTIONS]; READS]);
+    let mut out = Box::new([[[0f32; BLOCK]; I]; R]);
     for k in 0..BLOCK {
         for (i, row) in rows.iter().enumerate() {
             for (j, input) in inputs.iter().enumerate() {
@@ -425,8 +473,8 @@ pub struct ExactKey {
     /// The block loops' coefficients: `e`, the reads and the inputs `beta_d`; what a unit of
     /// `D_d` entering at one step adds to each read `k` steps later, `Re(r_i e^k beta_d)`
     /// (a block advanced freely, mode by mode, gets its input back by superposition).
-    pub(crate) block: BlockCoefficients,
-    pub(crate) markov: Box<Taps>,
+    pub(crate) block: BlockCoefficients<READS, DIRECTIONS>,
+    pub(crate) markov: Box<Taps<READS, DIRECTIONS>>,
     pub(crate) damper: Option<DamperKey>,
     pub(crate) hammer: HammerParams,
 }
@@ -516,9 +564,17 @@ impl ExactKey {
             }),
             volume: std::array::from_fn(|d| reads[0].read(&settle[d])),
         };
-        let damper = spec.damper.map(|damper| {
-            DamperKey::new(&modes, &weights, h, damper.damping_n_s_m, &reads, &settle)
-        });
+        let undamped = Undamped {
+            weights: &weights,
+            h,
+            ef: &ef,
+            reads: &reads,
+            settle: &settle,
+            beta: &beta,
+        };
+        let damper = spec
+            .damper
+            .map(|damper| DamperKey::new(&modes, &undamped, damper.damping_n_s_m));
         let damped = damper.as_ref().map_or(free, |dk| {
             let through = |i: usize, d: usize| -> f64 {
                 (0..dk.channels)
@@ -541,9 +597,11 @@ impl ExactKey {
             .map(|rows| std::array::from_fn(|d| reads_of(&rows[d])))
             .collect();
         let velocity_settle = std::array::from_fn(|d| reads_of(&modes.bridge_velocity_row[d]));
-        let markov = markov_parameters(&ef, &reads, &beta);
+        let rows: [&Split; READS] = std::array::from_fn(|i| &reads[i]);
+        let inputs: [&Split; DIRECTIONS] = std::array::from_fn(|d| &beta[d]);
+        let markov = markov_parameters(&ef, &rows, &inputs);
         let ef = Split::new(&ef);
-        let block = BlockCoefficients::new(&ef, &reads, &beta);
+        let block = BlockCoefficients::new(&ef, &rows, &inputs);
         ExactKey {
             n_strings: modes.force_row.len(),
             h,

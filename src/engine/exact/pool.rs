@@ -164,8 +164,8 @@ impl ExactPool {
     }
 
     /// `out.len()` (at most [`BLOCK`]) steps, the same as as many [`ExactPool::step`]s but for
-    /// rounding. A voice whose steps are linear and time-invariant ([`Voice::is_free`]: no hammer,
-    /// damper or fade) is advanced mode by mode over the whole block — each mode's coefficients
+    /// rounding. A voice whose steps are linear and time-invariant ([`Voice::is_linear`]: no
+    /// hammer or fade; the damper lifted or down) is advanced mode by mode over the whole block — each mode's coefficients
     /// loaded once, not once a step — and gets its input back by superposition: its reads step
     /// by step from its Markov parameters (the interface needs them every step), its modes from
     /// the inputs folded in at the end. The others step one sample at a time, as in `step`.
@@ -174,7 +174,7 @@ impl ExactPool {
         let len = out.len();
         for v in self.voices.iter_mut() {
             v.in_block = match (v.state.active, v.state.key) {
-                (true, Some(key)) => v.is_free(&self.keys[key]),
+                (true, Some(_)) => v.is_linear(),
                 _ => false,
             };
         }
@@ -188,8 +188,12 @@ impl ExactPool {
         // The block-long passes split over two cores where there is a second, in two halves of
         // about equal work (the voices' modes, in voice order); the steps between them — every
         // voice's sample by sample, the interface's solve — on this core.
+        // (A damped voice reads and folds in three times as much.)
         let work = |v: &Voice| match (v.in_block, v.state.key) {
-            (true, Some(key)) => self.keys[key].n_modes(),
+            (true, Some(key)) => {
+                let key = &self.keys[key];
+                key.n_modes() * if v.damped(key) { 3 } else { 1 }
+            }
             _ => 0,
         };
         let total: usize = self.voices.iter().map(work).sum();

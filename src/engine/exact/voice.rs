@@ -3,7 +3,10 @@
 //! around the interface's solve ([`super::interface`]): [`Voice::pre_step`] takes the step with
 //! what is known (`D^n`), [`Voice::post_step`] adds what `D^{n+1}` brings.
 
-use super::kernels::{advance, propagate, stage, Reversed, Simd, Split, BLOCK, DIRECTIONS, READS};
+use super::kernels::{
+    advance, convolve, propagate, stage, Reversed, Simd, Split, BLOCK, DAMPED_INPUTS, DAMPED_READS,
+    DIRECTIONS, READS,
+};
 use super::key::{ExactKey, DAMPER_CHANNELS};
 use crate::engine::pool::VoiceState;
 use crate::engine::spec::MAX_STRINGS;
@@ -34,11 +37,13 @@ pub(crate) struct Voice {
     /// damper's force without what `D^{n+1}` adds.
     pub(crate) known: [f64; READS],
     pub(crate) damper_known: [f64; DAMPER_CHANNELS],
-    /// Over a block advanced mode by mode ([`super::halves`]): whether this voice is, what its
-    /// modes read with no input, and the input of each step (`D^t`, m, [`Reversed`]).
+    /// Over a block advanced mode by mode ([`super::block`]): whether this voice is, what its
+    /// modes read with no input (the four rows, and the damper felt's velocity per channel where
+    /// the damper is down), and the inputs of each step (`D^t`, m, and the felt's `f^t`, N,
+    /// [`Reversed`]).
     pub(crate) in_block: bool,
-    pub(crate) block_read: [[f64; BLOCK]; READS],
-    pub(crate) block_inputs: Reversed,
+    pub(crate) block_read: [[f64; BLOCK]; DAMPED_READS],
+    pub(crate) block_inputs: Reversed<DAMPED_INPUTS>,
     /// What the interface holds for this voice: its key's `Z`, damper down or lifted.
     pub(crate) loads: Option<(usize, bool)>,
 }
@@ -58,16 +63,16 @@ impl Voice {
             known: [0.0; READS],
             damper_known: [0.0; DAMPER_CHANNELS],
             in_block: false,
-            block_read: [[0.0; BLOCK]; READS],
-            block_inputs: [[0.0; BLOCK]; DIRECTIONS],
+            block_read: [[0.0; BLOCK]; DAMPED_READS],
+            block_inputs: [[0.0; BLOCK]; DAMPED_INPUTS],
             loads: None,
         }
     }
 
-    /// Whether the next steps are linear and time-invariant: no hammer, no damper on the strings,
-    /// no fade (a block of them may then be advanced mode by mode).
-    pub(crate) fn is_free(&self, key: &ExactKey) -> bool {
-        !(self.state.hammer_on || self.damped(key)) && self.state.fade_left == 0
+    /// Whether the next steps are linear and time-invariant: no hammer, no fade (a block of them
+    /// may then be advanced mode by mode, the damper lifted or down).
+    pub(crate) fn is_linear(&self) -> bool {
+        !self.state.hammer_on && self.state.fade_left == 0
     }
 
     /// Whether the damper felt is on the strings.
@@ -99,6 +104,7 @@ impl Voice {
         self.force_n = [0.0; 3];
         self.damper_n = [0.0; DAMPER_CHANNELS];
         self.read = [0.0; READS];
+        self.block_inputs = [[0.0; BLOCK]; DAMPED_INPUTS];
         self.in_block = false;
     }
 
@@ -226,14 +232,47 @@ impl Voice {
     }
 
     /// The reads known before `D^{n+1}` of a voice in a block: its free reads and what its
-    /// inputs so far add, `D^t` stored as this step's input.
+    /// inputs so far add, `D^t` (and the damper felt's `f^t`) stored as this step's input; with
+    /// the damper down, the felt's force known but for `D^{n+1}` (as [`Voice::pre_step`]).
     pub(crate) fn pre_block_step(&mut self, key: &ExactKey, t: usize, simd: Simd) {
         for d in 0..DIRECTIONS {
             self.block_inputs[d][BLOCK - 1 - t] = self.d[d] as f32;
         }
-        let mut read = super::kernels::convolve(simd, &key.markov, &self.block_inputs, t);
-        for (i, r) in read.iter_mut().enumerate() {
-            *r += self.block_read[i][t];
+        let mut read = [0.0; READS];
+        match (self.damped(key), &key.damper) {
+            (true, Some(damper)) => {
+                for j in 0..damper.channels {
+                    self.block_inputs[DIRECTIONS + j][BLOCK - 1 - t] = self.damper_n[j] as f32;
+                }
+                let mut all = convolve(simd, &damper.markov, &self.block_inputs, t);
+                for (i, r) in all.iter_mut().enumerate() {
+                    *r += self.block_read[i][t];
+                }
+                // The felt's velocity after the step, from u (module notes of `key`): what the
+                // per-sample step forms from `w` and the force at the step's start.
+                let r = damper.channels;
+                let after: [f64; DAMPER_CHANNELS] = std::array::from_fn(|i| {
+                    (0..r)
+                        .map(|j| damper.solve[i * DAMPER_CHANNELS + j] * all[READS + j])
+                        .sum()
+                });
+                for (i, x) in read.iter_mut().enumerate() {
+                    *x = all[i]
+                        + (0..r)
+                            .map(|j| damper.reads_to[i][j] * after[j])
+                            .sum::<f64>();
+                }
+                self.damper_known = after;
+            }
+            _ => {
+                let inputs: &Reversed<DIRECTIONS> = self.block_inputs[..DIRECTIONS]
+                    .try_into()
+                    .expect("the first inputs are the bridge's");
+                read = convolve(simd, &key.markov, inputs, t);
+                for (i, r) in read.iter_mut().enumerate() {
+                    *r += self.block_read[i][t];
+                }
+            }
         }
         self.known = self.with_feed(key, read);
     }
@@ -258,8 +297,11 @@ impl Voice {
                     + (0..DIRECTIONS)
                         .map(|d| damper.settle[j][d] * next[d])
                         .sum::<f64>();
-                damper.from[j].add_to(&mut self.w, before[j]);
-                damper.to[j].add_to(&mut self.w, after);
+                // In a block the felt's force is an input, folded in at its end.
+                if !self.in_block {
+                    damper.from[j].add_to(&mut self.w, before[j]);
+                    damper.to[j].add_to(&mut self.w, after);
+                }
                 self.damper_n[j] = after;
             }
         } else {
