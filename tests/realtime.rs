@@ -415,6 +415,12 @@ fn play_runs_the_callback_on_the_alsa_null_device() {
     assert!(out.status.success());
     assert!(stderr.contains("playing on alsa:null"));
     assert!(stderr.contains("playing 2 events from the file"));
+    // Granted or refused (with the reason), the audio thread's real-time priority is reported.
+    assert!(
+        stderr.contains("real-time priority (SCHED_FIFO) granted")
+            || stderr.contains("real-time priority not granted: "),
+        "no word on real-time priority"
+    );
     let summary = ours.last().unwrap();
     let n: u64 = summary.split_whitespace().next().unwrap().parse().unwrap();
     assert!(n >= 300, "{summary}");

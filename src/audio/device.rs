@@ -148,6 +148,8 @@ pub struct CallbackStats {
     pub max_ns: AtomicU64,
     /// Frames of the largest block seen.
     pub max_frames: AtomicU64,
+    /// The callback thread's real-time priority (asked at its first callback).
+    pub priority: super::priority::Promotion,
 }
 
 /// Why a stream did not start, with the synth handed back when it could be (boxed: the error
@@ -285,6 +287,7 @@ pub fn start<E: VoicePool>(
     let built = chosen.build_output_stream(
         config,
         move |data: &mut [f32], _: &cpal::OutputCallbackInfo| {
+            cb_stats.priority.ask();
             let start = Instant::now();
             if let Some(synth) = held.synth.as_mut() {
                 synth.process(data, ch);

@@ -9,9 +9,10 @@
 //! the caller takes it back and [`Pair::join`] says so, so the engine runs the block on one core
 //! instead of waiting for a thread it does not control.
 
+use super::priority::Promotion;
 use crate::engine::Pair;
 use std::cell::UnsafeCell;
-use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -46,6 +47,9 @@ struct Shared {
     late: AtomicU64,
     /// Written by the caller before `POSTED`, taken by the helper after it sees `POSTED`.
     job: UnsafeCell<Option<*mut (dyn FnMut() + Send)>>,
+    /// Whether the helper should ask for real-time priority (set by its owner), and what it got.
+    wanted: AtomicBool,
+    priority: Promotion,
 }
 
 // SAFETY: `job` is touched only by the side that the `state` protocol makes its owner (the caller
@@ -81,6 +85,8 @@ impl Helper {
             joined: AtomicU64::new(0),
             late: AtomicU64::new(0),
             job: UnsafeCell::new(None),
+            wanted: AtomicBool::new(false),
+            priority: Promotion::default(),
         });
         let theirs = shared.clone();
         let thread = std::thread::Builder::new()
@@ -101,6 +107,19 @@ impl Helper {
     pub fn joined_jobs(&self) -> u64 {
         self.shared.joined.load(Ordering::Relaxed)
     }
+
+    /// Have the helper thread ask for real-time priority (before its next job, once).
+    pub fn ask_real_time_priority(&self) {
+        self.shared.wanted.store(true, Ordering::Relaxed);
+        if let Some(thread) = &self.thread {
+            thread.thread().unpark();
+        }
+    }
+
+    /// The helper thread's real-time priority.
+    pub fn promotion(&self) -> &Promotion {
+        &self.shared.priority
+    }
 }
 
 /// The helper's loop: wait (spinning, then parked) for a job, run it inside `wrap`, report it
@@ -108,6 +127,9 @@ impl Helper {
 fn work(shared: &Shared, wrap: JobWrapper) {
     let mut awake_since = Instant::now();
     loop {
+        if shared.wanted.load(Ordering::Relaxed) {
+            shared.priority.ask();
+        }
         match shared.state.load(Ordering::Acquire) {
             QUIT => return,
             POSTED => {

@@ -78,6 +78,8 @@ pub struct Stats {
     /// start in time ([`Synth::use_second_core`]).
     pub two_core_runs: AtomicU64,
     pub helper_late: AtomicU64,
+    /// The helper thread's real-time priority, as it reported it.
+    pub helper_priority: super::priority::Promotion,
 }
 
 /// The audio thread's side: owns the piano, reads events and commands.
@@ -222,6 +224,14 @@ impl<E: VoicePool> Synth<E> {
         self.use_second_core_with(super::helper::run_job)
     }
 
+    /// Have the helper thread (if any) ask for real-time priority, as the audio thread does
+    /// ([`super::priority`]); its outcome shows in [`Stats::helper_priority`].
+    pub fn ask_real_time_priority(&self) {
+        if let Some(helper) = &self.helper {
+            helper.ask_real_time_priority();
+        }
+    }
+
     /// [`Synth::use_second_core`], the helper running each of its jobs inside `wrap`.
     pub fn use_second_core_with(&mut self, wrap: super::helper::JobWrapper) -> std::io::Result<()> {
         self.helper = Some(Helper::spawn_with(wrap)?);
@@ -330,6 +340,7 @@ impl<E: VoicePool> Synth<E> {
             s.two_core_runs
                 .store(helper.joined_jobs(), Ordering::Relaxed);
             s.helper_late.store(helper.late_jobs(), Ordering::Relaxed);
+            s.helper_priority.copy_from(helper.promotion());
         }
     }
 

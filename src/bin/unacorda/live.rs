@@ -166,11 +166,18 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         }
     }
     let settings = scaling.base.output_settings();
-    let (mut synth, handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
+    let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
     if cores == 2 {
         synth.use_second_core()?;
+        synth.ask_real_time_priority();
     }
-    let clock = handle.clock.clone();
+    // A file's first events (as many as the queue holds) are scheduled before the stream starts,
+    // from its first frame: a callback running at real-time priority on a device that does not
+    // pace it (ALSA's null device) may otherwise play many blocks before this thread runs again.
+    let file_events = file_events.map(|events| {
+        let next = handle.schedule_timed(&events, 0, 0);
+        (events, next)
+    });
     let stats = handle.stats.clone();
     let callback_stats = Arc::new(CallbackStats::default());
     let mut output =
@@ -192,6 +199,7 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     }
     let started = Instant::now();
     let (mut injected, mut xruns, mut reopened) = (false, 0u64, 0u32);
+    let mut priority_reported = false;
     let mut last_watch = started;
     let mut deadline = args.seconds.map(|s| started + Duration::from_secs_f64(s));
     // The event source: a file fed in real time from this thread, or the MIDI input's callback.
@@ -199,12 +207,11 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     let mut midi_link = None;
     let shared = Arc::new(Mutex::new(handle));
     match file_events {
-        Some(events) => {
-            let start = clock.frame_at(Instant::now());
+        Some((events, next)) => {
             let length = events.last().map_or(0.0, |e| e.time_s) + FILE_TAIL_S;
             deadline.get_or_insert(started + Duration::from_secs_f64(length));
             eprintln!("playing {} events from the file ({length:.1} s)", events.len());
-            feed = Some((events, start, 0));
+            feed = Some((events, 0, next));
         }
         None => match connect_midi(args.midi_in.as_deref(), &shared) {
             Ok((connection, name)) => {
@@ -229,6 +236,25 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         if args.lose_device_after.is_some_and(|after| n >= after) && !injected {
             injected = true;
             output.inject(cpal::Error::new(cpal::ErrorKind::DeviceNotAvailable));
+        }
+        if !priority_reported {
+            let helper = if cores == 2 {
+                stats.helper_priority.outcome()
+            } else {
+                Some(Ok(()))
+            };
+            if let (Some(audio), Some(helper)) = (callback_stats.priority.outcome(), helper) {
+                priority_reported = true;
+                match (audio, helper) {
+                    (Ok(()), Ok(())) => eprintln!(
+                        "real-time priority (SCHED_FIFO) granted to the audio thread{}",
+                        if cores == 2 { " and the helper" } else { "" }
+                    ),
+                    (Err(e), _) | (_, Err(e)) => eprintln!(
+                        "real-time priority not granted: {e}; other work may preempt a block"
+                    ),
+                }
+            }
         }
         let mut lost = None;
         while let Ok(e) = output.errors.try_recv() {
