@@ -7,7 +7,7 @@
 //! guards or otherwise; the output must stay finite, the callback must never allocate, and
 //! resident memory must stay flat once every voice slot has been used.
 //!
-//! `soak_short` (CI) plays 10 s on each engine (the live one on two cores, as `play` runs it); `soak_ten_minutes_rk4` and `…_etd` are marked
+//! `soak_short` (CI) plays 10 s on each engine (the live ones on two cores, as `play` runs them); `soak_ten_minutes_rk4`, `…_etd` and `…_exact` are marked
 //! long (`#[ignore]`):
 //! `cargo test --release --test soak -- --ignored --nocapture` (length: `UNACORDA_SOAK_S`, s).
 
@@ -16,6 +16,7 @@ use std::sync::atomic::Ordering;
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::scaling::{Scaling, KEYS};
 use unacorda::engine::etd::EtdPool;
+use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::resident_bytes;
 use unacorda::midi::{Event, Pedal};
@@ -80,7 +81,17 @@ fn resident() -> u64 {
 }
 
 /// `two_cores`: as `play` runs the live integrator, half of the voices on a helper thread.
-fn soak<E: VoicePool>(seconds: f64, engine: &str, two_cores: bool) {
+/// How much an engine's energy may rise over a block in which nothing drives it (relative): by
+/// rounding on RK4 and the live integrator, whose energy is the state's quadratic form; on the
+/// exact engine by 1 %, whose energy is each key's modal energies summed (about the strings'
+/// static deflection by the board) and the shared board's — the coupling between keys moves
+/// energy between terms that this sum weighs alike only on average (measured: 105 of 6 160
+/// undriven blocks rose, by 0.35 % at most, in 10 s; a runaway grows without bound, and the
+/// growth guard's reset would show as a voice reset).
+const ROUNDING: f64 = 1e-12;
+const MODAL_SUM: f64 = 1e-2;
+
+fn soak<E: VoicePool>(seconds: f64, engine: &str, two_cores: bool, rise_tolerance: f64) {
     const VOICES: usize = 6;
     const BLOCK: usize = 64;
     let scaling = Scaling::resolve("grand").unwrap();
@@ -130,7 +141,7 @@ fn soak<E: VoicePool>(seconds: f64, engine: &str, two_cores: bool) {
             quiet += 1;
             let rise = (e1 - e0) / e0;
             worst_rise = worst_rise.max(rise);
-            rose += u64::from(rise > 1e-12);
+            rose += u64::from(rise > rise_tolerance);
         }
         for &s in &out {
             non_finite += u64::from(!s.is_finite());
@@ -160,7 +171,7 @@ fn soak<E: VoicePool>(seconds: f64, engine: &str, two_cores: bool) {
     let resets = stats.resets.load(Ordering::Relaxed);
     let growth_resets = stats.growth_resets.load(Ordering::Relaxed);
     println!(
-        "level before the soft clipper: peak {before_clip:.3} of full scale, {clipped} samples above its knee ({:.1e} of all); {quiet} blocks undriven, energy rose in {rose} (largest change {worst_rise:+.2e} per block); {resets} voices reset ({growth_resets} by the growth guard)",
+        "level before the soft clipper: peak {before_clip:.3} of full scale, {clipped} samples above its knee ({:.1e} of all); {quiet} blocks undriven, energy rose above {rise_tolerance:.0e} in {rose} (largest change {worst_rise:+.2e} per block); {resets} voices reset ({growth_resets} by the growth guard)",
         clipped as f64 / (blocks * BLOCK as u64) as f64
     );
     println!(
@@ -202,8 +213,14 @@ fn soak<E: VoicePool>(seconds: f64, engine: &str, two_cores: bool) {
 
 #[test]
 fn soak_short() {
-    soak::<Rk4Pool>(10.0, "RK4 at 96 kHz", false);
-    soak::<EtdPool>(10.0, "ETDRK4 at 48 kHz on two cores", true);
+    soak::<Rk4Pool>(10.0, "RK4 at 96 kHz", false, ROUNDING);
+    soak::<EtdPool>(10.0, "ETDRK4 at 48 kHz on two cores", true, ROUNDING);
+    soak::<ExactPool>(
+        10.0,
+        "the exact engine at 48 kHz on two cores",
+        true,
+        MODAL_SUM,
+    );
 }
 
 fn long_seconds() -> f64 {
@@ -216,11 +233,27 @@ fn long_seconds() -> f64 {
 #[test]
 #[ignore = "long: 10 minutes of sound (UNACORDA_SOAK_S to change)"]
 fn soak_ten_minutes_rk4() {
-    soak::<Rk4Pool>(long_seconds(), "RK4 at 96 kHz", false);
+    soak::<Rk4Pool>(long_seconds(), "RK4 at 96 kHz", false, ROUNDING);
+}
+
+#[test]
+#[ignore = "long: 10 minutes of sound (UNACORDA_SOAK_S to change)"]
+fn soak_ten_minutes_exact() {
+    soak::<ExactPool>(
+        long_seconds(),
+        "the exact engine at 48 kHz on two cores",
+        true,
+        MODAL_SUM,
+    );
 }
 
 #[test]
 #[ignore = "long: 10 minutes of sound (UNACORDA_SOAK_S to change)"]
 fn soak_ten_minutes_etd() {
-    soak::<EtdPool>(long_seconds(), "ETDRK4 at 48 kHz on two cores", true);
+    soak::<EtdPool>(
+        long_seconds(),
+        "ETDRK4 at 48 kHz on two cores",
+        true,
+        ROUNDING,
+    );
 }

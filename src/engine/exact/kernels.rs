@@ -494,17 +494,26 @@ fn carry<const R: usize, const I: usize>(
     range: std::ops::Range<usize>,
     len: usize,
 ) {
-    for m in range {
-        let (pr, pi) = if len == BLOCK {
-            (c.e_block.re[m], c.e_block.im[m])
-        } else if m < e_step.len() {
+    let (zr, zi) = (&mut z.re[range.clone()], &mut z.im[range.clone()]);
+    if len == BLOCK {
+        // The whole block's power, loaded (a loop that vectorises).
+        let (er, ei) = (&c.e_block.re[range.clone()], &c.e_block.im[range]);
+        for m in 0..zr.len() {
+            let (a, b) = (zr[m], zi[m]);
+            zr[m] = er[m] * a - ei[m] * b;
+            zi[m] = er[m] * b + ei[m] * a;
+        }
+        return;
+    }
+    for (m, (zr, zi)) in range.zip(zr.iter_mut().zip(zi.iter_mut())) {
+        let (pr, pi) = if m < e_step.len() {
             power(e_step.re[m], e_step.im[m], len)
         } else {
             (0.0, 0.0)
         };
-        let (a, b) = (z.re[m], z.im[m]);
-        z.re[m] = pr * a - pi * b;
-        z.im[m] = pr * b + pi * a;
+        let (a, b) = (*zr, *zi);
+        *zr = pr * a - pi * b;
+        *zi = pr * b + pi * a;
     }
 }
 

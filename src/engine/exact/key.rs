@@ -468,8 +468,10 @@ pub struct ExactKey {
     pub(crate) force_settle: Vec<[[f64; DIRECTIONS]; 3]>,
     pub(crate) velocity_settle: [[f64; DIRECTIONS]; 3],
     /// Per direction, the modes' static response to a unit `D` held (a key joining a moving
-    /// board starts on it, not jolted by its contact springs).
+    /// board starts on it, not jolted by its contact springs), and `a_d - follow_d` (`w` plus
+    /// these times `D` is the state about that static deflection: [`super::voice::Voice::energy_j`]).
     pub(crate) follow: [Split; 3],
+    pub(crate) unfollow: [Split; 3],
     /// The block loops' coefficients: `e`, the reads and the inputs `beta_d`; what a unit of
     /// `D_d` entering at one step adds to each read `k` steps later, `Re(r_i e^k beta_d)`
     /// (a block advanced freely, mode by mode, gets its input back by superposition).
@@ -597,6 +599,11 @@ impl ExactKey {
             .map(|rows| std::array::from_fn(|d| reads_of(&rows[d])))
             .collect();
         let velocity_settle = std::array::from_fn(|d| reads_of(&modes.bridge_velocity_row[d]));
+        let unfollow = std::array::from_fn(|d| {
+            let mut u = settle[d].clone();
+            follow[d].add_to(&mut u, -1.0);
+            u
+        });
         let rows: [&Split; READS] = std::array::from_fn(|i| &reads[i]);
         let inputs: [&Split; DIRECTIONS] = std::array::from_fn(|d| &beta[d]);
         let markov = markov_parameters(&ef, &rows, &inputs);
@@ -621,6 +628,7 @@ impl ExactKey {
             force_settle,
             velocity_settle,
             follow,
+            unfollow,
             block,
             markov,
             damper,

@@ -299,13 +299,17 @@ impl ExactPool {
         self.steps.part.set_values(take(m));
     }
 
-    /// Mechanical energy of every active key's modes and of the shared board (J, cycle-averaged
-    /// per mode).
+    /// Mechanical energy of every active key's modes about their static deflection by the board
+    /// ([`Voice::dynamic_energy_j`]) and of the shared board (J, cycle-averaged per mode).
     pub fn mechanical_energy_j(&self) -> f64 {
-        (0..self.voices.len())
-            .map(|k| self.voice_energy_j(k))
-            .sum::<f64>()
-            + self.board_energy_j()
+        let keys = self
+            .voices
+            .iter()
+            .map(|v| match (v.state.active, v.state.key) {
+                (true, Some(key)) => v.dynamic_energy_j(&self.keys[key]),
+                _ => 0.0,
+            });
+        keys.sum::<f64>() + self.board_energy_j()
     }
 
     /// Take voice `k` off the board and set it at rest.
@@ -453,11 +457,18 @@ impl Policy for ExactPool {
         self.board.energy_j(&self.steps.part)
     }
 
-    /// The shared board at rest, and the voices' forces on it with it (they are its terms).
+    /// The shared board at rest; each sounding voice's strings moved with it (to their static
+    /// deflection by the board's new position under them, as a voice joining one), their forces
+    /// on it its terms again — a board set at rest under strings that still feel it where it was
+    /// would jolt them through their contact springs.
     fn rest_board(&mut self) {
         self.steps.part.rest();
-        for v in &mut self.voices {
+        for k in 0..self.voices.len() {
+            let v = &mut self.voices[k];
             v.force_n = [0.0; 3];
+            if v.state.active && v.state.key.is_some() {
+                self.enter(k);
+            }
         }
     }
 }
