@@ -1,7 +1,7 @@
 //! The real-time path under load, at the engine's 48 kHz output:
-//! - `callback/{voices}v_{frames}f` (RK4 at 96 kHz) and `callback_etd/…` (ETDRK4 at 48 kHz, the
-//!   live integrator; `callback_etd_2cores/…` with its voices split over two cores): one audio callback ([`Synth::process`]) with 1, 8, 16 or 32
-//!   voices sounding (keys spread over the keyboard, sustain held, one shared soundboard) and 64-
+//! - `callback/{voices}v_{frames}f` (RK4 at 96 kHz) and `callback_exact/…` (the exact engine at
+//!   48 kHz; `callback_exact_2cores/…` with each block's work split over two cores): one audio
+//!   callback ([`Synth::process`]) with 1, 8, 16, 32 or (exact) 64 voices sounding (keys spread over the keyboard, sustain held, one shared soundboard) and 64-
 //!   or 128-frame blocks. Besides criterion's estimate, every block's time is recorded and the
 //!   median and p99.9 are printed as a fraction of the block's deadline.
 //! - `latency/event_to_first_sample`: a note-on stamped by the live clock, through the event queue
@@ -14,39 +14,47 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::scaling::{Scaling, KEYS};
-use unacorda::engine::etd::EtdPool;
+use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::{loaded_synth, percentile};
 use unacorda::midi::Event;
 use unacorda::play::Piano;
 
-fn keyboard<E: VoicePool>() -> (Piano<E>, unacorda::config::output::OutputSettings) {
+fn keyboard<E: VoicePool>(voices: usize) -> (Piano<E>, unacorda::config::output::OutputSettings) {
     let scaling = Scaling::resolve("grand").expect("built-in keyboard");
     let keys: Vec<usize> = (1..=KEYS).collect();
-    let piano = Piano::<E>::build(&scaling, &keys, 32).expect("the keyboard builds");
+    let piano = Piano::<E>::build(&scaling, &keys, voices).expect("the keyboard builds");
     (piano, scaling.base.output_settings())
 }
 
 fn callback(c: &mut Criterion) {
-    callback_on::<Rk4Pool>(c, "callback", "RK4 at 96 kHz", false);
-    callback_on::<EtdPool>(c, "callback_etd", "ETDRK4 at 48 kHz", false);
-    callback_on::<EtdPool>(
+    callback_on::<Rk4Pool>(c, "callback", "RK4 at 96 kHz", false, &[1, 8, 16, 32]);
+    let voices = [1, 8, 16, 32, 64];
+    callback_on::<ExactPool>(c, "callback_exact", "exact at 48 kHz", false, &voices);
+    callback_on::<ExactPool>(
         c,
-        "callback_etd_2cores",
-        "ETDRK4 at 48 kHz, voices split over two cores",
+        "callback_exact_2cores",
+        "exact at 48 kHz, each block split over two cores",
         true,
+        &voices,
     );
 }
 
-fn callback_on<E: VoicePool>(c: &mut Criterion, name: &str, label: &str, two_cores: bool) {
-    let (piano, settings) = keyboard::<E>();
+fn callback_on<E: VoicePool>(
+    c: &mut Criterion,
+    name: &str,
+    label: &str,
+    two_cores: bool,
+    voice_counts: &[usize],
+) {
+    let (piano, settings) = keyboard::<E>(voice_counts.iter().copied().max().unwrap_or(1));
     let fs = settings.rate_hz;
     let mut report = Vec::new();
     let mut group = c.benchmark_group(name);
     group.sample_size(10);
     group.warm_up_time(Duration::from_secs(1));
     group.measurement_time(Duration::from_secs(4));
-    for voices in [1usize, 8, 16, 32] {
+    for &voices in voice_counts {
         for frames in [64usize, 128] {
             let (mut synth, handle) = loaded_synth(&piano, settings, voices, frames);
             if two_cores {
@@ -92,7 +100,7 @@ fn callback_on<E: VoicePool>(c: &mut Criterion, name: &str, label: &str, two_cor
 }
 
 fn latency(c: &mut Criterion) {
-    let (piano, settings) = keyboard::<Rk4Pool>();
+    let (piano, settings) = keyboard::<Rk4Pool>(32);
     let frames = 64;
     let (silent, _handle) = Synth::new(piano, settings, EVENT_QUEUE).expect("rates match");
     let mut delays = Vec::new();

@@ -4,7 +4,6 @@
 
 use crate::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use crate::config::output::OutputSettings;
-use crate::engine::etd::EtdUnison;
 use crate::engine::exact::ExactUnison;
 use crate::engine::kernels::Real;
 use crate::engine::rk4::dense::DenseUnison;
@@ -91,33 +90,6 @@ pub fn voice_speed<T: Real>(spec: &UnisonSpec, seconds: f64) -> VoiceSpeed {
     let dt = t.elapsed().as_secs_f64();
     VoiceSpeed {
         real_time_factor: steps as f64 * inst.step_s() / dt,
-        flops_per_s: flops / dt,
-    }
-}
-
-/// Run `spec` on the live integrator ([`EtdUnison`], ETDRK4 on complex modes) at
-/// `rate_hz`, struck normally, for `seconds` of sound and time it (steps only).
-pub fn exponential_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> VoiceSpeed {
-    let mut spec = spec.clone();
-    spec.sample_rate_hz = rate_hz;
-    let mut voice = EtdUnison::new(&spec).expect("the preset builds");
-    voice.set_damper(false);
-    voice.strike(Strike {
-        velocity_m_s: 2.5,
-        una_corda: false,
-    });
-    for _ in 0..(0.01 * rate_hz) as usize {
-        voice.step();
-    }
-    let steps = (seconds * rate_hz).max(1.0) as usize;
-    let flops = voice.flops_per_step() * steps as f64;
-    let t = Instant::now();
-    for _ in 0..steps {
-        voice.step();
-    }
-    let dt = t.elapsed().as_secs_f64();
-    VoiceSpeed {
-        real_time_factor: steps as f64 / rate_hz / dt,
         flops_per_s: flops / dt,
     }
 }

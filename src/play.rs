@@ -198,7 +198,7 @@ pub struct Piano<E: VoicePool> {
 }
 
 /// Default size of the voice pool.
-pub const DEFAULT_VOICES: usize = 32;
+pub const DEFAULT_VOICES: usize = 64;
 
 /// Largest voice pool the command line accepts.
 pub const MAX_VOICES: usize = 256;

@@ -1,13 +1,12 @@
-//! The callback's ways of running the engine all sound the same, bit for bit: the live pools (the
-//! ETDRK4 pool and the exact pool) split over two cores (a helper thread) and on one, the engine
-//! run from event to event and one frame at a time; and the two-core callback never allocates.
+//! The callback's ways of running the engine all sound the same, bit for bit: the exact pool split
+//! over two cores (a helper thread) and on one, the engine run from event to event and (within
+//! rounding) one frame at a time; and the two-core callback never allocates.
 
 use assert_no_alloc::{assert_no_alloc, reset_violation_count, violation_count, AllocDisabler};
 use std::sync::atomic::{AtomicU64, Ordering};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::output::OutputSettings;
 use unacorda::config::scaling::{parse_key, Scaling};
-use unacorda::engine::etd::EtdPool;
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::Pair;
 use unacorda::engine::{Rk4Pool, VoicePool};
@@ -92,16 +91,11 @@ fn compare(label: &str, a: &[f32], b: &[f32]) {
     assert_eq!(differ, 0, "{label}: the outputs differ");
 }
 
-#[test]
-fn two_cores_sound_exactly_like_one() {
-    two_cores_alike::<EtdPool>("live pool", 0.0);
-}
-
 /// The exact pool advances a block in single precision inside it and in double from one block to
 /// the next, so frame by frame (blocks of one) rounds otherwise than event to event: ~1e-5 of the
 /// peak (the engine's own test), enough to move a hammer's release by a step here (1.2e-3).
 #[test]
-fn two_cores_sound_exactly_like_one_on_the_exact_pool() {
+fn two_cores_sound_exactly_like_one() {
     two_cores_alike::<ExactPool>("exact pool", 5e-3);
 }
 
@@ -182,11 +176,6 @@ fn checked(job: &mut dyn FnMut()) {
 
 #[test]
 fn the_callback_on_two_cores_never_allocates() {
-    never_allocates::<EtdPool>("live pool", 100);
-}
-
-#[test]
-fn the_callback_on_two_cores_never_allocates_on_the_exact_pool() {
     // One split a block, and only while two voices sound (the script's last 30 blocks are one).
     never_allocates::<ExactPool>("exact pool", 50);
 }
@@ -255,11 +244,6 @@ impl Pair for Alternates {
 
 #[test]
 fn split_and_declined_blocks_interleave_without_a_trace() {
-    interleave::<EtdPool>("live pool");
-}
-
-#[test]
-fn split_and_declined_blocks_interleave_without_a_trace_on_the_exact_pool() {
     interleave::<ExactPool>("exact pool");
 }
 

@@ -131,18 +131,19 @@ fn strike_every_key<E: VoicePool>() -> (f64, usize) {
     (worst, released)
 }
 
+/// How far the energy may rise in a step: by rounding on RK4 (a sum of ~1e3 terms in f64); on the
+/// exact engine by what its sum of modal energies weighs unevenly (`tests/soak.rs`).
 #[test]
 fn every_key_struck_fortissimo_stays_finite_and_decays() {
-    use unacorda::engine::etd::EtdPool;
-    for (engine, (worst, released)) in [
-        ("RK4", strike_every_key::<Rk4Pool>()),
-        ("live integrator", strike_every_key::<EtdPool>()),
+    use unacorda::engine::exact::ExactPool;
+    for (engine, tolerance, (worst, released)) in [
+        ("RK4", 1e-12, strike_every_key::<Rk4Pool>()),
+        ("exact", 1e-2, strike_every_key::<ExactPool>()),
     ] {
-        println!("{engine}: all 88 keys struck at 6 m/s for 20 ms: finite; {released} hammers released, after which the energy changed by at most {worst:+.2e} per step");
+        println!("{engine}: all 88 keys struck at 6 m/s for 20 ms: finite; {released} hammers released, after which the energy changed by at most {worst:+.2e} per step (limit {tolerance:e})");
         assert!(released > 80, "{engine}: only {released} hammers released");
-        // Rounding: the energy is a sum of ~1e3 terms in f64.
         assert!(
-            worst < 1e-12,
+            worst < tolerance,
             "{engine}: the energy rose by {worst:e} in a step"
         );
     }
@@ -181,7 +182,7 @@ fn keys_sound_near_their_pitch() {
 /// order asked for, exactly as built one after another.
 #[test]
 fn keys_prepared_on_several_threads_land_in_order() {
-    use unacorda::engine::etd::EtdPool;
+    use unacorda::engine::exact::ExactPool;
     use unacorda::engine::BuildError;
     use unacorda::engine::VoicePool;
     use unacorda::play::Piano;
@@ -192,8 +193,8 @@ fn keys_prepared_on_several_threads_land_in_order() {
         .iter()
         .map(|&k| keyboard.key_preset(k).unwrap().unison_spec())
         .collect();
-    let mut sequential = EtdPool::build_pool(&specs, 2, rate).unwrap();
-    let mut threaded = Piano::<EtdPool>::build(&keyboard, &keys, 2)
+    let mut sequential = ExactPool::build_pool(&specs, 2, rate).unwrap();
+    let mut threaded = Piano::<ExactPool>::build(&keyboard, &keys, 2)
         .unwrap()
         .instrument;
     let strike = Strike {

@@ -7,15 +7,14 @@
 //! guards or otherwise; the output must stay finite, the callback must never allocate, and
 //! resident memory must stay flat once every voice slot has been used.
 //!
-//! `soak_short` (CI) plays 10 s on each engine (the live ones on two cores, as `play` runs them); `soak_ten_minutes_rk4`, `…_etd` and `…_exact` are marked
-//! long (`#[ignore]`):
+//! `soak_short` (CI) plays 10 s on each engine (the exact one on two cores, as `play` runs it);
+//! `soak_ten_minutes_rk4` and `…_exact` are marked long (`#[ignore]`):
 //! `cargo test --release --test soak -- --ignored --nocapture` (length: `UNACORDA_SOAK_S`, s).
 
 use assert_no_alloc::{assert_no_alloc, reset_violation_count, violation_count, AllocDisabler};
 use std::sync::atomic::Ordering;
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::scaling::{Scaling, KEYS};
-use unacorda::engine::etd::EtdPool;
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::resident_bytes;
@@ -80,9 +79,9 @@ fn resident() -> u64 {
     resident_bytes().expect("no resident-memory figure on this system")
 }
 
-/// `two_cores`: as `play` runs the live integrator, half of the voices on a helper thread.
+/// `two_cores`: as `play` runs the exact engine, a helper thread taking half of each block.
 /// How much an engine's energy may rise over a block in which nothing drives it (relative): by
-/// rounding on RK4 and the live integrator, whose energy is the state's quadratic form; on the
+/// rounding on RK4, whose energy is the state's quadratic form; on the
 /// exact engine by 1 %, whose energy is each key's modal energies summed (about the strings'
 /// static deflection by the board) and the shared board's — the coupling between keys moves
 /// energy between terms that this sum weighs alike only on average (measured: 105 of 6 160
@@ -214,7 +213,6 @@ fn soak<E: VoicePool>(seconds: f64, engine: &str, two_cores: bool, rise_toleranc
 #[test]
 fn soak_short() {
     soak::<Rk4Pool>(10.0, "RK4 at 96 kHz", false, ROUNDING);
-    soak::<EtdPool>(10.0, "ETDRK4 at 48 kHz on two cores", true, ROUNDING);
     soak::<ExactPool>(
         10.0,
         "the exact engine at 48 kHz on two cores",
@@ -244,16 +242,5 @@ fn soak_ten_minutes_exact() {
         "the exact engine at 48 kHz on two cores",
         true,
         MODAL_SUM,
-    );
-}
-
-#[test]
-#[ignore = "long: 10 minutes of sound (UNACORDA_SOAK_S to change)"]
-fn soak_ten_minutes_etd() {
-    soak::<EtdPool>(
-        long_seconds(),
-        "ETDRK4 at 48 kHz on two cores",
-        true,
-        ROUNDING,
     );
 }

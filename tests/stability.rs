@@ -22,7 +22,6 @@ use std::path::Path;
 use unacorda::analysis::stability::{one_step_map, step_eigenvalues, StepEigen};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::scaling::{parse_key, Scaling, KEYS};
-use unacorda::engine::etd::EtdPool;
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::midi::file::{parse, TimedEvent};
@@ -107,18 +106,18 @@ fn chord_keys() -> Vec<usize> {
 }
 
 #[test]
-fn the_live_integrators_step_is_stable_with_32_keys_dampers_up() {
-    stable::<EtdPool>("ETDRK4", &stability_keys(), false);
+fn the_exact_engines_step_is_stable_with_32_keys_dampers_up() {
+    stable::<ExactPool>("exact", &stability_keys(), false);
 }
 
 #[test]
-fn the_live_integrators_step_is_stable_with_32_keys_dampers_down() {
-    stable::<EtdPool>("ETDRK4", &stability_keys(), true);
+fn the_exact_engines_step_is_stable_with_32_keys_dampers_down() {
+    stable::<ExactPool>("exact", &stability_keys(), true);
 }
 
 #[test]
-fn the_live_integrators_step_is_stable_with_the_chord() {
-    stable::<EtdPool>("ETDRK4", &chord_keys(), false);
+fn the_exact_engines_step_is_stable_with_the_chord() {
+    stable::<ExactPool>("exact", &chord_keys(), false);
 }
 
 #[test]
@@ -240,24 +239,22 @@ fn quarter_seconds<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> Vec<f64>
 
 /// The chord on every integrator: no quarter second louder than the first half second (a runaway
 /// rises to full scale), falling from `silenced_s` on (when the dampers drop) by at least
-/// `fall_db` to the end, and the live and the exact integrators within 1 dB of RK4 in every
+/// `fall_db` to the end, and the exact engine within 1 dB of RK4 in every
 /// quarter second within 60 dB of the onset, over the whole render and after the dampers drop.
 fn chord_decays(what: &str, events: &[TimedEvent], silenced_s: f64, tail_s: f64, fall_db: f64) {
     let rk4 = quarter_seconds::<Rk4Pool>(events, tail_s);
-    let etd = quarter_seconds::<EtdPool>(events, tail_s);
     let exact = quarter_seconds::<ExactPool>(events, tail_s);
     let from = (silenced_s / 0.25).ceil() as usize;
-    println!("{what}: level per quarter second (dBFS), RK4 / live integrator / exact:");
+    println!("{what}: level per quarter second (dBFS), RK4 / exact:");
     for (i, r) in rk4.iter().enumerate() {
-        let (e, x) = (etd[i], exact[i]);
+        let x = exact[i];
         println!(
-            "  {:5.2} s  {r:8.2}  {e:8.2} ({:+.3} dB)  {x:8.2} ({:+.3} dB)",
+            "  {:5.2} s  {r:8.2}  {x:8.2} ({:+.3} dB)",
             i as f64 * 0.25,
-            e - r,
             x - r
         );
     }
-    for (engine, level) in [("RK4", &rk4), ("live integrator", &etd), ("exact", &exact)] {
+    for (engine, level) in [("RK4", &rk4), ("exact", &exact)] {
         let onset = level[0].max(level[1]);
         let loudest = level.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         assert!(
@@ -285,7 +282,8 @@ fn chord_decays(what: &str, events: &[TimedEvent], silenced_s: f64, tail_s: f64,
         10.0 * ms.log10()
     };
     let floor = rk4[0].max(rk4[1]) - 60.0;
-    for (engine, level) in [("live integrator", &etd), ("exact", &exact)] {
+    {
+        let (engine, level) = ("exact engine", &exact);
         let worst = rk4
             .iter()
             .zip(level.iter())
@@ -343,8 +341,8 @@ impl Rng {
 /// ~60 ms at random velocities, releases, and the three pedals toggled: through the synth, frame
 /// by frame, the pool's mechanical energy at every frame that sounds (above 1e-15 J) with nothing
 /// driving it (and no voice joining or leaving), against the frame before. Returns (such frames,
-/// rises above rounding, largest relative rise).
-fn energy_stress<E: VoicePool>(seconds: f64) -> (u64, u64, f64) {
+/// rises above `tolerance` (relative), largest relative rise).
+fn energy_stress<E: VoicePool>(seconds: f64, tolerance: f64) -> (u64, u64, f64) {
     let scaling = Scaling::resolve("grand").unwrap();
     let keys: Vec<usize> = (1..=KEYS).step_by(4).chain([88]).take(24).collect();
     let piano = Piano::<E>::build(&scaling, &keys, keys.len()).unwrap();
@@ -389,8 +387,7 @@ fn energy_stress<E: VoicePool>(seconds: f64) -> (u64, u64, f64) {
                 let rise = (e - before) / before;
                 undriven += 1;
                 worst = worst.max(rise);
-                // Rounding: the energy is a sum of ~1e4 terms in f64.
-                rises += u64::from(rise > 1e-12);
+                rises += u64::from(rise > tolerance);
             }
             last = Some(e);
         });
@@ -398,14 +395,17 @@ fn energy_stress<E: VoicePool>(seconds: f64) -> (u64, u64, f64) {
     (undriven, rises, worst)
 }
 
+/// How far the energy may rise in a frame with nothing driving the pool: by rounding on RK4 (the
+/// energy is the state's quadratic form, a sum of ~1e4 terms in f64); on the exact engine by
+/// what its sum of modal energies weighs unevenly (`tests/soak.rs`: 1 % per block).
 #[test]
 fn undriven_energy_never_rises() {
-    for (engine, (undriven, rises, worst)) in [
-        ("RK4", energy_stress::<Rk4Pool>(3.0)),
-        ("live integrator", energy_stress::<EtdPool>(3.0)),
+    for (engine, tolerance, (undriven, rises, worst)) in [
+        ("RK4", 1e-12, energy_stress::<Rk4Pool>(3.0, 1e-12)),
+        ("exact", 1e-2, energy_stress::<ExactPool>(3.0, 1e-2)),
     ] {
         println!(
-            "{engine}: random playing on 24 keys, 3 s: {undriven} frames sounding with nothing driving the pool; the energy rose above rounding (1e-12) in {rises}; largest relative change {worst:+.2e} per frame"
+            "{engine}: random playing on 24 keys, 3 s: {undriven} frames sounding with nothing driving the pool; the energy rose above {tolerance:e} in {rises}; largest relative change {worst:+.2e} per frame"
         );
         assert!(undriven > 50_000, "{engine}: too few undriven frames");
         assert_eq!(
@@ -465,9 +465,9 @@ fn the_growth_guard_resets_a_slow_runaway() {
             growth_guard::<Rk4Pool>(0.03),
         ),
         (
-            "live integrator",
-            growth_guard::<EtdPool>(-0.01),
-            growth_guard::<EtdPool>(0.03),
+            "exact",
+            growth_guard::<ExactPool>(-0.01),
+            growth_guard::<ExactPool>(0.03),
         ),
     ] {
         println!(

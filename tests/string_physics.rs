@@ -313,9 +313,9 @@ fn both_engines_match_the_linearised_systems_eigenvalues() {
     // c2's partials 1–20 (the modes whose energy lies mostly in the strings' T motion near
     // n × 65.4 Hz: per partial the prompt and the aftersound of the pair) from the dense
     // state matrix of Eq. 10–11 with the contact forces folded in (independent of both engines'
-    // code), against the one-step maps of RK4 at 96 kHz and the live integrator at 48 kHz.
+    // code), against the one-step maps of RK4 at 96 kHz and the exact engine at 48 kHz.
     use unacorda::analysis::modes::linear_modes;
-    use unacorda::engine::etd::EtdPool;
+    use unacorda::engine::exact::ExactPool;
     let spec = c2().unison_spec();
     let exact: Vec<_> = linear_modes(&spec)
         .unwrap()
@@ -335,8 +335,11 @@ fn both_engines_match_the_linearised_systems_eigenvalues() {
         exact[1].t60_s()
     );
     assert!(exact.len() >= 40, "two modes per partial");
-    // Limits: RK4's own phase error at 96 kHz, (omega h)^4 / 120, is 8e-4 cents at partial 20;
-    // the decay rates agree to a few hundredths of a percent (measured 0.033 % and 0.018 %).
+    // Limits: RK4's own phase error at 96 kHz, (omega h)^4 / 120, is 8e-4 cents at partial 20,
+    // its decay rates within a few hundredths of a percent (measured 0.033 %); the exact engine's
+    // key is exact but its coupling to the shared board is not (an error of (omega h)^2 / 12,
+    // `engine::exact::interface`): measured 0.19 cents and 0.34 %, held to the gates'
+    // half (0.5 cents, 1 %).
     for (engine, rate, modes, (cents_limit, decay_limit)) in [
         (
             "RK4",
@@ -345,10 +348,10 @@ fn both_engines_match_the_linearised_systems_eigenvalues() {
             (2e-3, 0.1),
         ),
         (
-            "live integrator",
+            "exact engine",
             48_000.0,
-            map_modes::<EtdPool>(&spec, 48_000.0),
-            (1e-3, 0.1),
+            map_modes::<ExactPool>(&spec, 48_000.0),
+            (0.5, 1.0),
         ),
     ] {
         let (mut cents, mut decay) = (0f64, 0f64);

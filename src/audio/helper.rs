@@ -1,5 +1,5 @@
-//! A second core for the audio callback: a helper thread that runs one half of the live pool's
-//! step while the callback runs the other ([`Pair`]).
+//! A second core for the audio callback: a helper thread that runs one half of the exact pool's
+//! block passes while the callback runs the other ([`Pair`]).
 //!
 //! Nothing here locks or allocates after [`Helper::spawn`]: the job (a pointer to the caller's
 //! closure) is handed over through an atomic state word, the caller wakes the helper with

@@ -217,9 +217,9 @@ impl<E: VoicePool> Synth<E> {
         unsafe { no_denormals::no_denormals(|| self.render(out, channels.max(1), &mut tap, true)) }
     }
 
-    /// Give the engine a second core from now on: a helper thread that advances half of the
-    /// live pool's voices while the callback advances the other half (engines that cannot split
-    /// ignore it).
+    /// Give the engine a second core from now on: a helper thread that takes half of each of
+    /// the exact pool's block passes while the callback does the other half (engines that cannot
+    /// split ignore it).
     pub fn use_second_core(&mut self) -> std::io::Result<()> {
         self.use_second_core_with(super::helper::run_job)
     }

@@ -1,20 +1,16 @@
-//! Pure physics: no I/O, no threads, no allocation after a [`Rk4Pool`] is built.
+//! Pure physics: no I/O, no threads, no allocation after a pool is built.
 //!
-//! One module per physical part of the paper's model, one for their assembly:
-//! - [`string`]: stiff-string modes in T, P and L (Eq. 1–3),
-//! - [`duplex`]: the distributed damper on the duplex segment (Eq. 13),
-//! - [`soundboard`]: the reduced modal soundboard (Eq. 4–5) and its asset format,
-//! - [`plate`]: the generator of that asset from an orthotropic plate,
-//! - [`contact`]: the string–bridge contact springs and dampers (Eq. 6–7),
-//! - [`hammer`]: the nonlinear felt hammer (Eq. 8–9),
-//! - [`damper`]: the felt that silences a released key,
-//! - [`system`]: the state-space assembly (Eq. 10–19) advanced with classical RK4,
-//! - [`simd`]: its kernels (dot products, projections) in `f64` and `f32`, portable and AVX2,
-//! - [`statespace`]: the same system in the paper's literal dense form, the baseline it is checked
-//!   and measured against,
+//! - [`physics`]: one module per physical part of the paper's model — the stiff strings in T, P
+//!   and L (Eq. 1–3), the duplex damper (Eq. 13), the reduced modal soundboard (Eq. 4–5), the
+//!   string–bridge contact (Eq. 6–7), the felt hammer (Eq. 8–9), the damper felt;
+//! - [`rk4`]: their state-space assembly (Eq. 10–19) advanced with classical RK4 at the paper's
+//!   rate ([`Rk4Pool`], the reference), and the paper's literal dense form it is checked against;
+//! - [`exact`]: each key's coupled modes advanced exactly at the output rate, the keys met at the
+//!   bridges by one shared board ([`exact::ExactPool`], the engine `play` and `render --midi` use);
+//! - [`pool`]: the policy both pools share (assign, steal, strike, dampers, retire, reset);
+//! - [`kernels`], [`parallel`]: SIMD kernels and the two-core split;
 //! - [`tuning`]: the coupled first partial, from the undamped linear system.
 
-pub mod etd;
 pub mod exact;
 pub mod kernels;
 pub(crate) mod modal;
@@ -34,8 +30,8 @@ pub use spec::{
 };
 
 /// A pool of voices on one shared board, as the player and the audio callback drive it: RK4 at
-/// the paper's rate ([`Rk4Pool`], the reference) or ETDRK4 at the output rate
-/// ([`etd::EtdPool`], the live integrator). The pool policy (assign, steal, strike,
+/// the paper's rate ([`Rk4Pool`], the reference) or each key's coupled modes advanced exactly
+/// at the output rate ([`exact::ExactPool`]). The pool policy (assign, steal, strike,
 /// dampers, retire, reset) is [`Policy`], written once for both; this is the rest.
 pub trait VoicePool: Policy + Clone + Send + std::fmt::Debug + 'static {
     /// One key's coefficients, prepared before the pool is built.
@@ -110,7 +106,6 @@ pub trait StoredKey: Sized {
 }
 
 impl StoredKey for rk4::Rk4Key<f64> {}
-impl StoredKey for etd::PreparedKey {}
 
 impl StoredKey for exact::ExactKey {
     const STORE: Option<&'static str> = Some("exact");
@@ -192,11 +187,10 @@ macro_rules! voice_pool {
 }
 
 voice_pool!(Rk4Pool, rk4::Rk4Key<f64>, |_| None::<f64>);
-voice_pool!(etd::EtdPool, etd::PreparedKey, Some::<f64>);
 voice_pool!(exact::ExactPool, exact::ExactKey, Some::<f64>);
 
 /// What the offline renderer needs of a one-key engine: RK4 on [`Rk4Pool`] (the reference, at
-/// the paper's rate) or ETDRK4 on [`etd::EtdUnison`] (at the output rate).
+/// the paper's rate) or the exact engine on [`exact::ExactUnison`] (at the output rate).
 pub trait Engine {
     /// Advance one internal step.
     fn step(&mut self);
@@ -226,24 +220,6 @@ impl Engine for Rk4Pool {
     }
 }
 
-impl Engine for etd::EtdUnison {
-    fn step(&mut self) {
-        etd::EtdUnison::step(self)
-    }
-    fn observe(&self) -> Observation {
-        etd::EtdUnison::observe(self)
-    }
-    fn strike(&mut self, strike: Strike) {
-        etd::EtdUnison::strike(self, strike)
-    }
-    fn set_damper(&mut self, down: bool) {
-        etd::EtdUnison::set_damper(self, down)
-    }
-    fn step_s(&self) -> f64 {
-        etd::EtdUnison::step_s(self)
-    }
-}
-
 impl Engine for exact::ExactUnison {
     fn step(&mut self) {
         exact::ExactUnison::step(self)
@@ -262,14 +238,11 @@ impl Engine for exact::ExactUnison {
     }
 }
 
-/// How a one-key render integrates: the paper's RK4 at `min_rate_over_fmax × f_max` (the
-/// reference), exponential RK4 (ETDRK4) on complex modes at the output rate (the live
-/// integrator), or the key's coupled modes advanced exactly ([`exact`]) at the output rate
-/// (`tests/integrators.rs`).
+/// How a render integrates: the paper's RK4 at `min_rate_over_fmax × f_max` (the reference), or
+/// the key's coupled modes advanced exactly ([`exact`]) at the output rate (`tests/integrators.rs`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Integrator {
     #[default]
     Rk4,
-    Exponential,
     Exact,
 }

@@ -1,12 +1,13 @@
 //! A second-order block `x' = A x + B u` diagonalised into complex modes (conjugate pairs
-//! stored once), with its output rows, input vectors and the ETDRK4 weights of each mode.
+//! stored once), with its output rows, input vectors and modal energies; the weights of an exact
+//! step with a linear input and of ETDRK4 (the hammer's stages, [`crate::engine::exact`]).
 
 use crate::engine::kernels::LANES;
 use crate::engine::spec::BuildError;
 use faer::linalg::solvers::{PartialPivLu, Solve};
 use faer::{c64, Mat};
 
-/// A block `x' = A x + B u` in its complex modes: eigen-decomposition and ETDRK4 weights.
+/// A block `x' = A x + B u` in its complex modes: its eigen-decomposition.
 ///
 /// Of each complex-conjugate pair of modes only one is stored (its partner is its conjugate: the
 /// block is real), with weight 2 folded into the output rows; real (overdamped) modes have weight 1.
@@ -18,16 +19,13 @@ pub(crate) struct Modal {
     pub(crate) lambda: Vec<c64>,
     pub(crate) u: Mat<c64>,
     pub(crate) lu: PartialPivLu<c64>,
-    /// Per kept mode: `e^{lambda h/2}`, `e^{lambda h}`, `Q`, `(E - 1) Q`, `f1`, `f2`, `f3`.
-    pub(crate) eh: Vec<c64>,
-    pub(crate) ef: Vec<c64>,
-    pub(crate) etd: [Vec<c64>; 5],
+    /// Kept modes rounded up to whole SIMD lanes.
     pub(crate) padded: usize,
 }
 
 impl Modal {
-    /// Diagonalise `qdd = -K q - C qdot + ...` (dense `n × n`, row-major) for step `h`.
-    pub(crate) fn new(k: &[f64], c: &[f64], n: usize, h: f64) -> Result<Modal, BuildError> {
+    /// Diagonalise `qdd = -K q - C qdot + ...` (dense `n × n`, row-major).
+    pub(crate) fn new(k: &[f64], c: &[f64], n: usize) -> Result<Modal, BuildError> {
         // Balanced: velocities in units of `omega_s` (the highest undamped frequency), so that
         // both blocks of the matrix are of one size (`x = (q, qdot / omega_s)`). Unbalanced, the
         // entries span 1 to omega^2 ~ 1e10, and the QR iteration can fail to converge (it did
@@ -63,27 +61,14 @@ impl Modal {
         if 2 * pairs + (keep.len() - pairs) != 2 * n || !s.iter().all(|x| x.re.is_finite()) {
             return Err(BuildError::Modes);
         }
-        let lam: Vec<c64> = keep.iter().map(|&(i, _)| s[i]).collect();
-        let exp = |t: f64| -> Vec<c64> {
-            lam.iter()
-                .map(|&l| {
-                    let m = (l.re * t).exp();
-                    c64::new(m * (l.im * t).cos(), m * (l.im * t).sin())
-                })
-                .collect()
-        };
-        let weights: Vec<[c64; 5]> = lam.iter().map(|&l| etd_weights(l, h)).collect();
-        let etd = std::array::from_fn(|k| weights.iter().map(|w| w[k]).collect());
+        let lambda: Vec<c64> = keep.iter().map(|&(i, _)| s[i]).collect();
         Ok(Modal {
             n,
             padded: keep.len().div_ceil(LANES) * LANES,
             lu: u.partial_piv_lu(),
             u,
-            eh: exp(0.5 * h),
-            ef: exp(h),
-            etd,
             keep,
-            lambda: lam,
+            lambda,
         })
     }
 
@@ -112,40 +97,6 @@ impl Modal {
         self.keep.iter().map(|&(m, _)| g[(m, 0)]).collect()
     }
 
-    /// Real and imaginary parts, padded with zeros to whole SIMD lanes (a zero mode stays zero).
-    pub(crate) fn split(&self, v: &[c64]) -> [Vec<f64>; 2] {
-        let mut re: Vec<f64> = v.iter().map(|x| x.re).collect();
-        let mut im: Vec<f64> = v.iter().map(|x| x.im).collect();
-        re.resize(self.padded, 0.0);
-        im.resize(self.padded, 0.0);
-        [re, im]
-    }
-
-    pub(crate) fn times(a: &[c64], b: &[c64]) -> Vec<c64> {
-        a.iter().zip(b).map(|(x, y)| x * y).collect()
-    }
-
-    /// A row through the three propagators the stages read: `r`, `r E`, `r E²`.
-    pub(crate) fn rows3(&self, r: &[c64]) -> [[Vec<f64>; 2]; 3] {
-        [
-            self.split(r),
-            self.split(&Self::times(r, &self.eh)),
-            self.split(&Self::times(r, &self.ef)),
-        ]
-    }
-
-    /// An input through the final weights: `f1 g`, `f2 g`, `f3 g`.
-    pub(crate) fn gains3(&self, g: &[c64]) -> [[Vec<f64>; 2]; 3] {
-        std::array::from_fn(|k| self.split(&Self::times(g, &self.etd[2 + k])))
-    }
-
-    /// What one unit of input `g` adds to the output `r` at the later stages: `[Re r Q g,
-    /// Re r (E - 1) Q g]`.
-    pub(crate) fn resp(&self, r: &[c64], g: &[c64]) -> [f64; 2] {
-        let dot = |e: &[c64]| -> f64 { (0..r.len()).map(|m| (r[m] * e[m] * g[m]).re).sum() };
-        [dot(&self.etd[0]), dot(&self.etd[1])]
-    }
-
     /// Per stored mode, the mechanical energy per `|z|²` (J): the cycle-averaged
     /// `1/2 (qdot^T qdot + q^T K q)` of `w Re(v z)` for the mode's eigenvector `v`.
     pub(crate) fn energy(&self, k: &[f64]) -> Vec<f64> {
@@ -169,10 +120,6 @@ impl Modal {
             .collect();
         e.resize(self.padded, 0.0);
         e
-    }
-
-    pub(crate) fn propagator(&self) -> [Vec<f64>; 2] {
-        self.split(&self.ef)
     }
 }
 
@@ -247,17 +194,14 @@ mod tests {
     /// closed form (weights 2 for a conjugate pair, 1 for a real mode).
     fn kick_response(k: f64, c: f64, exact: impl Fn(f64) -> f64) -> f64 {
         let h = 1e-4;
-        let modal = Modal::new(&[k], &[c], 1, h).unwrap();
+        let modal = Modal::new(&[k], &[c], 1).unwrap();
         let (row, g) = (modal.row(&[1.0], false), modal.input(&[1.0]));
         let mut worst: f64 = 0.0;
         let mut peak: f64 = 0.0;
         for step in 0..2000 {
             let t = step as f64 * h;
             let y: f64 = (0..row.len())
-                .map(|m| {
-                    let l = modal.ef[m].ln() / h; // lambda, from the stored propagator
-                    (row[m] * (l * t).exp() * g[m]).re
-                })
+                .map(|m| (row[m] * (modal.lambda[m] * t).exp() * g[m]).re)
                 .sum();
             worst = worst.max((y - exact(t)).abs());
             peak = peak.max(exact(t).abs());

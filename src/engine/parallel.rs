@@ -2,7 +2,7 @@
 //! no threads; `audio::helper` implements it).
 
 /// Runs two jobs at once, one on another core. The real-time shell implements it with a helper
-/// thread (the engine holds no threads); the live pool uses it to split its voices over two cores.
+/// thread (the engine holds no threads); the exact pool uses it to split a block's passes over two cores.
 pub trait Pair {
     /// Run `there` on the other core and `here` on this one, the two started together (they may
     /// wait for each other), and return `true` when both have finished. When the other core

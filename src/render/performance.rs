@@ -117,8 +117,8 @@ pub struct Offline {
     pub cores: usize,
 }
 
-/// A MIDI performance on the engine `E` (RK4 [`Rk4Pool`], the live integrator
-/// [`crate::engine::etd::EtdPool`] or the exact engine), handing each block of samples to `sink`
+/// A MIDI performance on the engine `E` (RK4 [`Rk4Pool`] or the exact engine
+/// [`crate::engine::exact::ExactPool`]), handing each block of samples to `sink`
 /// as it is made (a WAV being written) instead of keeping them, the prepared keys read from and
 /// kept in the keyboard's cache where it has one; the render stops early when `sink` breaks
 /// (interrupted, or the disk is full). Without `tap` the engine runs from event to event (in

@@ -9,7 +9,6 @@
 use crate::audio::radiate::Monopole;
 use crate::audio::Decimator;
 use crate::config::preset::LoadedPreset;
-use crate::engine::etd::EtdUnison;
 use crate::engine::exact::ExactUnison;
 use crate::engine::MAX_STRINGS;
 use crate::engine::{BuildError, Observation, Rk4Pool, Strike};
@@ -78,15 +77,6 @@ impl Renderer<Rk4Pool> {
         let spec = preset.unison_spec();
         let instrument = Rk4Pool::new(&spec)?;
         Ok(Self::from_instrument(instrument, preset))
-    }
-}
-
-impl Renderer<EtdUnison> {
-    /// The preset's key on the live integrator, stepping at the output rate.
-    pub fn exponential(preset: &LoadedPreset) -> Result<Self, BuildError> {
-        let mut spec = preset.unison_spec();
-        spec.sample_rate_hz = preset.output_rate_hz();
-        Ok(Self::from_instrument(EtdUnison::new(&spec)?, preset))
     }
 }
 
@@ -215,13 +205,6 @@ pub fn simulate_with(
 ) -> Result<Recording, BuildError> {
     match integrator {
         Integrator::Rk4 => record(Renderer::new(preset)?, strike, release_s, seconds, progress),
-        Integrator::Exponential => record(
-            Renderer::exponential(preset)?,
-            strike,
-            release_s,
-            seconds,
-            progress,
-        ),
         Integrator::Exact => record(
             Renderer::exact(preset)?,
             strike,

@@ -7,12 +7,11 @@ use std::path::Path;
 use std::sync::atomic::Ordering;
 use unacorda::config::preset::Preset;
 use unacorda::config::scaling::{LoadedScaling, Scaling, KEYS};
-use unacorda::engine::etd::EtdPool;
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::{
-    block_times_s, denormal_tail_step_s, dense_real_time_factor, exact_speed, exponential_speed,
-    loaded_synth, nominal_f64_peak, percentile, resident_bytes, voice_speed,
+    block_times_s, denormal_tail_step_s, dense_real_time_factor, exact_speed, loaded_synth,
+    nominal_f64_peak, percentile, resident_bytes, voice_speed,
 };
 use unacorda::play::{Piano, MAX_VOICES};
 
@@ -109,12 +108,6 @@ pub fn bench(
     report.deadline_s = BLOCK as f64 / settings.rate_hz;
     for (engine, cores, label) in [
         ("rk4", 1, "RK4 at 96 kHz, the reference"),
-        ("etd", 1, "ETDRK4 at 48 kHz, the live integrator"),
-        (
-            "etd",
-            2,
-            "ETDRK4 at 48 kHz, the live integrator, voices split over two cores",
-        ),
         (
             "exact",
             1,
@@ -131,7 +124,6 @@ pub fn bench(
         }
         let run = match engine {
             "rk4" => callback::<Rk4Pool>,
-            "etd" => callback::<EtdPool>,
             _ => callback::<ExactPool>,
         };
         run(
@@ -310,28 +302,15 @@ fn single_voice(seconds: f64, report: &mut Report) -> Result<()> {
         ))
     );
     let rate = c2.output_rate_hz();
-    let live = exponential_speed(&spec, rate, seconds);
-    voice("etd", &live, None);
-    println!(
-        "same voice on the live integrator (exponential RK4, ETDRK4, on each string direction's complex modes with its contact spring and duplex damping; board coupling, hammer and damper explicit) at {:.0} kHz:\n  real-time factor {:.2} ({:.1} × the paper-faithful RK4), {:.1} GFLOP/s{}",
-        rate / 1e3,
-        live.real_time_factor,
-        live.real_time_factor / fast.real_time_factor,
-        live.flops_per_s / 1e9,
-        nominal_f64_peak().map_or(String::new(), |(peak, _)| format!(
-            " = {:.0} % of nominal f64 peak",
-            100.0 * live.flops_per_s / peak
-        ))
-    );
     let (exact, build_s, modes) = exact_speed(&spec, rate, seconds);
     voice("exact", &exact, Some(build_s));
     println!(
-        "same voice on the exact engine (the key's strings and the board's high modes in {} complex modes, z <- e^(lambda h) z, on the board's shared low modes; built in {:.2} s) at {:.0} kHz, hammer released:\n  real-time factor {:.1} ({:.1} × the live integrator), {:.1} GFLOP/s counted (mostly single precision)",
+        "same voice on the exact engine (the key's strings and the board's high modes in {} complex modes, z <- e^(lambda h) z, on the board's shared low modes; built in {:.2} s) at {:.0} kHz, hammer released:\n  real-time factor {:.1} ({:.1} × the paper-faithful RK4), {:.1} GFLOP/s counted (mostly single precision)",
         modes,
         build_s,
         rate / 1e3,
         exact.real_time_factor,
-        exact.real_time_factor / live.real_time_factor,
+        exact.real_time_factor / fast.real_time_factor,
         exact.flops_per_s / 1e9,
     );
     // The dense baseline is a few hundred times slower: time a slice of the same length in steps

@@ -9,7 +9,6 @@ use std::time::{Duration, Instant};
 use unacorda::audio::device::{self, midi_input, output_devices, CallbackStats, Fault, MidiError};
 use unacorda::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use unacorda::config::scaling::{Scaling, KEYS};
-use unacorda::engine::etd::EtdPool;
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::midi::live::LiveParser;
@@ -42,13 +41,14 @@ pub struct PlayArgs {
     /// Stop after this many audio callbacks (for tests on devices that play faster than real time).
     #[arg(long, value_name = "N")]
     pub callbacks: Option<u64>,
-    /// `exponential` (default): ETDRK4 on complex modes at 48 kHz, the live integrator; `rk4`: the
-    /// paper's RK4 at 96 kHz, the reference (slower: see `unacorda bench`); `exact`: each key's
-    /// coupled modes advanced exactly (one core; 24 s to build the 88 keys).
-    #[arg(long, value_enum, default_value_t = IntegratorArg::Exponential)]
+    /// `exact` (default): each key's coupled modes advanced exactly at 48 kHz, the keys coupled
+    /// through the board (the first run prepares the 88 keys, ~8 s, and keeps them in the cache of
+    /// prepared keys; later runs read them back in under a second); `rk4`: the paper's RK4 at
+    /// 96 kHz, the reference (a few voices at most: see `unacorda bench`).
+    #[arg(long, value_enum, default_value_t = IntegratorArg::Exact)]
     pub integrator: IntegratorArg,
-    /// Cores for the audio callback, 1–2: with 2 a helper thread advances half of the live
-    /// integrator's voices (default: 2 where the machine has them).
+    /// Cores for the audio callback, 1–2: with 2 a helper thread takes half of each block's
+    /// work (default: 2 where the machine has them).
     #[arg(long, value_name = "N")]
     pub cores: Option<usize>,
     /// Fault test: report the device as lost after this many callbacks, as cpal would on unplug.
@@ -120,7 +120,6 @@ const FILE_TAIL_S: f64 = 2.0;
 pub fn play(args: PlayArgs) -> Result<()> {
     match args.integrator {
         IntegratorArg::Rk4 => play_on::<Rk4Pool>(args),
-        IntegratorArg::Exponential => play_on::<EtdPool>(args),
         IntegratorArg::Exact => play_on::<ExactPool>(args),
     }
 }

@@ -71,13 +71,12 @@ enum Command {
         /// Soft pedal: the hammer strikes one string of two (two of three).
         #[arg(long)]
         una_corda: bool,
-        /// `rk4`, the paper's RK4 at 10 × f_max (the reference); `exponential`, ETDRK4 on
-        /// complex modes at the output rate (the live integrator: several times faster, within
-        /// 0.001 cents and 0.1 % decay of RK4 on c2); or `exact`, each key's coupled modes
-        /// advanced exactly at the output rate, the keys coupled through the board (within
-        /// 0.2 cents and 1 % of RK4 on c2, C4, A0).
-        #[arg(long, value_enum, default_value_t = IntegratorArg::Rk4)]
-        integrator: IntegratorArg,
+        /// `rk4`, the paper's RK4 at 10 × f_max (the reference; the default of --preset and
+        /// --key); or `exact`, each key's coupled modes advanced exactly at the output rate, the
+        /// keys coupled through the board (within 0.2 cents and 1 % of RK4 on c2, C4, A0; the
+        /// default of --midi).
+        #[arg(long, value_enum)]
+        integrator: Option<IntegratorArg>,
         /// Hammer speed at the strings (m/s), 0.01–10; default: the preset's.
         #[arg(
             long,
@@ -126,7 +125,7 @@ enum Command {
         #[arg(long, value_name = "FILE.json")]
         json: Option<PathBuf>,
         /// Time the callback of this engine only (default: every engine).
-        #[arg(long, value_parser = ["rk4", "etd", "exact"])]
+        #[arg(long, value_parser = ["rk4", "exact"])]
         engine: Option<String>,
     },
     /// Regenerate the paper's Figures 2–6 (PNG + CSV): the board's mobility, full vs reduced, and
@@ -161,7 +160,6 @@ mod modes;
 #[derive(Clone, Copy, clap::ValueEnum)]
 pub enum IntegratorArg {
     Rk4,
-    Exponential,
     Exact,
 }
 
@@ -169,7 +167,6 @@ impl From<IntegratorArg> for unacorda::engine::Integrator {
     fn from(a: IntegratorArg) -> Self {
         match a {
             IntegratorArg::Rk4 => Self::Rk4,
-            IntegratorArg::Exponential => Self::Exponential,
             IntegratorArg::Exact => Self::Exact,
         }
     }
@@ -346,15 +343,10 @@ fn run(cli: Cli) -> Result<()> {
                         length_s - tail
                     );
                 }
-                return match integrator {
+                return match integrator.unwrap_or(IntegratorArg::Exact) {
                     IntegratorArg::Rk4 => render_midi_file::<unacorda::engine::Rk4Pool>(
                         &scaling, &events, tail, voices, &path, &out, length_s,
                     ),
-                    IntegratorArg::Exponential => {
-                        render_midi_file::<unacorda::engine::etd::EtdPool>(
-                            &scaling, &events, tail, voices, &path, &out, length_s,
-                        )
-                    }
                     IntegratorArg::Exact => render_midi_file::<unacorda::engine::exact::ExactPool>(
                         &scaling, &events, tail, voices, &path, &out, length_s,
                     ),
@@ -391,7 +383,7 @@ fn run(cli: Cli) -> Result<()> {
             let pb = progress_bar(seconds, "rendering");
             let rec = simulate_with(
                 &loaded,
-                integrator.into(),
+                integrator.map_or(unacorda::engine::Integrator::Rk4, Into::into),
                 Strike {
                     velocity_m_s,
                     una_corda,

@@ -198,7 +198,7 @@ impl KeyModes {
             .clone();
         let layout = Layout::new(spec);
         let (k, c) = coupled_system(spec, &layout, &point);
-        let modal = Modal::new(&k, &c, layout.n, 1.0 / spec.sample_rate_hz)?;
+        let modal = Modal::new(&k, &c, layout.n)?;
         let s0 = &spec.strings[0];
         let t_modes = |s: usize, x: f64| {
             let string = &spec.strings[s];

@@ -5,7 +5,7 @@
 //! board's low modes are one system shared by every key, met at the bridges by an interface
 //! solved implicitly each step.
 //!
-//! Why this formulation (issue 16). The live integrator before it ([`crate::engine::etd`])
+//! Why this formulation (issue 16). The live integrator before it (issue 5's, since removed)
 //! diagonalises each string direction alone and couples every direction to the board explicitly
 //! at four ETDRK4 stages per sample; per voice and step that is ~42 FLOP per string mode plus
 //! ~9.4 kFLOP of board reads and writes, and 32 voices already ask 28 GFLOP/s. Here a sounding

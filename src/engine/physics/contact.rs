@@ -36,7 +36,7 @@ impl Contact {
 }
 
 /// Eq. 6 for one direction, `k s + c sdot` (N): the one place the contact force is written, for
-/// the engines' scalar loops ([`Contact::force_n`]) and the live integrator's lanes alike.
+/// the engines' scalar loops ([`Contact::force_n`]) and their lanes alike.
 #[inline]
 pub fn spring_damper_n(
     stiffness_n_m: f64,
