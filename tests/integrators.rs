@@ -255,7 +255,8 @@ fn exact_engines_modes_are_the_linearised_systems_eigenvalues() {
         pool.assign(0, 0);
         pool.set_active(0, true);
         let (map, state) = one_step_map(&pool);
-        let engine = step_eigenvalues(&map, &state, 1.0 / FS);
+        let order = map.nrows();
+        let engine = step_eigenvalues(map, &state, 1.0 / FS);
         let exact = linear_modes(&spec).unwrap();
         let (mut cents, mut decay, mut others) = (0f64, 0f64, 0f64);
         for m in exact.iter().filter(|m| m.freq_hz < 0.45 * FS) {
@@ -285,7 +286,7 @@ fn exact_engines_modes_are_the_linearised_systems_eigenvalues() {
         println!(
             "{name}: {} modes of the linearised system, a one-step map of order {}; ringing string modes: worst {cents:.3} cents, decay {:.2} %; the others' eigenvalues within {:.2} %",
             exact.len(),
-            map.nrows(),
+            order,
             100.0 * decay,
             100.0 * others
         );

@@ -4,12 +4,12 @@
 //!   the nine-key chord below, A0, and the 22 keys from D#6 to C8 (the stiffest anchors on the
 //!   board: few modes, three strings each) — formed column by column from the engine's own step,
 //!   dampers up and down, and for the chord alone: its spectral radius must be at most 1
-//!   (`analysis::stability`). Stability is not monotone in the keys sounding: with the old
+//!   (`analysis::stability`; the exact engine's 32-key maps by hand, its chord's in CI). Stability is not monotone in the keys sounding: with the old
 //!   coupling the chord alone ran away while the 32 keys, whose strings load the board's modes
 //!   differently, stayed (wrongly damped, but) inside the unit circle.
 //! - The nine-key chord C1 C2 C4 E4 G4 C5 E5 G5 C6 at velocity 115 as a MIDI file, held 5 s and
 //!   under the sustain pedal, through `render --midi`'s path on both integrators: it decays, and
-//!   the live and the exact integrators stay within 1 dB of RK4 in every quarter second (within
+//!   the exact engine stays within 1 dB of RK4 in every quarter second (within
 //!   60 dB of the onset), over the whole render and after the dampers drop.
 //! - Random playing over many keys and pedals: whenever nothing drives the pool (no hammer in
 //!   play, no voice fading), its mechanical energy never rises by more than rounding.
@@ -58,7 +58,8 @@ fn eigenvalues<E: VoicePool>(keys: &[usize], down: bool) -> (Vec<StepEigen>, f64
     }
     let (map, state) = one_step_map(&pool);
     let h = pool.step_s();
-    (step_eigenvalues(&map, &state, h), 1.0 / h, map.nrows())
+    let order = map.nrows();
+    (step_eigenvalues(map, &state, h), 1.0 / h, order)
 }
 
 fn stable<E: VoicePool>(engine: &str, keys: &[usize], down: bool) {
@@ -105,12 +106,18 @@ fn chord_keys() -> Vec<usize> {
     CHORD.iter().map(|k| parse_key(k).unwrap()).collect()
 }
 
+/// The exact engine's 32-key maps are of order ~9 700 (its keys carry the board's modes above
+/// 1.5 kHz): four minutes each here, so they run by hand
+/// (`cargo test --release --test stability -- --ignored`); CI checks the chord's, dampers up and
+/// down (order ~4 500).
 #[test]
+#[ignore = "long: an eigen-decomposition of order ~9 700"]
 fn the_exact_engines_step_is_stable_with_32_keys_dampers_up() {
     stable::<ExactPool>("exact", &stability_keys(), false);
 }
 
 #[test]
+#[ignore = "long: an eigen-decomposition of order ~9 700"]
 fn the_exact_engines_step_is_stable_with_32_keys_dampers_down() {
     stable::<ExactPool>("exact", &stability_keys(), true);
 }
@@ -118,6 +125,11 @@ fn the_exact_engines_step_is_stable_with_32_keys_dampers_down() {
 #[test]
 fn the_exact_engines_step_is_stable_with_the_chord() {
     stable::<ExactPool>("exact", &chord_keys(), false);
+}
+
+#[test]
+fn the_exact_engines_step_is_stable_with_the_chord_dampers_down() {
+    stable::<ExactPool>("exact", &chord_keys(), true);
 }
 
 #[test]

@@ -294,14 +294,13 @@ fn c2_first_partial_is_on_pitch() {
 /// The eigenvalues of an engine's one-step map as continuous rates, `ln(mu) / h`: (frequency Hz,
 /// decay 1/s) of each oscillating mode.
 fn map_modes<E: unacorda::engine::VoicePool>(spec: &UnisonSpec, rate_hz: f64) -> Vec<(f64, f64)> {
-    use unacorda::analysis::stability::one_step_map;
+    use unacorda::analysis::stability::{map_eigenvalues, one_step_map};
     let mut pool = E::build_pool(std::slice::from_ref(spec), 1, rate_hz).unwrap();
     pool.assign(0, 0);
     pool.set_active(0, true);
     let (map, _) = one_step_map(&pool);
     let h = pool.step_s();
-    map.eigenvalues()
-        .unwrap()
+    map_eigenvalues(map)
         .into_iter()
         .filter(|mu| mu.im > 0.0)
         .map(|mu| (mu.im.atan2(mu.re) / (2.0 * PI * h), -mu.norm().ln() / h))

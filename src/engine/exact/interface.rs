@@ -7,9 +7,10 @@
 //! key then carries the board's 130 modes (40 % of an average key's, 85 % of a treble key's)
 //! and the keys' copies must be kept apart from their sum by integrating each key's own part
 //! again, sample by sample (89 modes per key). Here the board's modes below [`SHARED_BELOW_HZ`]
-//! (89 of 130, where every key meets every other) are integrated once, for all keys; each key
+//! (55 of 130, where every key meets every other) are integrated once, for all keys; each key
 //! keeps only the board's modes above it, local to its bridge (the key's own modes,
-//! [`super::key`]). Over a step every key's force `F_k` on the board and the board's
+//! [`super::key`]): keys do not meet through those (each rings its own copy), which the chord
+//! and sympathy gates bound (`tests/stability.rs`, `tests/exact_pool.rs`). Over a step every key's force `F_k` on the board and the board's
 //! displacement `D_k` under it are taken linear in time — exact for the modes on both sides, an
 //! error of `(omega h)^2 / 12` at the interface: 1.3 % of the coupling at 3 kHz, 0.1 % at 1 kHz —
 //! and solved together, implicitly: each key's reads after the step are known but for
@@ -20,7 +21,7 @@
 //! ```
 //! with `q_known` what the board would do under the keys' known forces alone. `W` and the inverse
 //! change only when a key joins, leaves or has its damper lowered or lifted: a rank-3 update of
-//! both (Woodbury, ~9 m² FLOP, m = 89: ~70 kFLOP). Each step costs 2 m² (the inverse and `W`
+//! both (Woodbury, ~9 m² FLOP, m = 55: ~27 kFLOP). Each step costs 2 m² (the inverse and `W`
 //! applied) for the whole pool, and 6 m per key (its force onto the modes, their displacement at
 //! its bridge). Measured against the exact continuous system of one key (`tests/integrators.rs`):
 //! c2's partials within 0.33 cents and 0.5 % of their decay; the one-step map of the nine-key
@@ -32,9 +33,13 @@ use crate::engine::physics::soundboard::SoundboardModes;
 use faer::c64;
 
 /// The board's modes below this frequency (Hz) are shared by every key; each key carries those
-/// above in its own modes. Higher, the interface's error grows as `(omega h)^2`: with every mode
-/// shared (7 kHz) C7's fundamental decays 3.6 % off, at 3 kHz 1.2 % (module notes).
-pub(crate) const SHARED_BELOW_HZ: f64 = 3000.0;
+/// above in its own modes. Higher, the interface's error grows as `(omega h)^2` (with every mode
+/// shared, 7 kHz, C7's fundamental decays 3.6 % off, at 3 kHz 1.2 %) and so does the per-sample
+/// work that stays on one core (6 m per key and 2 m² per step); lower, every key carries more
+/// modes and the keys meet through fewer. At 1.5 kHz against 3 kHz (64 voices, one core): the
+/// callback 15 % faster, 20 % on two cores; the nine-key chord within 0.37 dB of RK4 (0.31 at
+/// 3 kHz), a held key's sympathy 0.011 dB (the same); at 1 kHz no faster on one core.
+pub(crate) const SHARED_BELOW_HZ: f64 = 1500.0;
 
 /// The shared modes' coefficients and the interface's matrices. Built off the audio thread;
 /// updated by the thread that owns the pool (between blocks), read by both halves of a block.

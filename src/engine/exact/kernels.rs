@@ -755,3 +755,71 @@ unsafe fn fold_block_avx512<const R: usize, const I: usize, const W: usize>(
         }
     }
 }
+
+/// A voice's energy `sum_m energy_m |w_m + sum_d shift_d,m D_d|^2` over its `n` modes (J): once
+/// or twice a block for every sounding voice (the pool's policy and its growth guard), so in the
+/// widest registers the machine has.
+pub(crate) fn energy(
+    simd: Simd,
+    w: &Split,
+    shift: &[Split; 3],
+    d: [f64; 3],
+    energy: &[f64],
+    n: usize,
+) -> f64 {
+    match simd {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `Simd::detect` found AVX-512F (AVX2 + FMA) on this machine.
+        Simd::Avx512 => unsafe { energy_avx512(w, shift, d, energy, n) },
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx2 => unsafe { energy_avx2(w, shift, d, energy, n) },
+        _ => energy_with(w, shift, d, energy, n),
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn energy_avx512(w: &Split, shift: &[Split; 3], d: [f64; 3], e: &[f64], n: usize) -> f64 {
+    energy_with(w, shift, d, e, n)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn energy_avx2(w: &Split, shift: &[Split; 3], d: [f64; 3], e: &[f64], n: usize) -> f64 {
+    energy_with(w, shift, d, e, n)
+}
+
+#[inline(always)]
+fn energy_with(w: &Split, shift: &[Split; 3], d: [f64; 3], energy: &[f64], n: usize) -> f64 {
+    const L: usize = 8;
+    let whole = n / L * L;
+    let [u0, u1, u2] = shift;
+    fn chunks(x: &[f64], whole: usize) -> std::slice::ChunksExact<'_, f64> {
+        x[..whole].chunks_exact(L)
+    }
+    let mut acc = [0.0; L];
+    for ((((((((wr, wi), r0), i0), r1), i1), r2), i2), e) in chunks(&w.re, whole)
+        .zip(chunks(&w.im, whole))
+        .zip(chunks(&u0.re, whole))
+        .zip(chunks(&u0.im, whole))
+        .zip(chunks(&u1.re, whole))
+        .zip(chunks(&u1.im, whole))
+        .zip(chunks(&u2.re, whole))
+        .zip(chunks(&u2.im, whole))
+        .zip(chunks(energy, whole))
+    {
+        for l in 0..L {
+            let re = wr[l] + r0[l] * d[0] + r1[l] * d[1] + r2[l] * d[2];
+            let im = wi[l] + i0[l] * d[0] + i1[l] * d[1] + i2[l] * d[2];
+            acc[l] += e[l] * (re * re + im * im);
+        }
+    }
+    let tail: f64 = (whole..n)
+        .map(|m| {
+            let re = w.re[m] + u0.re[m] * d[0] + u1.re[m] * d[1] + u2.re[m] * d[2];
+            let im = w.im[m] + u0.im[m] * d[0] + u1.im[m] * d[1] + u2.im[m] * d[2];
+            energy[m] * (re * re + im * im)
+        })
+        .sum();
+    acc.iter().sum::<f64>() + tail
+}

@@ -306,7 +306,7 @@ impl ExactPool {
             .voices
             .iter()
             .map(|v| match (v.state.active, v.state.key) {
-                (true, Some(key)) => v.dynamic_energy_j(&self.keys[key]),
+                (true, Some(key)) => v.dynamic_energy_j(&self.keys[key], self.simd),
                 _ => 0.0,
             });
         keys.sum::<f64>() + self.board_energy_j()
@@ -448,7 +448,7 @@ impl Policy for ExactPool {
     fn voice_energy_j(&self, k: usize) -> f64 {
         let v = &self.voices[k];
         match (v.state.active, v.state.key) {
-            (true, Some(key)) => v.energy_j(&self.keys[key]),
+            (true, Some(key)) => v.energy_j(&self.keys[key], self.simd),
             _ => 0.0,
         }
     }

@@ -4,8 +4,8 @@
 //! what is known (`D^n`), [`Voice::post_step`] adds what `D^{n+1}` brings.
 
 use super::kernels::{
-    advance, convolve, propagate, stage, Reversed, Simd, Split, BLOCK, DAMPED_INPUTS, DAMPED_READS,
-    DIRECTIONS, READS,
+    self, advance, convolve, propagate, stage, Reversed, Simd, Split, BLOCK, DAMPED_INPUTS,
+    DAMPED_READS, DIRECTIONS, READS,
 };
 use super::key::{ExactKey, DAMPER_CHANNELS};
 use crate::engine::pool::VoiceState;
@@ -112,8 +112,8 @@ impl Voice {
     /// the pool's policy weighs (a voice falls silent, is stolen, runs away), its contact springs
     /// counted as stretched by the board's motion `D` under them — so that a damped key is not
     /// retired while the board still moves it (taken off, it would no longer damp the board).
-    pub(crate) fn energy_j(&self, key: &ExactKey) -> f64 {
-        self.energy_about(key, &key.settle)
+    pub(crate) fn energy_j(&self, key: &ExactKey, simd: Simd) -> f64 {
+        self.energy_about(key, &key.settle, simd)
     }
 
     /// The same about the strings' static deflection by `D` (`z` less `follow D`): the energy that
@@ -121,45 +121,20 @@ impl Voice {
     /// ([`super::pool::ExactPool::mechanical_energy_j`]). Measured from `z` itself it would count
     /// every contact spring as stretched by `D` (`k_c D^2 / 2` each, although the strings' ends
     /// follow the bridge): a damped key beside a loud C1 then seemed to gain 2e-3 J from nothing.
-    pub(crate) fn dynamic_energy_j(&self, key: &ExactKey) -> f64 {
-        self.energy_about(key, &key.unfollow)
+    pub(crate) fn dynamic_energy_j(&self, key: &ExactKey, simd: Simd) -> f64 {
+        self.energy_about(key, &key.unfollow, simd)
     }
 
-    /// `sum_m energy_m |w_m + sum_d u_d,m D_d|^2`.
-    fn energy_about(&self, key: &ExactKey, shift: &[Split; 3]) -> f64 {
-        const L: usize = 8;
-        let n = key.n_modes();
-        let whole = n / L * L;
-        let d = self.d;
-        let [u0, u1, u2] = shift;
-        fn chunks(x: &[f64], whole: usize) -> std::slice::ChunksExact<'_, f64> {
-            x[..whole].chunks_exact(L)
-        }
-        let mut acc = [0.0; L];
-        for ((((((((wr, wi), r0), i0), r1), i1), r2), i2), e) in chunks(&self.w.re, whole)
-            .zip(chunks(&self.w.im, whole))
-            .zip(chunks(&u0.re, whole))
-            .zip(chunks(&u0.im, whole))
-            .zip(chunks(&u1.re, whole))
-            .zip(chunks(&u1.im, whole))
-            .zip(chunks(&u2.re, whole))
-            .zip(chunks(&u2.im, whole))
-            .zip(chunks(&key.modes.energy, whole))
-        {
-            for l in 0..L {
-                let re = wr[l] + r0[l] * d[0] + r1[l] * d[1] + r2[l] * d[2];
-                let im = wi[l] + i0[l] * d[0] + i1[l] * d[1] + i2[l] * d[2];
-                acc[l] += e[l] * (re * re + im * im);
-            }
-        }
-        let tail: f64 = (whole..n)
-            .map(|m| {
-                let re = self.w.re[m] + u0.re[m] * d[0] + u1.re[m] * d[1] + u2.re[m] * d[2];
-                let im = self.w.im[m] + u0.im[m] * d[0] + u1.im[m] * d[1] + u2.im[m] * d[2];
-                key.modes.energy[m] * (re * re + im * im)
-            })
-            .sum();
-        acc.iter().sum::<f64>() + tail
+    /// `sum_m energy_m |w_m + sum_d u_d,m D_d|^2` ([`kernels::energy`]).
+    fn energy_about(&self, key: &ExactKey, shift: &[Split; 3], simd: Simd) -> f64 {
+        kernels::energy(
+            simd,
+            &self.w,
+            shift,
+            self.d,
+            &key.modes.energy,
+            key.n_modes(),
+        )
     }
 
     /// The felt force on each string (Eq. 8) with the hammer at `y` and the modes at `z`.
