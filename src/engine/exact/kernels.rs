@@ -214,7 +214,7 @@ pub(crate) fn stage(out: &mut Split, e2: &Split, from: &Split, q: &[Split], u: &
 }
 
 /// Longest block advanced mode by mode ([`free_block`], [`fold_block`]). Its reads' inputs are
-/// convolved step by step ([`convolve`]: on average `BLOCK / 2` taps each), its coefficients
+/// convolved step by step ([`scatter`]: on average `BLOCK / 2` taps each), its coefficients
 /// loaded once: 32 balances the two (64: the convolution 30 % of the work; 16: the block's own
 /// overhead grows more than the convolution saves).
 pub(crate) const BLOCK: usize = 32;
@@ -264,97 +264,92 @@ pub(crate) const DAMPED_READS: usize = READS + DAMPER_CHANNELS;
 /// is a forward dot product), in single precision.
 pub(crate) type Reversed<const I: usize> = [[f32; BLOCK]; I];
 
-/// Markov parameters per read and input, tap `k` (steps after the input) at `k`.
-pub(crate) type Taps<const R: usize, const I: usize> = [[[f32; BLOCK]; I]; R];
+/// Markov parameters per read and input for [`scatter`]: `BLOCK` zeros, then tap `k` (steps
+/// after the input) at `BLOCK + k`.
+pub(crate) type Taps<const R: usize, const I: usize> = [[[f32; 2 * BLOCK]; I]; R];
 
-/// What the inputs of steps `0..=t` add to each read after step `t`:
-/// `sum_d sum_{j<=t} taps[i][d][t-j] u_d(j)`, in single precision.
-pub(crate) fn convolve<const R: usize, const I: usize>(
+/// What each read of a block's steps has received so far from the block's inputs, step `s` at
+/// `s`, in single precision.
+pub(crate) type Pending<const R: usize> = [[f32; BLOCK]; R];
+
+/// Step `t`'s inputs `x` added to what they bring to the reads of steps `t..BLOCK`:
+/// `pending[i][s] += sum_d taps[i][d][s - t] x_d`. After it `pending[i][t]` is what the inputs
+/// of steps `0..=t` add to read `i` after step `t` — the convolution with the Markov parameters,
+/// summed as the inputs arrive, in whole registers over the steps to come (no sums across
+/// lanes: computed step by step as a dot product it cost twice as much).
+pub(crate) fn scatter<const R: usize, const I: usize>(
     simd: Simd,
     taps: &Taps<R, I>,
-    u: &Reversed<I>,
+    x: &[f32; I],
     t: usize,
-) -> [f64; R] {
+    pending: &mut Pending<R>,
+) {
     #[cfg(target_arch = "x86_64")]
     match simd {
         // SAFETY: `Simd::detect` chose these only where the CPU has them.
-        Simd::Avx512 => return unsafe { convolve_avx512::<R, I>(taps, u, t) },
-        Simd::Avx2 => return unsafe { convolve_avx2::<R, I>(taps, u, t) },
+        Simd::Avx512 => return unsafe { scatter_avx512::<R, I>(taps, x, t, pending) },
+        Simd::Avx2 => return unsafe { scatter_avx2::<R, I>(taps, x, t, pending) },
         Simd::Portable => {}
     }
     let _ = simd;
-    convolve_with::<false, R, I>(taps, u, t)
+    scatter_with::<false, R, I>(taps, x, t, pending)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn convolve_avx2<const R: usize, const I: usize>(
+unsafe fn scatter_avx2<const R: usize, const I: usize>(
     taps: &Taps<R, I>,
-    u: &Reversed<I>,
+    x: &[f32; I],
     t: usize,
-) -> [f64; R] {
-    convolve_with::<true, R, I>(taps, u, t)
+    pending: &mut Pending<R>,
+) {
+    scatter_with::<true, R, I>(taps, x, t, pending)
 }
 
+/// Over every step of the block: the taps below step `t` are the zeros before the first.
 #[inline(always)]
-fn convolve_with<const FMA: bool, const R: usize, const I: usize>(
+fn scatter_with<const FMA: bool, const R: usize, const I: usize>(
     taps: &Taps<R, I>,
-    u: &Reversed<I>,
+    x: &[f32; I],
     t: usize,
-) -> [f64; R] {
-    const W: usize = 8;
-    let start = BLOCK - 1 - t;
-    std::array::from_fn(|i| {
-        let mut acc = [0f32; W];
-        for d in 0..I {
-            let (a, b) = (&taps[i][d][..=t], &u[d][start..]);
-            let whole = a.len() / W * W;
-            for k in (0..whole).step_by(W) {
-                for l in 0..W {
-                    acc[l] = fma32::<FMA>(a[k + l], b[k + l], acc[l]);
-                }
-            }
-            for k in whole..a.len() {
-                acc[0] = fma32::<FMA>(a[k], b[k], acc[0]);
+    pending: &mut Pending<R>,
+) {
+    for (taps, pending) in taps.iter().zip(pending.iter_mut()) {
+        for (taps, &x) in taps.iter().zip(x) {
+            let a: &[f32; BLOCK] = taps[BLOCK - t..2 * BLOCK - t]
+                .try_into()
+                .expect("BLOCK taps");
+            for (p, &a) in pending.iter_mut().zip(a) {
+                *p = fma32::<FMA>(a, x, *p);
             }
         }
-        acc.iter().map(|&x| f64::from(x)).sum()
-    })
+    }
 }
 
-/// The convolution in 16-lane registers: each direction's inputs loaded once for the four reads,
-/// the last partial register masked.
+/// In 16-lane registers, from the register that holds step `t` on.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn convolve_avx512<const R: usize, const I: usize>(
+unsafe fn scatter_avx512<const R: usize, const I: usize>(
     taps: &Taps<R, I>,
-    u: &Reversed<I>,
+    x: &[f32; I],
     t: usize,
-) -> [f64; R] {
+    pending: &mut Pending<R>,
+) {
     use std::arch::x86_64::*;
-    let start = BLOCK - 1 - t;
-    let n = t + 1;
-    let mut acc = [_mm512_setzero_ps(); R];
-    let mut k = 0;
-    while k < n {
-        let left = n - k;
-        let mask: __mmask16 = if left >= 16 {
-            0xffff
-        } else {
-            (1u16 << left) - 1
-        };
-        for d in 0..I {
-            // SAFETY: lanes `k..k + 16` under `mask` lie within `u[d][start..]` (n values) and
-            // within each `taps[i][d]` (BLOCK values, n <= BLOCK).
-            let x = _mm512_maskz_loadu_ps(mask, u[d].as_ptr().add(start + k));
-            for i in 0..R {
-                let a = _mm512_maskz_loadu_ps(mask, taps[i][d].as_ptr().add(k));
-                acc[i] = _mm512_fmadd_ps(a, x, acc[i]);
+    let x: [__m512; I] = std::array::from_fn(|d| _mm512_set1_ps(x[d]));
+    for h in t / 16..BLOCK / 16 {
+        for i in 0..R {
+            // SAFETY: lanes `16 h..16 h + 16` lie within `pending[i]` (BLOCK values), and
+            // `BLOCK - t + 16 h + 16 <= 2 BLOCK` for `16 h <= t`, within each `taps[i][d]`.
+            let p = pending[i].as_mut_ptr().add(16 * h);
+            let mut acc = _mm512_loadu_ps(p);
+            for (d, &x) in x.iter().enumerate() {
+                let a = _mm512_loadu_ps(taps[i][d].as_ptr().add(BLOCK - t + 16 * h));
+                acc = _mm512_fmadd_ps(a, x, acc);
             }
+            _mm512_storeu_ps(p, acc);
         }
-        k += 16;
     }
-    acc.map(|a| f64::from(_mm512_reduce_add_ps(a)))
 }
 
 /// A complex vector per mode in single precision, real and imaginary parts apart: the block

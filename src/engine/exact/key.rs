@@ -408,18 +408,18 @@ pub(crate) struct Settle {
     pub(crate) volume: [f64; DIRECTIONS],
 }
 
-/// `Re(r_i e^k g_d)` for `k < BLOCK`.
+/// `Re(r_i e^k g_d)` for `k < BLOCK`, laid out for [`super::kernels::scatter`].
 fn markov_parameters<const R: usize, const I: usize>(
     e: &[c64],
     rows: &[&Split; R],
     inputs: &[&Split; I],
 ) -> Box<Taps<R, I>> {
     let mut power: Vec<c64> = vec![c64::new(1.0, 0.0); e.len()];
-    let mut out = Box::new([[[0f32; BLOCK]; I]; R]);
+    let mut out = Box::new([[[0f32; 2 * BLOCK]; I]; R]);
     for k in 0..BLOCK {
         for (i, row) in rows.iter().enumerate() {
             for (j, input) in inputs.iter().enumerate() {
-                out[i][j][k] = (0..e.len())
+                out[i][j][BLOCK + k] = (0..e.len())
                     .map(|m| {
                         let r = c64::new(row.re[m], row.im[m]);
                         let g = c64::new(input.re[m], input.im[m]);

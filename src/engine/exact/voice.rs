@@ -4,7 +4,7 @@
 //! what is known (`D^n`), [`Voice::post_step`] adds what `D^{n+1}` brings.
 
 use super::kernels::{
-    self, advance, convolve, propagate, stage, Reversed, Simd, Split, BLOCK, DAMPED_INPUTS,
+    self, advance, propagate, scatter, stage, Pending, Reversed, Simd, Split, BLOCK, DAMPED_INPUTS,
     DAMPED_READS, DIRECTIONS, READS,
 };
 use super::key::{ExactKey, DAMPER_CHANNELS};
@@ -39,11 +39,12 @@ pub(crate) struct Voice {
     pub(crate) damper_known: [f64; DAMPER_CHANNELS],
     /// Over a block advanced mode by mode ([`super::block`]): whether this voice is, what its
     /// modes read with no input (the four rows, and the damper felt's velocity per channel where
-    /// the damper is down), and the inputs of each step (`D^t`, m, and the felt's `f^t`, N,
-    /// [`Reversed`]).
+    /// the damper is down), the inputs of each step (`D^t`, m, and the felt's `f^t`, N,
+    /// [`Reversed`]) and what they have added to the reads so far ([`Pending`]).
     pub(crate) in_block: bool,
     pub(crate) block_read: [[f64; BLOCK]; DAMPED_READS],
     pub(crate) block_inputs: Reversed<DAMPED_INPUTS>,
+    pub(crate) pending: Pending<DAMPED_READS>,
     /// What the interface holds for this voice: its key's `Z`, damper down or lifted.
     pub(crate) loads: Option<(usize, bool)>,
 }
@@ -65,6 +66,7 @@ impl Voice {
             in_block: false,
             block_read: [[0.0; BLOCK]; DAMPED_READS],
             block_inputs: [[0.0; BLOCK]; DAMPED_INPUTS],
+            pending: [[0.0; BLOCK]; DAMPED_READS],
             loads: None,
         }
     }
@@ -227,19 +229,24 @@ impl Voice {
     /// inputs so far add, `D^t` (and the damper felt's `f^t`) stored as this step's input; with
     /// the damper down, the felt's force known but for `D^{n+1}` (as [`Voice::pre_step`]).
     pub(crate) fn pre_block_step(&mut self, key: &ExactKey, t: usize, simd: Simd) {
+        if t == 0 {
+            self.pending = [[0.0; BLOCK]; DAMPED_READS];
+        }
+        let mut x = [0f32; DAMPED_INPUTS];
         for d in 0..DIRECTIONS {
-            self.block_inputs[d][BLOCK - 1 - t] = self.d[d] as f32;
+            x[d] = self.d[d] as f32;
+            self.block_inputs[d][BLOCK - 1 - t] = x[d];
         }
         let mut read = [0.0; READS];
         match (self.damped(key), &key.damper) {
             (true, Some(damper)) => {
                 for j in 0..damper.channels {
-                    self.block_inputs[DIRECTIONS + j][BLOCK - 1 - t] = self.damper_n[j] as f32;
+                    x[DIRECTIONS + j] = self.damper_n[j] as f32;
+                    self.block_inputs[DIRECTIONS + j][BLOCK - 1 - t] = x[DIRECTIONS + j];
                 }
-                let mut all = convolve(simd, &damper.markov, &self.block_inputs, t);
-                for (i, r) in all.iter_mut().enumerate() {
-                    *r += self.block_read[i][t];
-                }
+                scatter(simd, &damper.markov, &x, t, &mut self.pending);
+                let all: [f64; DAMPED_READS] =
+                    std::array::from_fn(|i| self.block_read[i][t] + f64::from(self.pending[i][t]));
                 // The felt's velocity after the step, from u (module notes of `key`): what the
                 // per-sample step forms from `w` and the force at the step's start.
                 let r = damper.channels;
@@ -257,12 +264,13 @@ impl Voice {
                 self.damper_known = after;
             }
             _ => {
-                let inputs: &Reversed<DIRECTIONS> = self.block_inputs[..DIRECTIONS]
+                let pending: &mut Pending<READS> = (&mut self.pending[..READS])
                     .try_into()
-                    .expect("the first inputs are the bridge's");
-                read = convolve(simd, &key.markov, inputs, t);
+                    .expect("the first reads are the four rows");
+                let x: [f32; DIRECTIONS] = std::array::from_fn(|d| x[d]);
+                scatter(simd, &key.markov, &x, t, pending);
                 for (i, r) in read.iter_mut().enumerate() {
-                    *r += self.block_read[i][t];
+                    *r = self.block_read[i][t] + f64::from(pending[i][t]);
                 }
             }
         }
