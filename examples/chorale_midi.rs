@@ -5,8 +5,8 @@
 //! every chord (lifted just after it sounds, pressed again at once), so that two chords ring at
 //! each change. Regenerate with `cargo run --example chorale_midi`.
 
-use midly::num::{u15, u28, u4, u7};
-use midly::{Format, Header, MetaMessage, MidiMessage, Smf, Timing, TrackEvent, TrackEventKind};
+use midly::num::u7;
+use midly::MidiMessage;
 
 const TICKS_PER_BEAT: u16 = 480;
 
@@ -76,32 +76,8 @@ fn main() -> std::io::Result<()> {
         }
     }
     timed.push((tick(CHORDS.len() as f64 + 1.5), cc(0)));
-    timed.sort_by_key(|&(t, _)| t);
-    let mut track = vec![TrackEvent {
-        delta: u28::new(0),
-        kind: TrackEventKind::Meta(MetaMessage::Tempo(midly::num::u24::new(1_000_000))),
-    }];
-    let mut last = 0;
-    for (t, message) in timed {
-        track.push(TrackEvent {
-            delta: u28::new(t - last),
-            kind: TrackEventKind::Midi {
-                channel: u4::new(0),
-                message,
-            },
-        });
-        last = t;
-    }
-    track.push(TrackEvent {
-        delta: u28::new(0),
-        kind: TrackEventKind::Meta(MetaMessage::EndOfTrack),
-    });
-    let mut smf = Smf::new(Header::new(
-        Format::SingleTrack,
-        Timing::Metrical(u15::new(TICKS_PER_BEAT)),
-    ));
-    smf.tracks.push(track);
-    smf.save("assets/midi/chorale.mid")?;
+    let bytes = unacorda::midi::file::single_track_bytes(TICKS_PER_BEAT, Some(1_000_000), timed)?;
+    std::fs::write("assets/midi/chorale.mid", bytes)?;
     eprintln!("wrote assets/midi/chorale.mid");
     Ok(())
 }

@@ -2,8 +2,8 @@
 //! sustain pedal, the second time with the soft pedal (CC67) down, so that the una-corda colour
 //! can be heard against the normal one. Regenerate with `cargo run --example demo_midi`.
 
-use midly::num::{u15, u28, u4, u7};
-use midly::{Format, Header, MetaMessage, MidiMessage, Smf, Timing, TrackEvent, TrackEventKind};
+use midly::num::u7;
+use midly::MidiMessage;
 
 const TICKS_PER_BEAT: u16 = 480;
 
@@ -52,29 +52,8 @@ fn main() -> std::io::Result<()> {
             ));
         }
     }
-    timed.sort_by_key(|&(t, _)| t);
-    let mut track = Vec::new();
-    let mut last = 0;
-    for (t, message) in timed {
-        track.push(TrackEvent {
-            delta: u28::new(t - last),
-            kind: TrackEventKind::Midi {
-                channel: u4::new(0),
-                message,
-            },
-        });
-        last = t;
-    }
-    track.push(TrackEvent {
-        delta: u28::new(0),
-        kind: TrackEventKind::Meta(MetaMessage::EndOfTrack),
-    });
-    let mut smf = Smf::new(Header::new(
-        Format::SingleTrack,
-        Timing::Metrical(u15::new(TICKS_PER_BEAT)),
-    ));
-    smf.tracks.push(track);
-    smf.save("assets/midi/demo.mid")?;
+    let bytes = unacorda::midi::file::single_track_bytes(TICKS_PER_BEAT, None, timed)?;
+    std::fs::write("assets/midi/demo.mid", bytes)?;
     eprintln!("wrote assets/midi/demo.mid");
     Ok(())
 }

@@ -24,7 +24,7 @@ use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::scaling::{parse_key, Scaling, KEYS};
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
-use unacorda::midi::file::{parse, TimedEvent};
+use unacorda::midi::file::{parse, single_track_bytes, TimedEvent};
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Keyboard;
 use unacorda::play::Piano;
@@ -150,48 +150,29 @@ fn rk4s_step_is_stable_with_the_chord() {
 /// A standard MIDI file (format 0, 480 ticks per beat at 120 bpm: 960 ticks per second) of
 /// `(time s, status, data1, data2)` messages, parsed back as `render --midi` reads it.
 fn midi(messages: &[(f64, u8, u8, u8)]) -> Vec<TimedEvent> {
-    use midly::num::{u15, u28, u4, u7};
-    use midly::{
-        Format, Header, MetaMessage, MidiMessage, Smf, Timing, TrackEvent, TrackEventKind,
-    };
-    let mut track = Vec::new();
-    let mut last = 0;
-    for &(t, status, a, b) in messages {
-        let tick = (t * 960.0).round() as u32;
-        let message = match status {
-            0x90 => MidiMessage::NoteOn {
-                key: u7::new(a),
-                vel: u7::new(b),
-            },
-            0x80 => MidiMessage::NoteOff {
-                key: u7::new(a),
-                vel: u7::new(b),
-            },
-            _ => MidiMessage::Controller {
-                controller: u7::new(a),
-                value: u7::new(b),
-            },
-        };
-        track.push(TrackEvent {
-            delta: u28::new(tick - last),
-            kind: TrackEventKind::Midi {
-                channel: u4::new(0),
-                message,
-            },
-        });
-        last = tick;
-    }
-    track.push(TrackEvent {
-        delta: u28::new(0),
-        kind: TrackEventKind::Meta(MetaMessage::EndOfTrack),
-    });
-    let mut smf = Smf::new(Header::new(
-        Format::SingleTrack,
-        Timing::Metrical(u15::new(480)),
-    ));
-    smf.tracks.push(track);
-    let mut bytes = Vec::new();
-    smf.write_std(&mut bytes).unwrap();
+    use midly::num::u7;
+    use midly::MidiMessage;
+    let timed = messages
+        .iter()
+        .map(|&(t, status, a, b)| {
+            let message = match status {
+                0x90 => MidiMessage::NoteOn {
+                    key: u7::new(a),
+                    vel: u7::new(b),
+                },
+                0x80 => MidiMessage::NoteOff {
+                    key: u7::new(a),
+                    vel: u7::new(b),
+                },
+                _ => MidiMessage::Controller {
+                    controller: u7::new(a),
+                    value: u7::new(b),
+                },
+            };
+            ((t * 960.0).round() as u32, message)
+        })
+        .collect();
+    let bytes = single_track_bytes(480, None, timed).unwrap();
     parse(&bytes, Path::new("chord.mid")).unwrap()
 }
 

@@ -2,7 +2,8 @@
 //! through the file's tempo map (metrical timing) or its SMPTE rate (timecode timing).
 
 use super::{map_channel_message, Event};
-use midly::{Format, MetaMessage, MidiMessage, Smf, Timing, TrackEventKind};
+use midly::num::{u15, u24, u28, u4};
+use midly::{Format, Header, MetaMessage, MidiMessage, Smf, Timing, TrackEvent, TrackEventKind};
 use std::path::{Path, PathBuf};
 
 /// A piano event at a time (s) from the start of the file.
@@ -164,4 +165,45 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<TimedEvent>, MidiFileError
         }
     }
     Ok(out)
+}
+
+/// A format-0 standard MIDI file, as bytes, of `messages` on channel 1 at their ticks
+/// (`ticks_per_beat` to the beat; sorted here, those at one tick kept in order), with a tempo
+/// (µs per beat) at its start if given, else the default 120 beats per minute: what [`parse`]
+/// reads. The generated files of `examples/` and the tests' performances are written by it.
+pub fn single_track_bytes(
+    ticks_per_beat: u16,
+    tempo_us_per_beat: Option<u32>,
+    mut messages: Vec<(u32, MidiMessage)>,
+) -> std::io::Result<Vec<u8>> {
+    messages.sort_by_key(|&(tick, _)| tick);
+    let tempo = tempo_us_per_beat.map(|us| TrackEvent {
+        delta: u28::new(0),
+        kind: TrackEventKind::Meta(MetaMessage::Tempo(u24::new(us))),
+    });
+    let mut last = 0;
+    let notes = messages.into_iter().map(|(tick, message)| {
+        let delta = u28::new(tick - last);
+        last = tick;
+        TrackEvent {
+            delta,
+            kind: TrackEventKind::Midi {
+                channel: u4::new(0),
+                message,
+            },
+        }
+    });
+    let end = TrackEvent {
+        delta: u28::new(0),
+        kind: TrackEventKind::Meta(MetaMessage::EndOfTrack),
+    };
+    let mut smf = Smf::new(Header::new(
+        Format::SingleTrack,
+        Timing::Metrical(u15::new(ticks_per_beat)),
+    ));
+    smf.tracks
+        .push(tempo.into_iter().chain(notes).chain([end]).collect());
+    let mut bytes = Vec::new();
+    smf.write_std(&mut bytes)?;
+    Ok(bytes)
 }
