@@ -5,7 +5,7 @@
 use crate::engine::physics::contact::Contact;
 use crate::engine::physics::damper::DamperParams;
 use crate::engine::physics::hammer::HammerParams;
-use crate::engine::physics::soundboard::SoundboardModes;
+use crate::engine::physics::soundboard::{BridgePoint, SoundboardModes};
 use crate::engine::physics::string::{ModeSet, StringParams};
 use std::f64::consts::PI;
 
@@ -43,6 +43,23 @@ impl UnisonSpec {
         });
         let board = self.board.freq_hz.iter().copied();
         strings.chain(board).fold(0.0, f64::max)
+    }
+
+    /// The number of strings, 1 to [`MAX_STRINGS`].
+    pub(crate) fn string_count(&self) -> Result<usize, BuildError> {
+        let ns = self.strings.len();
+        if ns == 0 || ns > MAX_STRINGS {
+            return Err(BuildError::StringCount(ns));
+        }
+        Ok(ns)
+    }
+
+    /// The bridge point the unison rests on.
+    pub(crate) fn bridge(&self) -> Result<&BridgePoint, BuildError> {
+        self.board
+            .points
+            .get(self.bridge_point)
+            .ok_or(BuildError::BridgePoint(self.bridge_point))
     }
 }
 

@@ -185,19 +185,10 @@ pub(crate) struct KeyModes {
 impl KeyModes {
     /// Diagonalise `spec`'s key at the step `1 / spec.sample_rate_hz`.
     pub(crate) fn new(spec: &UnisonSpec) -> Result<KeyModes, BuildError> {
-        let ns = spec.strings.len();
-        if ns == 0 || ns > MAX_STRINGS {
-            return Err(BuildError::StringCount(ns));
-        }
-        let point = spec
-            .board
-            .points
-            .get(spec.bridge_point)
-            .ok_or(BuildError::BridgePoint(spec.bridge_point))?
-            .shape
-            .clone();
+        let ns = spec.string_count()?;
+        let point = &spec.bridge()?.shape;
         let layout = Layout::new(spec);
-        let (k, c) = coupled_system(spec, &layout, &point);
+        let (k, c) = coupled_system(spec, &layout, point);
         let modal = Modal::new(&k, &c, layout.n)?;
         let s0 = &spec.strings[0];
         let t_modes = |s: usize, x: f64| {
@@ -216,7 +207,7 @@ impl KeyModes {
             strike_row.push(Split::new(&modal.row(&psi_e, false)));
             strike_input.push(Split::new(&modal.input(&psi_e)));
             force_row.push(std::array::from_fn(|d| {
-                let w = contact_vector(spec, &layout, &point, s, d);
+                let w = contact_vector(spec, &layout, point, s, d);
                 let (kc, cc) = (spec.contact.stiffness_n_m[d], spec.contact.damping_n_s_m[d]);
                 let row: Vec<c64> = modal
                     .row(&w, false)
@@ -231,7 +222,7 @@ impl KeyModes {
         let bridge_input = std::array::from_fn(|d| {
             let mut w = vec![0.0; layout.n];
             for s in 0..ns {
-                let ws = contact_vector(spec, &layout, &point, s, d);
+                let ws = contact_vector(spec, &layout, point, s, d);
                 w.iter_mut().zip(ws).for_each(|(x, y)| *x += y);
             }
             [spec.contact.stiffness_n_m[d], spec.contact.damping_n_s_m[d]]

@@ -52,13 +52,7 @@ impl ExactPool {
         let board = SharedBoard::new(&first.board, h);
         let points = specs
             .iter()
-            .map(|s| {
-                s.board
-                    .points
-                    .get(s.bridge_point)
-                    .map(|p| board.restrict(&p.shape))
-                    .ok_or(BuildError::BridgePoint(s.bridge_point))
-            })
+            .map(|s| Ok(board.restrict(&s.bridge()?.shape)))
             .collect::<Result<_, _>>()?;
         Ok(ExactPool {
             points,

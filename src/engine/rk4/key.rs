@@ -44,15 +44,8 @@ pub struct Rk4Key<T> {
 
 /// One key's coefficients, its modes laid out from 0.
 pub(super) fn build_key<T: Real>(spec: &UnisonSpec) -> Result<Rk4Key<T>, BuildError> {
-    let ns = spec.strings.len();
-    if ns == 0 || ns > MAX_STRINGS {
-        return Err(BuildError::StringCount(ns));
-    }
-    let point = spec
-        .board
-        .points
-        .get(spec.bridge_point)
-        .ok_or(BuildError::BridgePoint(spec.bridge_point))?;
+    let ns = spec.string_count()?;
+    let point = spec.bridge()?;
     let ModeSet {
         modes_t: nt,
         modes_p: np,
