@@ -2,6 +2,7 @@
 //! engine, timings of its callback, real-time factors and FLOP rates. Timing is never a pass/fail
 //! test (CI machines are noisy); these report figures.
 
+use crate::audio::priority::Promotion;
 use crate::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use crate::config::output::OutputSettings;
 use crate::engine::exact::ExactUnison;
@@ -10,11 +11,11 @@ use crate::engine::rk4::dense::DenseUnison;
 use crate::engine::{Rk4Pool, Strike, UnisonSpec, VoicePool};
 use crate::midi::{Event, Pedal};
 use crate::play::Piano;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// A synth on `piano` with `voices` keys sounding under the sustain pedal — spread over the
-/// keyboard from A0 upwards, struck 1 ms apart at MIDI velocity 80 — run for 50 ms so that every
-/// hammer has left its strings. `piano` must hold all 88 keys and at least `voices` voices.
+/// keyboard from A0 upwards, struck 48 frames (1 ms at 48 kHz) apart at MIDI velocity 80 — run
+/// until 50 ms after the last strike, so that every hammer has left its strings. `piano` must hold all 88 keys and at least `voices` voices.
 pub fn loaded_synth<E: VoicePool>(
     piano: &Piano<E>,
     settings: OutputSettings,
@@ -37,24 +38,50 @@ pub fn loaded_synth<E: VoicePool>(
         let _ = handle.schedule(Scheduled { frame, event });
     }
     let mut out = vec![0f32; frames];
-    for _ in 0..(0.05 * settings.rate_hz) as usize / frames.max(1) {
+    let last_strike = voices.saturating_sub(1) * 48;
+    for _ in 0..(last_strike + (0.05 * settings.rate_hz) as usize).div_ceil(frames.max(1)) {
         synth.process(&mut out, 1);
     }
     (synth, handle)
 }
 
-/// Time each of `blocks` callbacks of `frames` frames (s), sorted.
-pub fn block_times_s<E: VoicePool>(synth: &mut Synth<E>, frames: usize, blocks: usize) -> Vec<f64> {
-    let mut out = vec![0f32; frames];
-    let mut times: Vec<f64> = (0..blocks)
-        .map(|_| {
-            let t = Instant::now();
-            synth.process(&mut out, 1);
-            t.elapsed().as_secs_f64()
-        })
-        .collect();
+/// Time each of `blocks` callbacks of `frames` frames at `rate_hz` (s), sorted — as `play`'s audio
+/// device runs them: one block every `frames / rate_hz` seconds (each started on time, or at once after one that
+/// ran late), on a thread of its own at real-time priority where the system grants it, the helper
+/// thread (if any) asked for it too. Also says whether this thread's priority was granted.
+pub fn block_times_s<E: VoicePool>(
+    synth: &mut Synth<E>,
+    frames: usize,
+    rate_hz: f64,
+    blocks: usize,
+) -> (Vec<f64>, bool) {
+    let period = Duration::try_from_secs_f64(frames as f64 / rate_hz).unwrap_or_default();
+    synth.ask_real_time_priority();
+    let (mut times, granted) = std::thread::scope(|scope| {
+        let measure = scope.spawn(|| {
+            let priority = Promotion::default();
+            priority.ask();
+            let mut out = vec![0f32; frames];
+            let start = Instant::now();
+            let times: Vec<f64> = (1..=blocks as u32)
+                .map(|b| {
+                    let t = Instant::now();
+                    synth.process(&mut out, 1);
+                    let took = t.elapsed().as_secs_f64();
+                    let next = start + period * b;
+                    let now = Instant::now();
+                    if next > now {
+                        std::thread::sleep(next - now);
+                    }
+                    took
+                })
+                .collect();
+            (times, priority.granted())
+        });
+        measure.join().expect("the measuring thread does not panic")
+    });
     times.sort_by(f64::total_cmp);
-    times
+    (times, granted)
 }
 
 /// Percentile `p` (0–1) of sorted, non-empty `x`.

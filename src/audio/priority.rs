@@ -48,6 +48,11 @@ impl Promotion {
             .store(other.0.load(Ordering::Relaxed), Ordering::Relaxed);
     }
 
+    /// Whether it was asked and granted (relaxed; no allocation).
+    pub fn granted(&self) -> bool {
+        self.0.load(Ordering::Relaxed) == GRANTED
+    }
+
     /// `None` until asked; then `Ok` or the reason it was refused.
     pub fn outcome(&self) -> Option<Result<(), String>> {
         match self.0.load(Ordering::Relaxed) {

@@ -21,7 +21,7 @@ use ringbuf::traits::{Consumer, Observer, Producer, Split};
 use ringbuf::{HeapCons, HeapProd, HeapRb};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// A piano event due at an output frame of the engine's clock (frame 0 is the first sample the
 /// engine produced).
@@ -247,8 +247,9 @@ impl<E: VoicePool> Synth<E> {
         tap: &mut impl FnMut(&E, u64),
         frame_by_frame: bool,
     ) {
-        self.clock
-            .publish(self.frame, Instant::now(), (out.len() / channels) as u64);
+        let started = Instant::now();
+        let frames_out = (out.len() / channels) as u64;
+        self.clock.publish(self.frame, started, frames_out);
         while let Ok(command) = self.control.try_recv() {
             match command {
                 Control::Shutdown => self.running = false,
@@ -341,6 +342,9 @@ impl<E: VoicePool> Synth<E> {
                 .store(helper.joined_jobs(), Ordering::Relaxed);
             s.helper_late.store(helper.late_jobs(), Ordering::Relaxed);
             s.helper_priority.copy_from(helper.promotion());
+            // The next callback comes a block after this one began (a device's clock).
+            let period_s = frames_out as f64 / self.clock.rate_hz();
+            helper.rest_until(started + Duration::try_from_secs_f64(period_s).unwrap_or_default());
         }
     }
 

@@ -2,10 +2,12 @@
 //! no threads; `audio::helper` implements it).
 
 /// Runs two jobs at once, one on another core. The real-time shell implements it with a helper
-/// thread (the engine holds no threads); the exact pool uses it to split a block's passes over two cores.
+/// thread (the engine holds no threads); the exact pool uses it to split a block's passes and its
+/// steps over two cores.
 pub trait Pair {
     /// Run `there` on the other core and `here` on this one, the two started together (they may
-    /// wait for each other), and return `true` when both have finished. When the other core
+    /// wait for each other: `there` must run to its end, or panic, whenever `join` returns
+    /// `true`), and return `true` when both have finished. When the other core
     /// cannot start `there` promptly, run neither and return `false`: the caller then does the
     /// work alone, so a late core costs one core's time, not a wait of unknown length.
     fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut()) -> bool;

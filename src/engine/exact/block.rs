@@ -4,13 +4,18 @@
 //! interface ([`Voice::pre_step`], or for a voice in the block its free reads and Markov
 //! parameters), their known forces summed onto the shared board's modes, the board stepped with
 //! the interface solved ([`super::interface`]), every voice's step finished with the board's
-//! displacement at its bridge.
+//! displacement at its bridge. On two cores ([`run_on_two`]) each core steps half of the voices
+//! and a copy of the shared board, the two meeting every sample to exchange their halves' known
+//! forces.
 
 use super::interface::{BoardState, SharedBoard};
 use super::kernels::{fold_block, free_block, Reversed, Simd, Split, BLOCK, DIRECTIONS, READS};
 use super::key::ExactKey;
 use super::voice::Voice;
 use crate::engine::pool::fade_step;
+use crate::engine::Pair;
+use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 
 /// What the block reads: the keys, their bridge points on the shared modes, the shared board
 /// (its coefficients and the interface's matrices) and timing.
@@ -22,25 +27,124 @@ pub(crate) struct Context<'a> {
     pub(crate) simd: Simd,
 }
 
-/// The steps' working values: the stage states of a hammer step, the voices' known modal force
-/// this sample, the shared board's state, and the volume velocity of each sample of the block.
-/// Touched by the thread that steps the pool.
-#[derive(Debug, Clone)]
+/// The steps' working values: per half of the voices ([`Half`]), the shared board's state (and
+/// the second core's copy of it), the meeting of the two cores, and the volume velocity of each
+/// sample of the block. Touched by the thread that steps the pool (and, within a block on two
+/// cores, `halves[1]`, `copy` and `exchange` by the second core).
+#[derive(Debug)]
 pub(crate) struct Steps {
-    pub(crate) stages: [Split; 3],
-    pub(crate) known: Vec<f64>,
+    pub(crate) halves: [Half; 2],
     pub(crate) part: BoardState,
+    copy: BoardState,
+    exchange: Exchange,
     pub(crate) volume: [f64; BLOCK],
+}
+
+/// One half of the voices' working values within the steps: the stage states of a hammer step,
+/// the half's known modal force this sample (and, on two cores, the other half's as received,
+/// and their sum), each sample's volume velocity of the half's voices and of the board.
+#[derive(Debug, Clone)]
+pub(crate) struct Half {
+    stages: [Split; 3],
+    known: Vec<f64>,
+    other: Vec<f64>,
+    sum: Vec<f64>,
+    volume: [f64; BLOCK],
+    board_volume: [f64; BLOCK],
 }
 
 impl Steps {
     pub(crate) fn new(modes: usize, board: &SharedBoard) -> Steps {
-        Steps {
+        let m = board.modes();
+        let half = Half {
             stages: std::array::from_fn(|_| Split::zeros(modes)),
-            known: vec![0.0; board.modes()],
+            known: vec![0.0; m],
+            other: vec![0.0; m],
+            sum: vec![0.0; m],
+            volume: [0.0; BLOCK],
+            board_volume: [0.0; BLOCK],
+        };
+        Steps {
+            halves: [half.clone(), half],
             part: board.state(),
+            copy: board.state(),
+            exchange: Exchange::new(m),
             volume: [0.0; BLOCK],
         }
+    }
+}
+
+impl Clone for Steps {
+    /// The state and working values; a fresh meeting (no block is under way while the pool is
+    /// cloned).
+    fn clone(&self) -> Steps {
+        Steps {
+            halves: self.halves.clone(),
+            part: self.part.clone(),
+            copy: self.copy.clone(),
+            exchange: Exchange::new(self.part.modes()),
+            volume: self.volume,
+        }
+    }
+}
+
+/// A cache line of its own for a value one core writes and the other reads.
+#[derive(Debug, Default)]
+#[repr(align(128))]
+struct Line<T>(T);
+
+/// Where the two halves of a block on two cores meet each sample: each publishes its known
+/// modal force (two slots per half, alternating by sample: a slot is written again only after
+/// the other core has published the next sample, so after it has read this one) and the count of
+/// samples it has published; each reads the other's. `abort` stops a core waiting for one that
+/// has panicked.
+#[derive(Debug)]
+struct Exchange {
+    ready: [Line<AtomicUsize>; 2],
+    slots: [[Vec<AtomicU64>; 2]; 2],
+    abort: Line<AtomicBool>,
+}
+
+impl Exchange {
+    fn new(modes: usize) -> Exchange {
+        let slot = || (0..modes).map(|_| AtomicU64::new(0)).collect();
+        Exchange {
+            ready: Default::default(),
+            slots: std::array::from_fn(|_| std::array::from_fn(|_| slot())),
+            abort: Line::default(),
+        }
+    }
+
+    /// Before a block (neither core in it).
+    fn reset(&self) {
+        for r in &self.ready {
+            r.0.store(0, Ordering::Relaxed);
+        }
+        self.abort.0.store(false, Ordering::Relaxed);
+    }
+
+    /// Half `me` publishes its known force of sample `t`.
+    fn publish(&self, me: usize, t: usize, known: &[f64]) {
+        for (slot, x) in self.slots[me][t % 2].iter().zip(known) {
+            slot.store(x.to_bits(), Ordering::Relaxed);
+        }
+        self.ready[me].0.store(t + 1, Ordering::Release);
+    }
+
+    /// Half `me` waits for the other's known force of sample `t` and copies it into `into`;
+    /// `false` if the other core has given up.
+    fn receive(&self, me: usize, t: usize, into: &mut [f64]) -> bool {
+        let other = 1 - me;
+        while self.ready[other].0.load(Ordering::Acquire) <= t {
+            if self.abort.0.load(Ordering::Relaxed) {
+                return false;
+            }
+            std::hint::spin_loop();
+        }
+        for (x, slot) in into.iter_mut().zip(&self.slots[other][t % 2]) {
+            *x = f64::from_bits(slot.load(Ordering::Relaxed));
+        }
+        true
     }
 }
 
@@ -104,8 +208,9 @@ pub(crate) fn end(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
 
 /// Sample `t` of the voices up to the interface: a voice in the block from its free reads and
 /// its Markov parameters, any other by [`Voice::pre_step`] (its fade moving: a stolen voice's
-/// modes shrink with it); their known forces added onto the shared modes in `steps.known`.
-fn known(cx: &Context<'_>, voices: &mut [Voice], steps: &mut Steps, t: usize) {
+/// modes shrink with it); their known forces summed onto the shared modes in `half.known`.
+fn known(cx: &Context<'_>, voices: &mut [Voice], half: &mut Half, t: usize) {
+    half.known.iter_mut().for_each(|f| *f = 0.0);
     for v in voices.iter_mut() {
         let (true, Some(k)) = (v.state.active, v.state.key) else {
             continue;
@@ -124,11 +229,11 @@ fn known(cx: &Context<'_>, voices: &mut [Voice], steps: &mut Steps, t: usize) {
                 };
                 v.w.scale(ratio);
             }
-            v.pre_step(key, &mut steps.stages, cx.simd);
+            v.pre_step(key, &mut half.stages, cx.simd);
         }
         let f = [v.known[1], v.known[2], v.known[3]];
         cx.board
-            .add_force(cx.simd, &cx.points[k], f, &mut steps.known);
+            .add_force(cx.simd, &cx.points[k], f, &mut half.known);
     }
 }
 
@@ -147,16 +252,181 @@ fn finish(cx: &Context<'_>, voices: &mut [Voice], part: &BoardState) -> f64 {
     total
 }
 
-/// `len` samples of every voice and the shared board (the block passes of the voices in the
-/// block done before and after: [`begin`], [`end`]); the volume velocity of each in
-/// `steps.volume`.
+/// The shared modes' known force: half 0's plus half 1's, in that order on either core (so that
+/// one core and two give the same board bit for bit).
+fn sum(first: &[f64], second: &[f64], total: &mut [f64]) {
+    for ((t, a), b) in total.iter_mut().zip(first).zip(second) {
+        *t = a + b;
+    }
+}
+
+/// `len` samples of every voice (both halves) and the shared board on this core (the block
+/// passes of the voices in the block done before and after: [`begin`], [`end`]); the volume
+/// velocity of each in `steps.volume`.
 pub(crate) fn run(cx: &Context<'_>, voices: [&mut [Voice]; 2], steps: &mut Steps, len: usize) {
     let [v0, v1] = voices;
+    let [h0, h1] = &mut steps.halves;
     for t in 0..len {
-        steps.known.iter_mut().for_each(|f| *f = 0.0);
-        known(cx, v0, steps, t);
-        known(cx, v1, steps, t);
-        let board = cx.board.step(&mut steps.part, &steps.known, cx.simd);
+        known(cx, v0, h0, t);
+        known(cx, v1, h1, t);
+        sum(&h0.known, &h1.known, &mut h0.sum);
+        let board = cx.board.step(&mut steps.part, &h0.sum, cx.simd);
         steps.volume[t] = finish(cx, v0, &steps.part) + finish(cx, v1, &steps.part) + board;
+    }
+}
+
+/// Half `me` of the steps on two cores: its voices' `len` samples, meeting the other half each
+/// sample to exchange the known forces, both cores stepping their own identical copy of the
+/// shared board (`part`). `false` if the other core gave up.
+fn run_half(
+    cx: &Context<'_>,
+    voices: &mut [Voice],
+    half: &mut Half,
+    part: &mut BoardState,
+    exchange: &Exchange,
+    me: usize,
+    len: usize,
+) -> bool {
+    for t in 0..len {
+        known(cx, voices, half, t);
+        exchange.publish(me, t, &half.known);
+        if !exchange.receive(me, t, &mut half.other) {
+            return false;
+        }
+        let (first, second) = match me {
+            0 => (&half.known, &half.other),
+            _ => (&half.other, &half.known),
+        };
+        sum(first, second, &mut half.sum);
+        half.board_volume[t] = cx.board.step(part, &half.sum, cx.simd);
+        half.volume[t] = finish(cx, voices, part);
+    }
+    true
+}
+
+/// [`run`] with `voices[0]` on this core and `voices[1]` on the other through `pair`: the same
+/// result bit for bit. `false` if the other core could not start (nothing done). A panic on
+/// either core stops the other at its next meeting and is raised again here.
+pub(crate) fn run_on_two(
+    pair: &dyn Pair,
+    cx: &Context<'_>,
+    voices: [&mut [Voice]; 2],
+    steps: &mut Steps,
+    len: usize,
+) -> bool {
+    let [v0, v1] = voices;
+    let Steps {
+        halves: [h0, h1],
+        part,
+        copy,
+        exchange,
+        volume,
+    } = steps;
+    copy.copy_from(part);
+    exchange.reset();
+    let exchange = &*exchange;
+    let mut panic = None;
+    let mut there = || {
+        let run = catch_unwind(AssertUnwindSafe(|| {
+            run_half(cx, v1, h1, copy, exchange, 1, len)
+        }));
+        if let Err(e) = run {
+            exchange.abort.0.store(true, Ordering::Relaxed);
+            panic = Some(e);
+        }
+    };
+    let mut mine = None;
+    let mut here = || {
+        let run = catch_unwind(AssertUnwindSafe(|| {
+            run_half(cx, v0, h0, part, exchange, 0, len)
+        }));
+        if let Err(e) = run {
+            exchange.abort.0.store(true, Ordering::Relaxed);
+            mine = Some(e);
+        }
+    };
+    if !pair.join(&mut there, &mut here) {
+        return false;
+    }
+    if let Some(e) = mine.or(panic) {
+        resume_unwind(e);
+    }
+    for t in 0..len {
+        volume[t] = h0.volume[t] + h1.volume[t] + h0.board_volume[t];
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::{Duration, Instant};
+
+    /// Sets `abort` when dropped (as a thread unwinds).
+    struct Abort<'a>(&'a Exchange);
+
+    impl Drop for Abort<'_> {
+        fn drop(&mut self) {
+            self.0.abort.0.store(true, Ordering::Relaxed);
+        }
+    }
+
+    #[test]
+    fn the_halves_receive_each_others_forces_sample_by_sample() {
+        // Two threads meet 20 000 times, each publishing values unique to its half and the
+        // sample and checking what it receives: were a slot written again before the other had
+        // read it (one slot instead of two alternating), a value of the next sample would show.
+        const MODES: usize = 64;
+        const SAMPLES: usize = 20_000;
+        let exchange = Exchange::new(MODES);
+        let value = |half: usize, t: usize, k: usize| (half * 1_000_000_000 + t * 100 + k) as f64;
+        let started = Instant::now();
+        std::thread::scope(|s| {
+            for me in 0..2 {
+                let exchange = &exchange;
+                s.spawn(move || {
+                    // A failed check must not leave the other thread waiting.
+                    let give_up = Abort(exchange);
+                    let mut mine = vec![0.0; MODES];
+                    let mut theirs = vec![0.0; MODES];
+                    for t in 0..SAMPLES {
+                        mine.iter_mut()
+                            .enumerate()
+                            .for_each(|(k, x)| *x = value(me, t, k));
+                        exchange.publish(me, t, &mine);
+                        assert!(
+                            exchange.receive(me, t, &mut theirs),
+                            "the other half gave up"
+                        );
+                        for (k, &x) in theirs.iter().enumerate() {
+                            assert_eq!(x, value(1 - me, t, k), "half {me}, sample {t}, mode {k}");
+                        }
+                    }
+                    std::mem::forget(give_up);
+                });
+            }
+        });
+        println!(
+            "{SAMPLES} meetings of two threads, {MODES} modes each way: every value received as published ({:.1} us a meeting)",
+            started.elapsed().as_secs_f64() * 1e6 / SAMPLES as f64
+        );
+    }
+
+    #[test]
+    fn a_core_that_gives_up_releases_the_other() {
+        let exchange = Exchange::new(8);
+        exchange.reset();
+        let started = Instant::now();
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                std::thread::sleep(Duration::from_millis(20));
+                exchange.abort.0.store(true, Ordering::Relaxed);
+            });
+            assert!(!exchange.receive(0, 0, &mut [0.0; 8]));
+        });
+        println!(
+            "the waiting half returned {:.0} ms after the other gave up",
+            started.elapsed().as_secs_f64() * 1e3 - 20.0
+        );
     }
 }

@@ -303,6 +303,19 @@ impl BoardState {
         }
     }
 
+    /// Modes (padded).
+    pub(crate) fn modes(&self) -> usize {
+        self.force.len()
+    }
+
+    /// This state made a copy of `from` (the same board's; no allocation).
+    pub(crate) fn copy_from(&mut self, from: &BoardState) {
+        self.z.re.copy_from_slice(&from.z.re);
+        self.z.im.copy_from_slice(&from.z.im);
+        self.force.copy_from_slice(&from.force);
+        self.q.copy_from_slice(&from.q);
+    }
+
     /// The state as plain numbers (modes, force at the step's end), and back; the displacement
     /// follows from the modes.
     pub(crate) fn values(&self) -> Vec<f64> {

@@ -2,7 +2,7 @@
 //! shared board, with the same behaviour as the other pools ([`Policy`]: assign, steal with a
 //! fade, strike in the current motion, dampers, silent voices retired, runaways reset).
 
-use super::block::{begin, end, run, Context, Steps};
+use super::block::{begin, end, run, run_on_two, Context, Steps};
 use super::interface::SharedBoard;
 use super::kernels::{Simd, BLOCK};
 use super::key::ExactKey;
@@ -99,7 +99,7 @@ impl ExactPool {
     /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity after each,
     /// in blocks of up to [`BLOCK`] steps ([`ExactPool::block`]) that end where a stolen voice's
     /// fade does (so that its next key starts between blocks); the voices split in two halves
-    /// over two cores through `pair` (the same result bit for bit: [`super::halves`]).
+    /// over two cores through `pair` (the same result bit for bit: [`ExactPool::block`]).
     pub fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn Pair>) {
         let mut done = 0;
         while done < volume_velocity.len() {
@@ -179,29 +179,33 @@ impl ExactPool {
             fade_steps: self.fade_steps,
             simd: self.simd,
         };
-        // The block-long passes split over two cores where there is a second, in two halves of
-        // about equal work (the voices' modes, in voice order); the steps between them — every
-        // voice's sample by sample, the interface's solve — on this core.
-        // (A damped voice reads and folds in three times as much.)
-        let work = |v: &Voice| match (v.in_block, v.state.key) {
+        // Where there is a second core, the block-long passes split over the two in two halves
+        // of about equal work (the voices' modes, in voice order; a damped voice reads and folds
+        // in three times as much), and the steps between them in two halves of about equal
+        // steps ([`step_work`]): the steps meet every sample, so each half's share of them must
+        // be even, not only its total.
+        let pass_work = |v: &Voice| match (v.in_block, v.state.key) {
             (true, Some(key)) => {
                 let key = &self.keys[key];
                 key.n_modes() * if v.damped(key) { 3 } else { 1 }
             }
             _ => 0,
         };
-        let total: usize = self.voices.iter().map(work).sum();
-        let (mut at, mut first) = (0, 0);
-        while at < self.voices.len() && 2 * first < total {
-            first += work(&self.voices[at]);
-            at += 1;
-        }
-        let split = pair.filter(|_| first > 0 && first < total);
-        let (v0, v1) = self.voices.split_at_mut(at);
+        let (passes, _) = halves(&self.voices, pass_work);
+        let (steps, step_total) = halves(&self.voices, |v| step_work(&self.keys, v));
+        let (v0, v1) = self.voices.split_at_mut(passes);
+        let split = pair.filter(|_| !v0.is_empty() && !v1.is_empty());
         both(split, &mut || begin(&cx, v1, len), &mut || {
             begin(&cx, v0, len)
         });
-        run(&cx, [v0, v1], &mut self.steps, len);
+        let (v0, v1) = self.voices.split_at_mut(steps);
+        let two = pair.filter(|_| step_total >= MEET_FROM && !v0.is_empty() && !v1.is_empty());
+        if !two
+            .is_some_and(|pair| run_on_two(pair, &cx, [&mut *v0, &mut *v1], &mut self.steps, len))
+        {
+            run(&cx, [v0, v1], &mut self.steps, len);
+        }
+        let (v0, v1) = self.voices.split_at_mut(passes);
         both(split, &mut || end(&cx, v1, len), &mut || end(&cx, v0, len));
         out.copy_from_slice(&self.steps.volume[..len]);
         self.volume_velocity_m3_s = out[len - 1];
@@ -312,6 +316,41 @@ impl ExactPool {
             self.leave(k);
         }
         self.voices[k].rest();
+    }
+}
+
+/// Where to split `voices` in two halves of about equal `work` (the first index of the second
+/// half; 0 or `voices.len()` when one half would have nothing to do), and the work in all.
+fn halves(voices: &[Voice], work: impl Fn(&Voice) -> usize) -> (usize, usize) {
+    let total: usize = voices.iter().map(&work).sum();
+    let (mut at, mut first) = (0, 0);
+    while at < voices.len() && 2 * first < total {
+        first += work(&voices[at]);
+        at += 1;
+    }
+    (if first == total { voices.len() } else { at }, total)
+}
+
+/// The least [`step_work`] for which the steps are split over two cores: 32 voices in the block,
+/// their damper lifted. The two cores then meet every sample, which costs about 1 us (on a 2-core
+/// Zen 5 VM: 2 voices split took 0.146 ms a 64-frame block, on one core 0.058 ms); half the steps
+/// of 32 voices take about as long (`unacorda bench`: 16 voices 0.30 ms split, 0.20 ms on one
+/// core; 32 voices 0.34 and 0.35 ms; 64 voices 0.43 and 0.63 ms).
+const MEET_FROM: usize = 32 * 16;
+
+/// A voice's share of the steps of a block, in a voice in the block with its damper lifted (its
+/// free reads and Markov sums, its force on the shared modes and their displacement at its
+/// bridge): one with its damper down reads and remembers the felt's channels too; one stepped
+/// sample by sample (a hammer touching, a fade) advances every mode each step.
+fn step_work(keys: &[ExactKey], v: &Voice) -> usize {
+    let (true, Some(key)) = (v.state.active, v.state.key) else {
+        return 0;
+    };
+    let key = &keys[key];
+    match (v.in_block, v.damped(key)) {
+        (true, false) => 16,
+        (true, true) => 32,
+        (false, _) => key.n_modes() / 2,
     }
 }
 
