@@ -15,7 +15,8 @@ use std::time::{Duration, Instant};
 
 /// A synth on `piano` with `voices` keys sounding under the sustain pedal — spread over the
 /// keyboard from A0 upwards, struck 48 frames (1 ms at 48 kHz) apart at MIDI velocity 80 — run
-/// until 50 ms after the last strike, so that every hammer has left its strings. `piano` must hold all 88 keys and at least `voices` voices.
+/// until 50 ms after the last strike, so that every hammer has left its strings. `piano` must
+/// hold all 88 keys and at least `voices` voices.
 pub fn loaded_synth<E: VoicePool>(
     piano: &Piano<E>,
     settings: OutputSettings,
@@ -46,9 +47,10 @@ pub fn loaded_synth<E: VoicePool>(
 }
 
 /// Time each of `blocks` callbacks of `frames` frames at `rate_hz` (s), sorted — as `play`'s audio
-/// device runs them: one block every `frames / rate_hz` seconds (each started on time, or at once after one that
-/// ran late), on a thread of its own at real-time priority where the system grants it, the helper
-/// thread (if any) asked for it too. Also says whether this thread's priority was granted.
+/// device runs them: one block every `frames / rate_hz` seconds (each started on time, or at once
+/// after one that ran late), on a thread of its own at real-time priority where the system grants
+/// it, the helper thread (if any) asked for it too. Also says whether this thread's priority was
+/// granted.
 pub fn block_times_s<E: VoicePool>(
     synth: &mut Synth<E>,
     frames: usize,

@@ -197,7 +197,6 @@ fn callback<E: VoicePool>(
     );
     let mut within = 0;
     let mut voices = 1;
-    let mut reported_priority = false;
     loop {
         let (mut synth, handle) = loaded_synth(&piano, settings, voices, BLOCK);
         if cores == 2 {
@@ -207,8 +206,7 @@ fn callback<E: VoicePool>(
         let (probe, _) = block_times_s(&mut synth, BLOCK, settings.rate_hz, 5);
         let blocks = ((seconds / percentile(&probe, 0.5).max(deadline)) as usize).clamp(20, 45_000);
         let (t, granted) = block_times_s(&mut synth, BLOCK, settings.rate_hz, blocks);
-        if !reported_priority {
-            reported_priority = true;
+        if voices == 1 {
             println!(
                 "  (paced as a device runs them, one block every {:.2} ms; real-time priority {})",
                 deadline * 1e3,

@@ -14,6 +14,7 @@ use super::key::ExactKey;
 use super::voice::Voice;
 use crate::engine::pool::fade_step;
 use crate::engine::Pair;
+use std::any::Any;
 use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 
@@ -277,7 +278,7 @@ pub(crate) fn run(cx: &Context<'_>, voices: [&mut [Voice]; 2], steps: &mut Steps
 
 /// Half `me` of the steps on two cores: its voices' `len` samples, meeting the other half each
 /// sample to exchange the known forces, both cores stepping their own identical copy of the
-/// shared board (`part`). `false` if the other core gave up.
+/// shared board (`part`). Stops early if the other core gives up.
 fn run_half(
     cx: &Context<'_>,
     voices: &mut [Voice],
@@ -286,12 +287,12 @@ fn run_half(
     exchange: &Exchange,
     me: usize,
     len: usize,
-) -> bool {
+) {
     for t in 0..len {
         known(cx, voices, half, t);
         exchange.publish(me, t, &half.known);
         if !exchange.receive(me, t, &mut half.other) {
-            return false;
+            return;
         }
         let (first, second) = match me {
             0 => (&half.known, &half.other),
@@ -301,7 +302,16 @@ fn run_half(
         half.board_volume[t] = cx.board.step(part, &half.sum, cx.simd);
         half.volume[t] = finish(cx, voices, part);
     }
-    true
+}
+
+/// `run` with a panic caught: the other core told to stop waiting, the panic kept to be raised
+/// again once both have stopped.
+fn stop_on_panic(exchange: &Exchange, run: impl FnOnce()) -> Option<Box<dyn Any + Send>> {
+    let caught = catch_unwind(AssertUnwindSafe(run)).err();
+    if caught.is_some() {
+        exchange.abort.0.store(true, Ordering::Relaxed);
+    }
+    caught
 }
 
 /// [`run`] with `voices[0]` on this core and `voices[1]` on the other through `pair`: the same
@@ -325,30 +335,15 @@ pub(crate) fn run_on_two(
     copy.copy_from(part);
     exchange.reset();
     let exchange = &*exchange;
-    let mut panic = None;
-    let mut there = || {
-        let run = catch_unwind(AssertUnwindSafe(|| {
-            run_half(cx, v1, h1, copy, exchange, 1, len)
-        }));
-        if let Err(e) = run {
-            exchange.abort.0.store(true, Ordering::Relaxed);
-            panic = Some(e);
-        }
-    };
-    let mut mine = None;
-    let mut here = || {
-        let run = catch_unwind(AssertUnwindSafe(|| {
-            run_half(cx, v0, h0, part, exchange, 0, len)
-        }));
-        if let Err(e) = run {
-            exchange.abort.0.store(true, Ordering::Relaxed);
-            mine = Some(e);
-        }
-    };
+    let (mut theirs, mut mine) = (None, None);
+    let mut there =
+        || theirs = stop_on_panic(exchange, || run_half(cx, v1, h1, copy, exchange, 1, len));
+    let mut here =
+        || mine = stop_on_panic(exchange, || run_half(cx, v0, h0, part, exchange, 0, len));
     if !pair.join(&mut there, &mut here) {
         return false;
     }
-    if let Some(e) = mine.or(panic) {
+    if let Some(e) = mine.or(theirs) {
         resume_unwind(e);
     }
     for t in 0..len {
@@ -410,6 +405,25 @@ mod tests {
             "{SAMPLES} meetings of two threads, {MODES} modes each way: every value received as published ({:.1} us a meeting)",
             started.elapsed().as_secs_f64() * 1e6 / SAMPLES as f64
         );
+    }
+
+    #[test]
+    fn a_panicking_half_tells_the_other_to_stop_and_keeps_its_panic() {
+        let exchange = Exchange::new(8);
+        exchange.reset();
+        assert!(stop_on_panic(&exchange, || {}).is_none());
+        assert!(
+            !exchange.abort.0.load(Ordering::Relaxed),
+            "no panic, no abort"
+        );
+        let caught = stop_on_panic(&exchange, || panic!("a fault in one half"));
+        let message = caught.as_ref().and_then(|e| e.downcast_ref::<&str>());
+        assert_eq!(message, Some(&"a fault in one half"));
+        assert!(
+            exchange.abort.0.load(Ordering::Relaxed),
+            "the other half is told to stop"
+        );
+        assert!(!exchange.receive(0, 0, &mut [0.0; 8]), "and stops waiting");
     }
 
     #[test]
