@@ -368,6 +368,17 @@ fn bench_writes_every_printed_figure_as_json() {
         }
         let median = c["median_x_deadline"].as_f64().unwrap();
         assert!((median - p).abs() <= 0.0051, "printed {p}, JSON {median}");
+        // On two cores, the cores' meeting before and after the blocks (this machine's state).
+        if c["cores"] == 2 && std::thread::available_parallelism().map_or(1, |n| n.get()) >= 2 {
+            let meeting = c["meeting_us"].as_array().expect("meeting_us on two cores");
+            assert_eq!(meeting.len(), 2);
+            assert!(
+                meeting
+                    .iter()
+                    .all(|m| m.as_f64().is_some_and(|us| us > 0.0)),
+                "{c}"
+            );
+        }
         assert!(c["p999_x_deadline"].as_f64().unwrap() >= median);
     }
     let engines: Vec<&str> = report["voices"]

@@ -10,13 +10,18 @@ use unacorda::config::scaling::{LoadedScaling, Scaling, KEYS};
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::{
-    block_times_s, denormal_tail_step_s, dense_real_time_factor, exact_speed, loaded_synth,
-    nominal_f64_peak, percentile, resident_bytes, voice_speed,
+    block_times_s, core_meeting_s, denormal_tail_step_s, dense_real_time_factor, exact_speed,
+    loaded_synth, nominal_f64_peak, percentile, resident_bytes, voice_speed,
 };
 use unacorda::play::{Piano, MAX_VOICES};
 
 /// Block length of the live figures (frames at 48 kHz).
 const BLOCK: usize = 64;
+
+/// The cores' meeting, timed around each two-core measurement: values each way (about the shared
+/// board's modes) and meetings per round (the median of 10 rounds, a few milliseconds in all).
+const MEETING_VALUES: usize = 64;
+const MEETINGS: usize = 1_000;
 
 /// Every figure `bench` prints, for `--json`.
 #[derive(Serialize, Default)]
@@ -64,6 +69,9 @@ struct CallbackFigure {
     misses: usize,
     blocks: usize,
     helper_late: Option<u64>,
+    /// On two cores: how long the two took to meet just before and just after the blocks (us,
+    /// [`core_meeting_s`]; `null` where they could not), the machine's state during them.
+    meeting_us: Option<[Option<f64>; 2]>,
 }
 
 /// Building the 88-key piano, what `play` does before it sounds.
@@ -205,7 +213,14 @@ fn callback<E: VoicePool>(
         // `seconds` of blocks paced at the deadline, or of back-to-back blocks where they overrun.
         let (probe, _) = block_times_s(&mut synth, BLOCK, settings.rate_hz, 5);
         let blocks = ((seconds / percentile(&probe, 0.5).max(deadline)) as usize).clamp(20, 45_000);
+        // After the helper has parked (it spins for `SPIN` after its last job).
+        let meeting_us = || {
+            std::thread::sleep(3 * unacorda::audio::helper::SPIN);
+            core_meeting_s(MEETING_VALUES, MEETINGS, 10).map(|s| s * 1e6)
+        };
+        let before = (cores == 2).then(meeting_us).flatten();
         let (t, granted) = block_times_s(&mut synth, BLOCK, settings.rate_hz, blocks);
+        let meeting = (cores == 2).then(|| [before, meeting_us()]);
         if voices == 1 {
             println!(
                 "  (paced as a device runs them, one block every {:.2} ms; real-time priority {})",
@@ -228,8 +243,14 @@ fn callback<E: VoicePool>(
             median / deadline,
             p999 * 1e3,
             p999 / deadline,
-            if cores == 2 {
-                format!("; helper late (run on one core) {late} of {} runs", late + split)
+            if let Some(meeting) = meeting {
+                let us = meeting.map(|m| m.map_or("-".to_string(), |m| format!("{m:.2}")));
+                format!(
+                    "; helper late (run on one core) {late} of {} runs; cores meet in {} / {} us before / after",
+                    late + split,
+                    us[0],
+                    us[1]
+                )
             } else {
                 String::new()
             }
@@ -243,6 +264,7 @@ fn callback<E: VoicePool>(
             misses,
             blocks,
             helper_late: (cores == 2).then_some(late),
+            meeting_us: meeting,
         });
         if p999 < 0.5 * deadline {
             within = voices;

@@ -26,6 +26,8 @@ pub(crate) struct Context<'a> {
     pub(crate) board: &'a SharedBoard,
     pub(crate) fade_steps: u32,
     pub(crate) simd: Simd,
+    /// Whether [`end`] keeps each voice's energies (the last block before the policy looks).
+    pub(crate) keep_energies: bool,
 }
 
 /// The steps' working values: per half of the voices ([`Half`]), the shared board's state (and
@@ -183,7 +185,8 @@ pub(crate) fn begin(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
 }
 
 /// The last pass: each voice in the block gets the block's inputs folded into its modes (a
-/// damped one shifted back to `w`).
+/// damped one shifted back to `w`), and at the end of a run its energies for the pool's policy
+/// worked out while its modes are in this core's cache ([`Voice::energies`]).
 pub(crate) fn end(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
     for v in voices.iter_mut() {
         if let (true, Some(key)) = (v.in_block, v.state.key) {
@@ -201,6 +204,9 @@ pub(crate) fn end(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
                         .expect("the first inputs are the bridge's");
                     fold_block(cx.simd, &key.block, &mut v.w, inputs, len);
                 }
+            }
+            if cx.keep_energies {
+                v.energies = Some(v.energies_now_j(key, cx.simd));
             }
         }
         v.in_block = false;

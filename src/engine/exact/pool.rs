@@ -82,7 +82,7 @@ impl ExactPool {
     pub fn step(&mut self) {
         self.sync_loads();
         for v in self.voices.iter_mut() {
-            v.in_block = false;
+            (v.in_block, v.energies) = (false, None);
         }
         let cx = Context {
             keys: &self.keys,
@@ -90,6 +90,7 @@ impl ExactPool {
             board: &self.board,
             fade_steps: self.fade_steps,
             simd: self.simd,
+            keep_energies: false,
         };
         run(&cx, [&mut self.voices, &mut []], &mut self.steps, 1);
         self.volume_velocity_m3_s = self.steps.volume[0];
@@ -111,7 +112,8 @@ impl ExactPool {
                 .min()
                 .unwrap_or(BLOCK);
             let n = (volume_velocity.len() - done).min(BLOCK).min(fade);
-            self.block(&mut volume_velocity[done..done + n], pair);
+            let last = done + n == volume_velocity.len();
+            self.block(&mut volume_velocity[done..done + n], pair, last);
             self.finish_fades();
             done += n;
         }
@@ -163,7 +165,9 @@ impl ExactPool {
     /// loaded once, not once a step — and gets its input back by superposition: its reads step
     /// by step from its Markov parameters (the interface needs them every step), its modes from
     /// the inputs folded in at the end. The others step one sample at a time, as in `step`.
-    fn block(&mut self, out: &mut [f64], pair: Option<&dyn Pair>) {
+    /// The last block of a run (`last`) keeps each voice's energies for the policy
+    /// ([`Voice::energies`]).
+    fn block(&mut self, out: &mut [f64], pair: Option<&dyn Pair>, last: bool) {
         self.sync_loads();
         let len = out.len();
         for v in self.voices.iter_mut() {
@@ -171,6 +175,7 @@ impl ExactPool {
                 (true, Some(_)) => v.is_linear(),
                 _ => false,
             };
+            v.energies = None;
         }
         let cx = Context {
             keys: &self.keys,
@@ -178,6 +183,7 @@ impl ExactPool {
             board: &self.board,
             fade_steps: self.fade_steps,
             simd: self.simd,
+            keep_energies: last,
         };
         // Where there is a second core, the block-long passes split over the two in two halves
         // of about equal work (the voices' modes, in voice order; a damped voice reads and folds
@@ -286,6 +292,7 @@ impl ExactPool {
                 continue;
             };
             let n = self.keys[key].n_modes();
+            v.energies = None;
             v.w.re[..n].copy_from_slice(take(n));
             v.w.im[..n].copy_from_slice(take(n));
             v.d.copy_from_slice(take(3));
@@ -304,7 +311,7 @@ impl ExactPool {
             .voices
             .iter()
             .map(|v| match (v.state.active, v.state.key) {
-                (true, Some(key)) => v.dynamic_energy_j(&self.keys[key], self.simd),
+                (true, Some(key)) => v.energies_j(&self.keys[key], self.simd)[1],
                 _ => 0.0,
             });
         keys.sum::<f64>() + self.board_energy_j()
@@ -389,6 +396,21 @@ impl ExactPool {
     pub(crate) fn set_simd(&mut self, simd: Simd) {
         self.simd = simd;
     }
+
+    /// Voices whose energies are kept from a block's end (`Some`) and, of those, how many differ
+    /// from their energies worked out now.
+    fn kept_and_stale_energies(&self) -> (usize, usize) {
+        let kept: Vec<_> = self
+            .voices
+            .iter()
+            .filter_map(|v| Some((v, v.energies?, &self.keys[v.state.key?])))
+            .collect();
+        let stale = kept
+            .iter()
+            .filter(|(v, e, key)| *e != v.energies_now_j(key, self.simd))
+            .count();
+        (kept.len(), stale)
+    }
 }
 
 /// The pool policy's hooks on the exact engine's voices.
@@ -444,6 +466,7 @@ impl Policy for ExactPool {
         let (point, key) = (&self.points[key], &self.keys[key]);
         let part = &mut self.steps.part;
         let now = self.board.at(part, point, self.simd);
+        v.energies = None;
         for d in 0..3 {
             let change = now[d] - v.d[d];
             key.follow[d].add_to(&mut v.w, change);
@@ -483,7 +506,7 @@ impl Policy for ExactPool {
     fn voice_energy_j(&self, k: usize) -> f64 {
         let v = &self.voices[k];
         match (v.state.active, v.state.key) {
-            (true, Some(key)) => v.energy_j(&self.keys[key], self.simd),
+            (true, Some(key)) => v.energies_j(&self.keys[key], self.simd)[0],
             _ => 0.0,
         }
     }
@@ -513,6 +536,80 @@ mod tests {
     use super::*;
     use crate::config::scaling::{parse_key, Scaling};
     use crate::engine::{Strike, VoicePool};
+
+    #[test]
+    fn the_energies_kept_from_a_blocks_end_are_those_of_the_voices_as_they_are() {
+        // Strikes, a damper lowered, a steal with its fade, blocks of uneven lengths, single
+        // steps, the policy's retirements, the board set at rest and the state set anew: after
+        // each, every energy kept from a block's end equals the voice's energy worked out now.
+        let scaling = Scaling::resolve("grand").unwrap();
+        let rate = scaling.base.output_rate_hz();
+        let specs: Vec<_> = ["A0", "C2", "E3", "C4"]
+            .iter()
+            .map(|k| {
+                scaling
+                    .key_preset(parse_key(k).unwrap())
+                    .unwrap()
+                    .unison_spec()
+            })
+            .collect();
+        let mut pool = ExactPool::build_pool(&specs, 3, rate).unwrap();
+        let strike = Strike {
+            velocity_m_s: 3.0,
+            una_corda: false,
+        };
+        let (mut kept, mut checks) = (0, 0);
+        let mut check = |pool: &ExactPool, what: &str| {
+            let (k, stale) = pool.kept_and_stale_energies();
+            assert_eq!(stale, 0, "{stale} of {k} kept energies stale after {what}");
+            kept += k;
+            checks += 1;
+        };
+        let mut out = vec![0.0; 300];
+        for k in 0..3 {
+            pool.assign(k, k);
+            pool.set_active(k, true);
+            pool.strike_voice(k, strike);
+        }
+        pool.run(&mut out[..100], None);
+        check(&pool, "strikes and 100 steps");
+        for _ in 0..16 {
+            pool.run(&mut out, None);
+        }
+        check(&pool, "0.1 s: the hammers gone");
+        pool.set_damper_voice(2, true);
+        pool.run(&mut out[..70], None);
+        check(&pool, "a damper lowered");
+        pool.steal(1, 3, strike);
+        check(&pool, "a steal");
+        for n in [1, 5, 64, 200] {
+            pool.run(&mut out[..n], None);
+            check(&pool, "the fade");
+        }
+        pool.run(&mut out, None);
+        pool.step();
+        check(&pool, "a single step");
+        pool.run(&mut out, None);
+        pool.retire_silent(1e-3);
+        check(&pool, "retirements");
+        pool.run(&mut out, None);
+        pool.rest_board();
+        check(&pool, "the board set at rest");
+        pool.run(&mut out, None);
+        let x = pool.linear_state().x;
+        pool.set_linear_state(&x.iter().map(|x| 0.5 * x).collect::<Vec<_>>());
+        check(&pool, "the state set anew");
+        pool.run(&mut out, None);
+        pool.reset_runaways(0.0);
+        check(&pool, "every voice reset");
+        println!(
+            "{checks} checks, {kept} energies kept from a block's end: each that of its voice now"
+        );
+        assert!(
+            kept >= checks,
+            "the energies are kept: {kept} in {checks} checks"
+        );
+    }
 
     #[test]
     fn a_block_advanced_mode_by_mode_equals_its_steps() {

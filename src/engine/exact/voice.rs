@@ -47,6 +47,12 @@ pub(crate) struct Voice {
     pub(crate) pending: Pending<DAMPED_READS>,
     /// What the interface holds for this voice: its key's `Z`, damper down or lifted.
     pub(crate) loads: Option<(usize, bool)>,
+    /// [`Voice::energy_j`] and [`Voice::dynamic_energy_j`] as the last block's end left the
+    /// voice, worked out there by the core that advanced it (its modes still in that core's
+    /// cache); `None` once anything else has moved it since. The pool's policy reads them after
+    /// every block: worked out afresh on the callback's core, they swept every voice's modes
+    /// through it two or three times a block, the helper's half from the other core's cache.
+    pub(crate) energies: Option<[f64; 2]>,
 }
 
 impl Voice {
@@ -68,6 +74,7 @@ impl Voice {
             block_inputs: [[0.0; BLOCK]; DAMPED_INPUTS],
             pending: [[0.0; BLOCK]; DAMPED_READS],
             loads: None,
+            energies: None,
         }
     }
 
@@ -108,6 +115,7 @@ impl Voice {
         self.read = [0.0; READS];
         self.block_inputs = [[0.0; BLOCK]; DAMPED_INPUTS];
         self.in_block = false;
+        self.energies = None;
     }
 
     /// Mechanical energy of the key's modes (J, cycle-averaged per mode) at `z = w + a D`: what
@@ -125,6 +133,18 @@ impl Voice {
     /// follow the bridge): a damped key beside a loud C1 then seemed to gain 2e-3 J from nothing.
     pub(crate) fn dynamic_energy_j(&self, key: &ExactKey, simd: Simd) -> f64 {
         self.energy_about(key, &key.unfollow, simd)
+    }
+
+    /// `[energy_j, dynamic_energy_j]`: as the last block's end left them if nothing has moved
+    /// the voice since, else worked out now.
+    pub(crate) fn energies_j(&self, key: &ExactKey, simd: Simd) -> [f64; 2] {
+        self.energies
+            .unwrap_or_else(|| self.energies_now_j(key, simd))
+    }
+
+    /// `[energy_j, dynamic_energy_j]` worked out now.
+    pub(crate) fn energies_now_j(&self, key: &ExactKey, simd: Simd) -> [f64; 2] {
+        [self.energy_j(key, simd), self.dynamic_energy_j(key, simd)]
     }
 
     /// `sum_m energy_m |w_m + sum_d u_d,m D_d|^2` ([`kernels::energy`]).
