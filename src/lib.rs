@@ -11,7 +11,8 @@
 //! - [`analysis`]: spectra, envelopes and the paper's figures,
 //! - [`audio`]: decimation and WAV output,
 //! - [`midi`]: MIDI input — live byte parser, MIDI files, mapping to piano events,
-//! - [`measure`]: speed and memory figures for the benchmarks and `unacorda bench`.
+//! - [`measure`]: speed and memory figures for the benchmarks and `unacorda bench`,
+//! - [`cores`]: independent work (each key's preparation or analysis) on every core.
 
 // Index loops mirror the equations' indices (modes k, directions d, strings s) across parallel
 // arrays; iterator chains over three or four of them read worse.
@@ -21,6 +22,7 @@ pub mod analysis;
 pub mod audio;
 pub mod board;
 pub mod config;
+pub mod cores;
 pub mod engine;
 pub mod keycache;
 pub mod measure;

@@ -222,40 +222,18 @@ impl<E: VoicePool> Piano<E> {
         voices: usize,
         cache: Option<&crate::keycache::KeyCache>,
     ) -> Result<Piano<E>, PianoError> {
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let threads = threads.min(keys.len()).max(1);
         let rate_hz = scaling.base.output_rate_hz();
-        // Thread `t` takes keys `t`, `t + threads`, …: bass and treble keys (many modes and few)
-        // spread evenly.
-        let built = std::thread::scope(|scope| {
-            let handles: Vec<_> = (0..threads)
-                .map(|t| {
-                    scope.spawn(move || {
-                        keys.iter()
-                            .skip(t)
-                            .step_by(threads)
-                            .map(|&k| {
-                                let spec = scaling.key_preset(k)?.unison_spec();
-                                let spec = E::at_engine_rate(spec, rate_hz);
-                                let key = match cache {
-                                    Some(cache) => cache.key(&spec, E::prepare_key)?,
-                                    None => E::prepare_key(&spec)?,
-                                };
-                                Ok((spec, key))
-                            })
-                            .collect::<Result<Vec<_>, PianoError>>()
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().expect("key builder thread panicked"))
-                .collect::<Result<Vec<_>, _>>()
-        })?;
-        let mut parts: Vec<_> = built.into_iter().map(|part| part.into_iter()).collect();
-        let (specs, prepared): (Vec<_>, Vec<_>) = (0..keys.len())
-            .map(|i| parts[i % threads].next().expect("one result per key"))
-            .unzip();
+        let (specs, prepared): (Vec<_>, Vec<_>) = crate::cores::map_on_cores(keys, |&k| {
+            let spec = scaling.key_preset(k)?.unison_spec();
+            let spec = E::at_engine_rate(spec, rate_hz);
+            let key = match cache {
+                Some(cache) => cache.key(&spec, E::prepare_key)?,
+                None => E::prepare_key(&spec)?,
+            };
+            Ok::<_, PianoError>((spec, key))
+        })?
+        .into_iter()
+        .unzip();
         Ok(Piano {
             instrument: E::from_keys(&specs, prepared, voices)?,
             player: Player::new(keys),

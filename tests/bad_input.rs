@@ -102,9 +102,17 @@ fn cli_rejects_bad_input_without_writing() {
     let wav = dir.path().join("out.wav");
     let wav = wav.to_str().unwrap();
     let bad_preset = data("bad_preset_range.toml");
-    let cases: [(&[&str], &str); 9] = [
+    let cases: [(&[&str], &str); 11] = [
         (&["modes", "--max-hz", "0"], "--max-hz 0"),
         (&["modes", "--key", "H9"], "--key H9"),
+        (
+            &["analyze", "--keys", "C4,H9"],
+            "--keys: \"H9\" is not a key",
+        ),
+        (
+            &["analyze", "--keyboard", "no-such-keyboard"],
+            "no-such-keyboard",
+        ),
         (
             &["render", "--offline", "--midi-velocity", "0", "--out", wav],
             "--midi-velocity 0",

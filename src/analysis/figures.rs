@@ -153,6 +153,72 @@ pub fn write_all(
     Ok(written)
 }
 
+/// The T60 of each key's first partial — its fastest and slowest string mode, a bar per key from
+/// one to the other (`keys`: key 1–88, fastest, slowest, in s) — beside published values
+/// (`published`: key, T60 in s, source), log scale (`unacorda analyze --figure`).
+pub fn partial_decay(
+    png: &Path,
+    keyboard: &str,
+    keys: &[(usize, f64, f64)],
+    published: &[(usize, f64, &str)],
+) -> Result<(), FigureError> {
+    register_font();
+    let draw = || -> Result2<()> {
+        let root = BitMapBackend::new(png, (1100, 650)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let values = keys
+            .iter()
+            .flat_map(|k| [k.1, k.2])
+            .chain(published.iter().map(|p| p.1))
+            .filter(|v| v.is_finite() && *v > 0.0);
+        let (lo, hi) = values.fold((f64::INFINITY, 0f64), |(a, b), v| (a.min(v), b.max(v)));
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                format!("First partial's T60 per key, keyboard {keyboard}: fastest to slowest string mode (blue), published (red)"),
+                (FONT, 18),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..89.0, ((lo * 0.7).max(1e-3)..hi * 1.5).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc("key (1 = A0, 40 = C4, 88 = C8)")
+            .y_desc("T60 (s)")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v}"))
+            .label_style((FONT, 13))
+            .draw()?;
+        chart.draw_series(keys.iter().map(|&(k, fast, slow)| {
+            PathElement::new(
+                vec![(k as f64, fast), (k as f64, slow)],
+                COLORS[0].stroke_width(3),
+            )
+        }))?;
+        chart.draw_series(
+            keys.iter()
+                .map(|&(k, _, slow)| Circle::new((k as f64, slow), 2, COLORS[0].filled())),
+        )?;
+        chart
+            .draw_series(
+                published
+                    .iter()
+                    .map(|&(k, t60, _)| Circle::new((k as f64, t60), 6, COLORS[2].filled())),
+            )?
+            .label(published.first().map_or("", |p| p.2))
+            .legend(|(x, y)| Circle::new((x + 10, y), 5, COLORS[2].filled()));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font((FONT, 13))
+            .draw()?;
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(plot_err(png))
+}
+
 fn write_text(path: PathBuf, text: &str) -> Result<PathBuf, FigureError> {
     std::fs::write(&path, text).map_err(|source| FigureError::Io {
         path: path.clone(),

@@ -3,5 +3,6 @@
 pub mod figures;
 pub mod mobility;
 pub mod modes;
+pub mod partials;
 pub mod spectral;
 pub mod stability;

@@ -106,6 +106,10 @@ enum Command {
     /// The modes of one key's linearised system (hammer out of play): frequency, decay rate, T60,
     /// and which string and direction, or the board, holds each.
     Modes(modes::ModesArgs),
+    /// How the keyboard sounds against a grand, key by key, from each key's linearised system:
+    /// pitch on partials 2–8 against equal temperament, the first partial's pitch, and the T60 of
+    /// the first partials' fastest and slowest modes (table, and CSV with --csv).
+    Analyze(analyze::AnalyzeArgs),
     /// Play live: MIDI input (or a MIDI file in real time) on all 88 keys through an audio device.
     Play(live::PlayArgs),
     /// List audio outputs and MIDI inputs.
@@ -152,6 +156,7 @@ enum Command {
     },
 }
 
+mod analyze;
 mod bench;
 mod live;
 mod modes;
@@ -467,6 +472,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Play(args) => live::play(args)?,
         Command::Devices => live::devices()?,
         Command::Modes(args) => modes::modes(args)?,
+        Command::Analyze(args) => analyze::analyze(args)?,
         Command::Bench {
             seconds,
             voices,

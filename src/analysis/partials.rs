@@ -1,0 +1,182 @@
+//! A key's partials as a tuner and a listener meet them, from its linearised system's modes
+//! ([`super::modes`]): each partial is the cluster of string modes (mostly transverse) near the
+//! stiff string's `n`-th frequency (Eq. 2) — one per string and polarisation, split by the
+//! strings' mistuning and their coupling at the bridge — with its frequency and the decay of its
+//! fastest and slowest mode (the early and late decay of a coupled unison: Weinreich 1977). The
+//! key's pitch is what a tuner listening to partials 2–8 hears: the first partial of the
+//! stiff-string law `f_n = n f0 sqrt(1 + B n^2)` fitted to them, so that a board mode pulling
+//! the first partial alone does not move it.
+
+use super::modes::LinearMode;
+
+/// Share of a mode's energy in the strings' transverse (T) motion from which it counts as a
+/// string mode of a partial (a mode shared with the board, T 50 % and board 43 %, does not).
+pub const STRING_SHARE: f64 = 0.6;
+
+/// A partial's modes lie within this fraction of the string's partial spacing of the stiff
+/// string's frequency.
+const WINDOW: f64 = 0.3;
+
+/// Partial `n` of a key.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Partial {
+    pub n: usize,
+    /// The mean of its modes' frequencies weighted by their transverse share (Hz).
+    pub freq_hz: f64,
+    /// T60 of its fastest and its slowest mode (s).
+    pub t60_min_s: f64,
+    pub t60_max_s: f64,
+    /// How many modes it has (strings × polarisations where they are coupled).
+    pub modes: usize,
+}
+
+/// Partials `1..=count` of a string whose stiff-string frequencies are `expected_hz(n)` (Hz), found
+/// among `modes`: those with no string mode near their frequency are left out (above the modes
+/// the keyboard keeps, or drowned in the board).
+pub fn partials(
+    modes: &[LinearMode],
+    expected_hz: impl Fn(usize) -> f64,
+    count: usize,
+) -> Vec<Partial> {
+    let spacing = expected_hz(1);
+    (1..=count)
+        .filter_map(|n| {
+            let centre = expected_hz(n);
+            let near: Vec<&LinearMode> = modes
+                .iter()
+                .filter(|m| m.shares[0] >= STRING_SHARE)
+                .filter(|m| (m.freq_hz - centre).abs() <= WINDOW * spacing)
+                .collect();
+            if near.is_empty() {
+                return None;
+            }
+            let weight: f64 = near.iter().map(|m| m.shares[0]).sum();
+            let t60 = near.iter().map(|m| m.t60_s());
+            Some(Partial {
+                n,
+                freq_hz: near.iter().map(|m| m.freq_hz * m.shares[0]).sum::<f64>() / weight,
+                t60_min_s: t60.clone().fold(f64::INFINITY, f64::min),
+                t60_max_s: t60.fold(0.0, f64::max),
+                modes: near.len(),
+            })
+        })
+        .collect()
+}
+
+/// The pitch a tuner hears from partials 2–8.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TunerPitch {
+    /// The fitted law's first partial `f0 sqrt(1 + B)` (Hz).
+    pub first_partial_hz: f64,
+    /// The fitted (or, from fewer than three partials, the given) inharmonicity `B`.
+    pub inharmonicity: f64,
+    /// How many of partials 2–8 it was fitted to.
+    pub partials: usize,
+}
+
+/// The stiff-string law fitted to partials 2–8 of `partials`: `f_n^2 = a n^2 + b n^4` with
+/// `a = f0^2`, `b = f0^2 B`, each equation divided by `f_n^2` so that every partial weighs by its
+/// error in cents. From one or two partials `B` is `nominal_b` (the string's own) and only `f0`
+/// is fitted. `None` without any of partials 2–8.
+pub fn tuner_pitch(partials: &[Partial], nominal_b: f64) -> Option<TunerPitch> {
+    let used: Vec<(f64, f64)> = partials
+        .iter()
+        .filter(|p| (2..=8).contains(&p.n))
+        .map(|p| (p.n as f64, p.freq_hz))
+        .collect();
+    if used.is_empty() {
+        return None;
+    }
+    let (a, b) = if used.len() >= 3 {
+        // Normal equations of rows (n^2 / f^2, n^4 / f^2) = 1.
+        let (mut s11, mut s12, mut s22, mut r1, mut r2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for &(n, f) in &used {
+            let (x1, x2) = (n * n / (f * f), n.powi(4) / (f * f));
+            (s11, s12, s22, r1, r2) = (
+                s11 + x1 * x1,
+                s12 + x1 * x2,
+                s22 + x2 * x2,
+                r1 + x1,
+                r2 + x2,
+            );
+        }
+        let det = s11 * s22 - s12 * s12;
+        ((r1 * s22 - r2 * s12) / det, (s11 * r2 - s12 * r1) / det)
+    } else {
+        // f0 from each partial with B given, averaged in cents.
+        let log_f0 = used
+            .iter()
+            .map(|&(n, f)| (f / (n * (1.0 + nominal_b * n * n).sqrt())).ln())
+            .sum::<f64>()
+            / used.len() as f64;
+        let f0_sq = (2.0 * log_f0).exp();
+        (f0_sq, f0_sq * nominal_b)
+    };
+    (a > 0.0).then(|| TunerPitch {
+        first_partial_hz: (a + b).sqrt(),
+        inharmonicity: b / a,
+        partials: used.len(),
+    })
+}
+
+/// `f` against `target` (cents).
+pub fn cents(f_hz: f64, target_hz: f64) -> f64 {
+    1200.0 * (f_hz / target_hz).log2()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A mode of a string at `freq_hz` with decay `decay_per_s`, `t` of its energy transverse.
+    fn mode(freq_hz: f64, decay_per_s: f64, t: f64) -> LinearMode {
+        LinearMode {
+            freq_hz,
+            decay_per_s,
+            shares: [t, 0.0, 1.0 - t, 0.0],
+            string_shares: [1.0, 0.0, 0.0],
+        }
+    }
+
+    #[test]
+    fn the_tuner_hears_partials_2_to_8_not_a_first_partial_pulled_by_the_board() {
+        // A stiff string (f0 110 Hz, B 4e-4), two strings a partial apart by 0.1 Hz, its first
+        // partial pulled 30 cents sharp by a board mode, P modes and board modes between.
+        let (f0, b) = (110.0, 4e-4);
+        let law = |n: usize| n as f64 * f0 * (1.0 + b * (n * n) as f64).sqrt();
+        let mut modes = vec![];
+        for n in 1..=10 {
+            let f = if n == 1 {
+                law(1) * 2f64.powf(30.0 / 1200.0)
+            } else {
+                law(n)
+            };
+            modes.push(mode(f - 0.05, 0.1 * n as f64, 0.95));
+            modes.push(mode(f + 0.05, 2.0 * n as f64, 0.9));
+            modes.push(mode(f + 0.2, 0.3, 0.1)); // a P mode: not counted
+            modes.push(mode(f + 0.4 * f0, 30.0, 0.2)); // a board mode between partials
+        }
+        let found = partials(&modes, law, 8);
+        assert_eq!(found.len(), 8);
+        assert!(found.iter().all(|p| p.modes == 2));
+        let p2 = found[1];
+        let expected_t60 = |sigma: f64| 3.0 * std::f64::consts::LN_10 / sigma;
+        assert!((p2.t60_max_s - expected_t60(0.2)).abs() < 1e-9);
+        assert!((p2.t60_min_s - expected_t60(4.0)).abs() < 1e-9);
+        let pitch = tuner_pitch(&found, 0.0).unwrap();
+        let heard = cents(pitch.first_partial_hz, law(1));
+        let first = cents(found[0].freq_hz, law(1));
+        println!(
+            "partial 1 {first:+.2} cents off (pulled), the tuner's pitch from partials 2-8 {heard:+.4} cents, B {:.3e} (true 4e-4)",
+            pitch.inharmonicity
+        );
+        assert_eq!(pitch.partials, 7);
+        assert!(heard.abs() < 0.05, "{heard}");
+        assert!((pitch.inharmonicity / b - 1.0).abs() < 0.01);
+        assert!((first - 30.0).abs() < 0.5);
+        // From two partials the string's own B is used.
+        let two = tuner_pitch(&found[..3], b).unwrap();
+        assert_eq!(two.partials, 2);
+        assert!(cents(two.first_partial_hz, law(1)).abs() < 0.05);
+    }
+}

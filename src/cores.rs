@@ -1,0 +1,58 @@
+//! Independent work on every core of the machine: each key's preparation (`play`), each key's
+//! eigen-analysis (`unacorda analyze`).
+
+/// `f` of every item, on as many threads as the machine has cores (at most one per item), the
+/// results in the items' order; the first error (in that order) if any. Thread `t` takes items
+/// `t`, `t + threads`, …, so that the keyboard's heavy bass keys and light treble keys spread
+/// evenly.
+pub fn map_on_cores<T: Sync, R: Send, E: Send>(
+    items: &[T],
+    f: impl Fn(&T) -> Result<R, E> + Sync,
+) -> Result<Vec<R>, E> {
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(items.len())
+        .max(1);
+    let f = &f;
+    let parts = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                scope.spawn(move || {
+                    items
+                        .iter()
+                        .skip(t)
+                        .step_by(threads)
+                        .map(f)
+                        .collect::<Result<Vec<R>, E>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().expect("a worker thread panicked"))
+            .collect::<Result<Vec<_>, E>>()
+    })?;
+    let mut parts: Vec<_> = parts.into_iter().map(|p| p.into_iter()).collect();
+    Ok((0..items.len())
+        .map(|i| parts[i % threads].next().expect("one result per item"))
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn results_come_back_in_the_items_order() {
+        let items: Vec<u32> = (0..37).collect();
+        let squares: Result<Vec<u32>, ()> = map_on_cores(&items, |x| Ok(x * x));
+        assert_eq!(
+            squares.unwrap(),
+            items.iter().map(|x| x * x).collect::<Vec<_>>()
+        );
+        let failed = map_on_cores(&items, |&x| if x % 10 == 7 { Err(x) } else { Ok(x) });
+        assert_eq!(failed, Err(7), "the first error in the items' order");
+        let none: Result<Vec<u32>, ()> = map_on_cores(&[] as &[u32], |x| Ok(*x));
+        assert_eq!(none.unwrap(), Vec::<u32>::new());
+    }
+}
