@@ -378,17 +378,20 @@ fn string_2_sounds_its_mistuning_above_string_1_on_the_bridge() {
     // The c2 preset mistunes string 2 by +1.5 cents through its tension. On its contact spring
     // and the board (each string alone on the bridge, the undamped coupled system), its first
     // partial must sit 1.5 cents above string 1's: the bridge and board pull both alike.
-    use unacorda::engine::tuning::bridged_first_partial_hz;
+    use unacorda::engine::tuning::{bridged_partials_hz, stiff_string_hz};
     let spec = c2().unison_spec();
     let point = &spec.board.points[spec.bridge_point];
     let partial = |s: usize| {
-        bridged_first_partial_hz(
-            &spec.strings[s],
+        let string = &spec.strings[s];
+        let first = bridged_partials_hz(
+            string,
             spec.modes.modes_t,
             spec.contact.stiffness_n_m[0],
             Some((&spec.board, point)),
-            65.4,
-        )
+            stiff_string_hz(65.4, string.speaking_inharmonicity()),
+            1,
+        );
+        first[0].1
     };
     let (f1, f2) = (partial(0), partial(1));
     let cents = 1200.0 * (f2 / f1).log2();

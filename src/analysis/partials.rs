@@ -8,14 +8,11 @@
 //! the first partial alone does not move it.
 
 use super::modes::LinearMode;
+use crate::engine::tuning::{stiff_string_fit, PARTIAL_WINDOW};
 
 /// Share of a mode's energy in the strings' transverse (T) motion from which it counts as a
 /// string mode of a partial (a mode shared with the board, T 50 % and board 43 %, does not).
 pub const STRING_SHARE: f64 = 0.6;
-
-/// A partial's modes lie within this fraction of the string's partial spacing of the stiff
-/// string's frequency.
-const WINDOW: f64 = 0.3;
 
 /// Partial `n` of a key.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,7 +42,7 @@ pub fn partials(
             let near: Vec<&LinearMode> = modes
                 .iter()
                 .filter(|m| m.shares[0] >= STRING_SHARE)
-                .filter(|m| (m.freq_hz - centre).abs() <= WINDOW * spacing)
+                .filter(|m| (m.freq_hz - centre).abs() <= PARTIAL_WINDOW * spacing)
                 .collect();
             if near.is_empty() {
                 return None;
@@ -74,48 +71,16 @@ pub struct TunerPitch {
     pub partials: usize,
 }
 
-/// The stiff-string law fitted to partials 2–8 of `partials`: `f_n^2 = a n^2 + b n^4` with
-/// `a = f0^2`, `b = f0^2 B`, each equation divided by `f_n^2` so that every partial weighs by its
-/// error in cents. From one or two partials `B` is `nominal_b` (the string's own) and only `f0`
-/// is fitted. `None` without any of partials 2–8.
+/// The stiff-string law fitted to partials 2–8 of `partials` ([`stiff_string_fit`]; from one or
+/// two of them `B` is `nominal_b`). `None` without any of partials 2–8.
 pub fn tuner_pitch(partials: &[Partial], nominal_b: f64) -> Option<TunerPitch> {
-    let used: Vec<(f64, f64)> = partials
-        .iter()
-        .filter(|p| (2..=8).contains(&p.n))
-        .map(|p| (p.n as f64, p.freq_hz))
-        .collect();
-    if used.is_empty() {
-        return None;
-    }
-    let (a, b) = if used.len() >= 3 {
-        // Normal equations of rows (n^2 / f^2, n^4 / f^2) = 1.
-        let (mut s11, mut s12, mut s22, mut r1, mut r2) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for &(n, f) in &used {
-            let (x1, x2) = (n * n / (f * f), n.powi(4) / (f * f));
-            (s11, s12, s22, r1, r2) = (
-                s11 + x1 * x1,
-                s12 + x1 * x2,
-                s22 + x2 * x2,
-                r1 + x1,
-                r2 + x2,
-            );
+    let found: Vec<(usize, f64)> = partials.iter().map(|p| (p.n, p.freq_hz)).collect();
+    stiff_string_fit(&found, nominal_b).map(|(first_partial_hz, inharmonicity, partials)| {
+        TunerPitch {
+            first_partial_hz,
+            inharmonicity,
+            partials,
         }
-        let det = s11 * s22 - s12 * s12;
-        ((r1 * s22 - r2 * s12) / det, (s11 * r2 - s12 * r1) / det)
-    } else {
-        // f0 from each partial with B given, averaged in cents.
-        let log_f0 = used
-            .iter()
-            .map(|&(n, f)| (f / (n * (1.0 + nominal_b * n * n).sqrt())).ln())
-            .sum::<f64>()
-            / used.len() as f64;
-        let f0_sq = (2.0 * log_f0).exp();
-        (f0_sq, f0_sq * nominal_b)
-    };
-    (a > 0.0).then(|| TunerPitch {
-        first_partial_hz: (a + b).sqrt(),
-        inharmonicity: b / a,
-        partials: used.len(),
     })
 }
 

@@ -9,7 +9,7 @@
 
 use crate::config::preset::{bridge_point_index, LoadedPreset, Preset, PresetError};
 use crate::engine::physics::string::StringParams;
-use crate::engine::tuning::bridged_first_partial_hz;
+use crate::engine::tuning::bridged_pitch_hz;
 use serde::Deserialize;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
@@ -255,14 +255,16 @@ impl LoadedScaling {
             .iter()
             .any(|a| a.key == key && a.tension_tuned);
         if !tuned {
-            // Tune the tension until the first partial on the bridge and board is on pitch (it
-            // converges in a few rounds: the partial goes as sqrt(T0), with a small stiffness term).
+            // Tune the tension until the string on the bridge and board is on pitch as a tuner
+            // hears it, on partials 2–8 (`bridged_pitch_hz`; a board mode near the first partial
+            // pulls it alone). It converges in a few rounds: the partials go as sqrt(T0), with a
+            // small stiffness term.
             let k_contact = self.base.contact().stiffness_n_m[0];
             let point = self.base.board.point(&crate::board::key_name(key));
             let board = point.map(|p| (&self.base.board, p));
             for _ in 0..4 {
                 let (modes, _) = count_modes(&string);
-                let f1 = bridged_first_partial_hz(&string, modes, k_contact, board, f_et);
+                let f1 = bridged_pitch_hz(&string, modes, k_contact, board, f_et);
                 string.tension_n *= (f_et / f1).powi(2);
             }
             s.tension_n = string.tension_n;

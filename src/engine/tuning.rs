@@ -1,4 +1,5 @@
-//! Tuning: the first partial of a string on its bridge, from the undamped linear system.
+//! Tuning: a string's partials on its bridge, from the undamped linear system, and the pitch a
+//! tuner hears from them.
 //!
 //! Without damping, string T modes, contact spring and board T modes form a symmetric system
 //! (Eq. 2, 5, 6 with mass-normalised modes, `M = I`):
@@ -8,24 +9,32 @@
 //! ```
 //! Its eigenvalues are the coupled frequencies. The truncated string mode set (a Ritz basis) puts
 //! the first partial above the speaking length's fundamental, by tens of cents when few modes are
-//! kept; the spring and the board's reactance move it further. Tuning against this system puts the
-//! struck note on pitch.
+//! kept; the spring and the board's reactance move it further, and a board mode near a partial
+//! pulls that partial alone. Tuning against this system's partials 2–8, as a tuner listens, puts
+//! the struck note on pitch.
 
 use crate::engine::physics::soundboard::{BridgePoint, SoundboardModes};
 use crate::engine::physics::string::StringParams;
 use faer::{Mat, Side};
 use std::f64::consts::PI;
 
-/// The coupled partial (Hz) nearest in character to the string's first partial: of the
-/// eigenvalues within a semitone of `near_hz`, the one whose mode has the largest share of its
-/// motion in the string. `board` is `None` for a rigid bridge.
-pub fn bridged_first_partial_hz(
+/// A partial's modes lie within this fraction of the partial spacing of where the stiff string
+/// puts it (also the analysis's window: [`crate::analysis::partials`]).
+pub const PARTIAL_WINDOW: f64 = 0.3;
+
+/// The coupled partials `1..=count` (Hz) nearest in character to the string's: for each `n`, of
+/// the eigenvalues within [`PARTIAL_WINDOW`] of the spacing `expected_hz(1)` of `expected_hz(n)`,
+/// the one whose mode has the largest share of its motion in the string, if that is at least
+/// half (none where no string mode is there: a board mode's frequency would pull the tuning
+/// anywhere). `board` is `None` for a rigid bridge.
+pub fn bridged_partials_hz(
     string: &StringParams,
     modes: usize,
     contact_n_m: f64,
     board: Option<(&SoundboardModes, &BridgePoint)>,
-    near_hz: f64,
-) -> f64 {
+    expected_hz: impl Fn(usize) -> f64,
+    count: usize,
+) -> Vec<(usize, f64)> {
     let ls = string.speaking_length_m;
     let psi: Vec<f64> = (1..=modes).map(|n| string.mode_shape(n, ls)).collect();
     let (nb, phi, wb2): (usize, &[f64], Vec<f64>) = match board {
@@ -51,14 +60,95 @@ pub fn bridged_first_partial_hz(
         .self_adjoint_eigen(Side::Lower)
         .expect("a real symmetric matrix has real eigenvalues");
     let (vals, vecs) = (evd.S().column_vector(), evd.U());
-    let band = 2f64.powf(1.0 / 12.0);
-    (0..n)
-        .map(|m| (vals[m].max(0.0).sqrt() / (2.0 * PI), m))
-        .filter(|(f, _)| *f > near_hz / band && *f < near_hz * band)
-        .max_by(|a, b| {
-            let share = |m: usize| (0..modes).map(|i| vecs[(i, m)].powi(2)).sum::<f64>();
-            share(a.1).total_cmp(&share(b.1))
+    let share = |m: usize| (0..modes).map(|i| vecs[(i, m)].powi(2)).sum::<f64>();
+    let freq_hz: Vec<f64> = (0..n)
+        .map(|m| vals[m].max(0.0).sqrt() / (2.0 * PI))
+        .collect();
+    let spacing = expected_hz(1);
+    (1..=count)
+        .filter_map(|p| {
+            let centre = expected_hz(p);
+            (0..n)
+                .filter(|&m| (freq_hz[m] - centre).abs() <= PARTIAL_WINDOW * spacing)
+                .max_by(|&a, &b| share(a).total_cmp(&share(b)))
+                .filter(|&m| share(m) >= 0.5)
+                .map(|m| (p, freq_hz[m]))
         })
-        .map(|(f, _)| f)
-        .unwrap_or(near_hz)
+        .collect()
+}
+
+/// Eq. 2's law fitted to partials 2–8 of `partials` (`(n, Hz)`): `f_n^2 = a n^2 + b n^4` with
+/// `a = f0^2`, `b = f0^2 B`, each equation divided by `f_n^2` so that every partial weighs by its
+/// error in cents. Returns the law's first partial `f0 sqrt(1 + B)` (Hz), its `B`, and how many
+/// partials it was fitted to; from one or two, `B` is `nominal_b` and only `f0` is fitted.
+/// `None` without any of partials 2–8. What a tuner hears: a board mode that pulls the first
+/// partial alone does not move it.
+pub fn stiff_string_fit(partials: &[(usize, f64)], nominal_b: f64) -> Option<(f64, f64, usize)> {
+    let used: Vec<(f64, f64)> = partials
+        .iter()
+        .filter(|p| (2..=8).contains(&p.0))
+        .map(|&(n, f)| (n as f64, f))
+        .collect();
+    if used.is_empty() {
+        return None;
+    }
+    let (a, b) = if used.len() >= 3 {
+        // Normal equations of rows (n^2 / f^2, n^4 / f^2) = 1.
+        let (mut s11, mut s12, mut s22, mut r1, mut r2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for &(n, f) in &used {
+            let (x1, x2) = (n * n / (f * f), n.powi(4) / (f * f));
+            (s11, s12, s22, r1, r2) = (
+                s11 + x1 * x1,
+                s12 + x1 * x2,
+                s22 + x2 * x2,
+                r1 + x1,
+                r2 + x2,
+            );
+        }
+        let det = s11 * s22 - s12 * s12;
+        ((r1 * s22 - r2 * s12) / det, (s11 * r2 - s12 * r1) / det)
+    } else {
+        // f0 from each partial with B given, averaged in cents.
+        let log_f0 = used
+            .iter()
+            .map(|&(n, f)| (f / (n * (1.0 + nominal_b * n * n).sqrt())).ln())
+            .sum::<f64>()
+            / used.len() as f64;
+        let f0_sq = (2.0 * log_f0).exp();
+        (f0_sq, f0_sq * nominal_b)
+    };
+    (a > 0.0).then(|| ((a + b).sqrt(), b / a, used.len()))
+}
+
+/// The stiff string's partials with the first at `target_hz` and inharmonicity `b` (Eq. 2).
+pub fn stiff_string_hz(target_hz: f64, b: f64) -> impl Fn(usize) -> f64 {
+    move |n| {
+        let n = n as f64;
+        n * target_hz * ((1.0 + b * n * n) / (1.0 + b)).sqrt()
+    }
+}
+
+/// The pitch a tuner hears from `string` on its bridge and board (Hz): Eq. 2's law fitted to its
+/// coupled partials 2–8 ([`stiff_string_fit`]), or its first partial where none of them is below
+/// the modes kept (the top keys).
+pub fn bridged_pitch_hz(
+    string: &StringParams,
+    modes: usize,
+    contact_n_m: f64,
+    board: Option<(&SoundboardModes, &BridgePoint)>,
+    target_hz: f64,
+) -> f64 {
+    let b = string.speaking_inharmonicity();
+    let found = bridged_partials_hz(
+        string,
+        modes,
+        contact_n_m,
+        board,
+        stiff_string_hz(target_hz, b),
+        8.min(modes),
+    );
+    stiff_string_fit(&found, b)
+        .map(|(f1, _, _)| f1)
+        .or_else(|| found.iter().find(|p| p.0 == 1).map(|p| p.1))
+        .unwrap_or(target_hz)
 }

@@ -10,6 +10,7 @@ use unacorda::analysis::modes::linear_modes;
 use unacorda::analysis::partials::{cents, partials, tuner_pitch, Partial, TunerPitch};
 use unacorda::board::key_name;
 use unacorda::config::scaling::{equal_tempered_hz, parse_key, LoadedScaling, Scaling, KEYS};
+use unacorda::engine::tuning::stiff_string_hz;
 
 /// Partials looked for on each key.
 const PARTIALS: usize = 8;
@@ -57,9 +58,14 @@ impl KeyFigures {
         self.partials.iter().find(|p| p.n == n)
     }
 
+    /// The pitch as a tuner hears it: on partials 2–8, or on the first where none of them is
+    /// among the key's modes (B7, C8).
     fn tuner_cents(&self) -> Option<f64> {
-        self.pitch
-            .map(|p| cents(p.first_partial_hz, self.target_hz))
+        let heard = self
+            .pitch
+            .map(|p| p.first_partial_hz)
+            .or_else(|| self.partial(1).map(|p| p.freq_hz));
+        heard.map(|f| cents(f, self.target_hz))
     }
 }
 
@@ -82,15 +88,10 @@ fn analyse_key(scaling: &LoadedScaling, key: usize) -> Result<KeyFigures> {
     let spec = scaling.key_preset(key)?.unison_spec();
     let modes = linear_modes(&spec).with_context(|| format!("key {}", key_name(key)))?;
     let string = &spec.strings[0];
-    // The speaking length's inharmonicity (Eq. 2's `B` scales as 1 / L^2), and the stiff
-    // string's partials with the first on target: where the tuner meant them to be.
-    let b = string.inharmonicity() * (string.length_m() / string.speaking_length_m).powi(2);
+    // The stiff string's partials with the first on target: where the tuner meant them to be.
+    let b = string.speaking_inharmonicity();
     let target_hz = equal_tempered_hz(key);
-    let expected_hz = |n: usize| {
-        let n = n as f64;
-        n * target_hz * ((1.0 + b * n * n) / (1.0 + b)).sqrt()
-    };
-    let partials = partials(&modes, expected_hz, PARTIALS);
+    let partials = partials(&modes, stiff_string_hz(target_hz, b), PARTIALS);
     let pitch = tuner_pitch(&partials, b);
     Ok(KeyFigures {
         key,
@@ -149,7 +150,7 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
             f.target_hz,
             match f.pitch {
                 Some(p) => format!("{} ({})", show(f.tuner_cents(), 1), p.partials),
-                None => "-".into(),
+                None => format!("{} (1st)", show(f.tuner_cents(), 1)),
             },
             f.pitch
                 .map_or("-".into(), |p| format!("{:.2e}", p.inharmonicity)),
@@ -200,7 +201,8 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
         .collect();
     let _ = writeln!(
         out,
-        "pitch (partials 2–8): {} of {} keys within ±{TUNED_CENTS} cents of equal temperament; furthest: {}; no string partial 2–8 near its place: {}",
+        "pitch (partials 2–8; the first where none of them is among the modes: {}): {} of {} keys within ±{TUNED_CENTS} cents of equal temperament; furthest: {}",
+        if unheard.is_empty() { "none".to_string() } else { unheard.join(", ") },
         tuned.len(),
         figures.len(),
         worst
@@ -209,7 +211,6 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
             .map(|(f, c)| format!("{} {c:+.0}", key_name(f.key)))
             .collect::<Vec<_>>()
             .join(", "),
-        if unheard.is_empty() { "none".to_string() } else { unheard.join(", ") }
     );
     let _ = writeln!(
         out,

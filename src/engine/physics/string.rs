@@ -49,6 +49,12 @@ impl StringParams {
         PI * PI * self.bending_stiffness_n_m2() / (self.tension_n * self.length_m().powi(2))
     }
 
+    /// `B` of the speaking length alone (Eq. 2's `B` goes as `1 / L^2`): the inharmonicity of
+    /// the partials the struck string sounds.
+    pub fn speaking_inharmonicity(&self) -> f64 {
+        self.inharmonicity() * (self.length_m() / self.speaking_length_m).powi(2)
+    }
+
     /// Transverse natural frequency of mode `n` (1-based), `omega_n = n 2 pi f0 sqrt(1 + B n^2)` (Eq. 2).
     pub fn transverse_omega(&self, n: usize) -> f64 {
         let n = n as f64;
