@@ -14,27 +14,41 @@ pub fn map_on_cores<T: Sync, R: Send, E: Send>(
         .min(items.len())
         .max(1);
     let f = &f;
+    // Each thread stops at its first error and says where it was: of those, the first in the
+    // items' order is the error.
     let parts = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..threads)
             .map(|t| {
                 scope.spawn(move || {
-                    items
-                        .iter()
-                        .skip(t)
+                    (t..items.len())
                         .step_by(threads)
-                        .map(f)
-                        .collect::<Result<Vec<R>, E>>()
+                        .map(|i| f(&items[i]).map_err(|e| (i, e)))
+                        .collect::<Result<Vec<R>, (usize, E)>>()
                 })
             })
             .collect();
         handles
             .into_iter()
             .map(|h| h.join().expect("a worker thread panicked"))
-            .collect::<Result<Vec<_>, E>>()
-    })?;
-    let mut parts: Vec<_> = parts.into_iter().map(|p| p.into_iter()).collect();
+            .collect::<Vec<_>>()
+    });
+    let mut done = Vec::with_capacity(threads);
+    let mut first: Option<(usize, E)> = None;
+    for part in parts {
+        match part {
+            Ok(results) => done.push(results.into_iter()),
+            Err((i, e)) => {
+                if first.as_ref().is_none_or(|(j, _)| i < *j) {
+                    first = Some((i, e));
+                }
+            }
+        }
+    }
+    if let Some((_, e)) = first {
+        return Err(e);
+    }
     Ok((0..items.len())
-        .map(|i| parts[i % threads].next().expect("one result per item"))
+        .map(|i| done[i % threads].next().expect("one result per item"))
         .collect())
 }
 
@@ -52,6 +66,13 @@ mod tests {
         );
         let failed = map_on_cores(&items, |&x| if x % 10 == 7 { Err(x) } else { Ok(x) });
         assert_eq!(failed, Err(7), "the first error in the items' order");
+        // Errors on every thread (items 5, 6, 7, …, taken by different threads): still the first.
+        let failed = map_on_cores(&items, |&x| if x >= 5 { Err(x) } else { Ok(x) });
+        assert_eq!(
+            failed,
+            Err(5),
+            "the first error in the items' order, of any thread"
+        );
         let none: Result<Vec<u32>, ()> = map_on_cores(&[] as &[u32], |x| Ok(*x));
         assert_eq!(none.unwrap(), Vec::<u32>::new());
     }
