@@ -4,7 +4,7 @@
 
 use std::process::Command;
 use unacorda::analysis::modes::linear_modes;
-use unacorda::analysis::partials::{cents, partials, tuner_pitch};
+use unacorda::analysis::partials::{cents, partials, tuner_pitch, KeyPartials};
 use unacorda::config::scaling::{parse_key, Scaling};
 
 #[test]
@@ -103,18 +103,9 @@ fn the_keyboard_is_tuned_as_a_tuner_hears_it() {
     let keys: Vec<usize> = (1..=88).collect();
     let pitch = unacorda::cores::map_on_cores(&keys, |&k| {
         let spec = scaling.key_preset(k).unwrap().unison_spec();
-        let modes = linear_modes(&spec).map_err(|e| format!("key {k}: {e}"))?;
-        let b = spec.strings[0].speaking_inharmonicity();
         let target = unacorda::config::scaling::equal_tempered_hz(k);
-        let found = partials(
-            &modes,
-            unacorda::engine::tuning::stiff_string_hz(target, b),
-            8,
-        );
-        let heard = tuner_pitch(&found, b)
-            .map(|p| p.first_partial_hz)
-            .or_else(|| found.first().filter(|p| p.n == 1).map(|p| p.freq_hz))
-            .ok_or(format!("key {k}: no partial found"))?;
+        let key = KeyPartials::new(&spec, target, 8).map_err(|e| format!("key {k}: {e}"))?;
+        let heard = key.heard_hz().ok_or(format!("key {k}: no partial found"))?;
         Ok::<_, String>(cents(heard, target))
     })
     .unwrap();

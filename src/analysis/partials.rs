@@ -7,8 +7,9 @@
 //! stiff-string law `f_n = n f0 sqrt(1 + B n^2)` fitted to them, so that a board mode pulling
 //! the first partial alone does not move it.
 
-use super::modes::LinearMode;
-use crate::engine::tuning::{stiff_string_fit, PARTIAL_WINDOW};
+use super::modes::{linear_modes, LinearMode, ModesError};
+use crate::engine::tuning::{stiff_string_fit, stiff_string_hz, PARTIAL_WINDOW};
+use crate::engine::UnisonSpec;
 
 /// Share of a mode's energy in the strings' transverse (T) motion from which it counts as a
 /// string mode of a partial (a mode shared with the board, T 50 % and board 43 %, does not).
@@ -82,6 +83,43 @@ pub fn tuner_pitch(partials: &[Partial], nominal_b: f64) -> Option<TunerPitch> {
             partials,
         }
     })
+}
+
+/// A key's partials and the pitch a tuner hears, from its linearised system ([`linear_modes`])
+/// against the stiff string with its first partial on `target_hz` (the speaking length's `B`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct KeyPartials {
+    pub target_hz: f64,
+    /// Partials `1..=count` found among the modes.
+    pub partials: Vec<Partial>,
+    /// On partials 2–8 ([`tuner_pitch`]).
+    pub pitch: Option<TunerPitch>,
+}
+
+impl KeyPartials {
+    pub fn new(spec: &UnisonSpec, target_hz: f64, count: usize) -> Result<KeyPartials, ModesError> {
+        let modes = linear_modes(spec)?;
+        let b = spec.strings[0].speaking_inharmonicity();
+        let partials = partials(&modes, stiff_string_hz(target_hz, b), count);
+        let pitch = tuner_pitch(&partials, b);
+        Ok(KeyPartials {
+            target_hz,
+            partials,
+            pitch,
+        })
+    }
+
+    pub fn partial(&self, n: usize) -> Option<&Partial> {
+        self.partials.iter().find(|p| p.n == n)
+    }
+
+    /// The pitch as a tuner hears it (Hz): on partials 2–8, or on the first where none of them
+    /// is among the key's modes (B7, C8).
+    pub fn heard_hz(&self) -> Option<f64> {
+        self.pitch
+            .map(|p| p.first_partial_hz)
+            .or_else(|| self.partial(1).map(|p| p.freq_hz))
+    }
 }
 
 /// `f` against `target` (cents).

@@ -6,11 +6,9 @@
 use anyhow::{bail, Context, Result};
 use std::fmt::Write as _;
 use std::path::PathBuf;
-use unacorda::analysis::modes::linear_modes;
-use unacorda::analysis::partials::{cents, partials, tuner_pitch, Partial, TunerPitch};
+use unacorda::analysis::partials::{cents, KeyPartials, Partial};
 use unacorda::board::key_name;
 use unacorda::config::scaling::{equal_tempered_hz, parse_key, LoadedScaling, Scaling, KEYS};
-use unacorda::engine::tuning::stiff_string_hz;
 
 /// Partials looked for on each key.
 const PARTIALS: usize = 8;
@@ -48,24 +46,18 @@ const PUBLISHED_T60: [(usize, f64, &str); 3] = [
 /// One key's figures.
 struct KeyFigures {
     key: usize,
-    target_hz: f64,
-    partials: Vec<Partial>,
-    pitch: Option<TunerPitch>,
+    heard: KeyPartials,
 }
 
 impl KeyFigures {
     fn partial(&self, n: usize) -> Option<&Partial> {
-        self.partials.iter().find(|p| p.n == n)
+        self.heard.partial(n)
     }
 
-    /// The pitch as a tuner hears it: on partials 2–8, or on the first where none of them is
-    /// among the key's modes (B7, C8).
     fn tuner_cents(&self) -> Option<f64> {
-        let heard = self
-            .pitch
-            .map(|p| p.first_partial_hz)
-            .or_else(|| self.partial(1).map(|p| p.freq_hz));
-        heard.map(|f| cents(f, self.target_hz))
+        self.heard
+            .heard_hz()
+            .map(|f| cents(f, self.heard.target_hz))
     }
 }
 
@@ -86,19 +78,9 @@ fn parse_keys(text: &str) -> Result<Vec<usize>> {
 
 fn analyse_key(scaling: &LoadedScaling, key: usize) -> Result<KeyFigures> {
     let spec = scaling.key_preset(key)?.unison_spec();
-    let modes = linear_modes(&spec).with_context(|| format!("key {}", key_name(key)))?;
-    let string = &spec.strings[0];
-    // The stiff string's partials with the first on target: where the tuner meant them to be.
-    let b = string.speaking_inharmonicity();
-    let target_hz = equal_tempered_hz(key);
-    let partials = partials(&modes, stiff_string_hz(target_hz, b), PARTIALS);
-    let pitch = tuner_pitch(&partials, b);
-    Ok(KeyFigures {
-        key,
-        target_hz,
-        partials,
-        pitch,
-    })
+    let heard = KeyPartials::new(&spec, equal_tempered_hz(key), PARTIALS)
+        .with_context(|| format!("key {}", key_name(key)))?;
+    Ok(KeyFigures { key, heard })
 }
 
 pub fn analyze(args: AnalyzeArgs) -> Result<()> {
@@ -139,7 +121,7 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
         })
     };
     for f in &figures {
-        let first = f.partial(1).map(|p| cents(p.freq_hz, f.target_hz));
+        let first = f.partial(1).map(|p| cents(p.freq_hz, f.heard.target_hz));
         let show =
             |x: Option<f64>, digits: usize| x.map_or("-".into(), |x| format!("{x:+.digits$}"));
         let _ = writeln!(
@@ -147,12 +129,13 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
             "{:>4} {:<4} {:>9.3} {:>10} {:>9} {:>9} {:>17} {:>17}",
             f.key,
             key_name(f.key),
-            f.target_hz,
-            match f.pitch {
+            f.heard.target_hz,
+            match f.heard.pitch {
                 Some(p) => format!("{} ({})", show(f.tuner_cents(), 1), p.partials),
                 None => format!("{} (1st)", show(f.tuner_cents(), 1)),
             },
-            f.pitch
+            f.heard
+                .pitch
                 .map_or("-".into(), |p| format!("{:.2e}", p.inharmonicity)),
             show(first, 1),
             t60(f.partial(1)),
@@ -164,10 +147,10 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
             "{},{},{},{},{},{},{}",
             f.key,
             key_name(f.key),
-            f.target_hz,
+            f.heard.target_hz,
             opt(f.tuner_cents()),
-            f.pitch.map_or(0, |p| p.partials),
-            opt(f.pitch.map(|p| p.inharmonicity)),
+            f.heard.pitch.map_or(0, |p| p.partials),
+            opt(f.heard.pitch.map(|p| p.inharmonicity)),
             opt(first)
         );
         for n in 1..=PARTIALS {
@@ -185,10 +168,10 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
         csv.push('\n');
     }
     // The rows of issue 17's table that the modes answer.
-    let tuned: Vec<&KeyFigures> = figures
+    let tuned = figures
         .iter()
         .filter(|f| f.tuner_cents().is_some_and(|c| c.abs() <= TUNED_CENTS))
-        .collect();
+        .count();
     let mut worst: Vec<(&KeyFigures, f64)> = figures
         .iter()
         .filter_map(|f| Some((f, f.tuner_cents()?)))
@@ -196,14 +179,14 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
     worst.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
     let unheard: Vec<String> = figures
         .iter()
-        .filter(|f| f.pitch.is_none())
+        .filter(|f| f.heard.pitch.is_none())
         .map(|f| key_name(f.key))
         .collect();
     let _ = writeln!(
         out,
         "pitch (partials 2–8; the first where none of them is among the modes: {}): {} of {} keys within ±{TUNED_CENTS} cents of equal temperament; furthest: {}",
         if unheard.is_empty() { "none".to_string() } else { unheard.join(", ") },
-        tuned.len(),
+        tuned,
         figures.len(),
         worst
             .iter()
