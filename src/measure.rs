@@ -5,7 +5,7 @@
 use crate::audio::priority::Promotion;
 use crate::audio::synth::{Scheduled, Synth, SynthHandle, EVENT_QUEUE};
 use crate::config::output::OutputSettings;
-use crate::engine::exact::ExactUnison;
+use crate::engine::exact::{ExactUnison, Exchange};
 use crate::engine::kernels::Real;
 use crate::engine::rk4::dense::DenseUnison;
 use crate::engine::{Rk4Pool, Strike, UnisonSpec, VoicePool};
@@ -236,49 +236,39 @@ pub fn resident_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
-/// How long two cores take to meet (s): two threads each publish `values` numbers and a count,
-/// and wait for the other's — the pattern of the exact pool's steps on two cores, which meet every
-/// sample. The median of `rounds` rounds of `meetings` (the first rounds of a new thread may share
-/// a core before the scheduler moves it). `None` if a value arrived wrong or the meetings took
-/// over 2 s (one core, or a thread descheduled for long). A machine's own figure: on a 2-core
-/// Zen 5 VM 0.1 us while its two virtual cores sit close on the host, 0.5–0.7 us for minutes at a
-/// time when the host places them apart — and then a block on two cores takes about as long as
-/// on one (docs/performance.md).
+/// How long two cores take to meet (s): two threads meeting through the exact pool's own
+/// [`Exchange`] as its halves do every sample, each publishing `values` numbers and waiting for
+/// the other's. The median of `rounds` rounds of `meetings` (the first rounds of a new thread may
+/// share a core before the scheduler moves it). `None` if a value arrived wrong or the meetings
+/// took over 2 s (one core, or a thread descheduled for long). A machine's own figure: on a
+/// 2-core Zen 5 VM 0.1 us while its two virtual cores sit close on the host, 0.5–0.7 us for
+/// minutes at a time when the host places them apart — and then a block on two cores takes about
+/// as long as on one (docs/performance.md).
 pub fn core_meeting_s(values: usize, meetings: usize, rounds: usize) -> Option<f64> {
-    use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
-    let ready = [AtomicUsize::new(0), AtomicUsize::new(0)];
-    // Two slots per side, alternating by meeting: a slot is written again only after the other
-    // side has published the next meeting, so after it has read this one.
-    let slots: [[Vec<AtomicU64>; 2]; 2] = std::array::from_fn(|_| {
-        std::array::from_fn(|_| (0..values).map(|_| AtomicU64::new(0)).collect())
-    });
-    let value = |side: usize, t: usize, k: usize| (side * 1_000_000_000 + t * 1_000 + k) as u64;
-    let stop = AtomicBool::new(false);
-    let started = Instant::now();
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let exchange = Exchange::new(values);
+    exchange.reset();
+    let value = |side: usize, t: usize, k: usize| (side * 1_000_000_000 + t * 1_000 + k) as f64;
     let total = meetings * rounds.max(1);
-    // Side `me`: the time each round took, or `None`.
+    let done = AtomicBool::new(false);
+    // Side `me`: the time each round took, or `None` (the other side is told to stop).
     let side = |me: usize| -> Option<Vec<f64>> {
+        let (mut mine, mut theirs) = (vec![0.0; values], vec![0.0; values]);
         let mut round_s = Vec::with_capacity(rounds);
         let mut round_start = Instant::now();
         for t in 0..total {
-            for (k, slot) in slots[me][t % 2].iter().enumerate() {
-                slot.store(value(me, t, k), Ordering::Relaxed);
+            for (k, x) in mine.iter_mut().enumerate() {
+                *x = value(me, t, k);
             }
-            ready[me].store(t + 1, Ordering::Release);
-            let mut spins = 0u32;
-            while ready[1 - me].load(Ordering::Acquire) <= t {
-                spins = spins.wrapping_add(1);
-                if spins.is_multiple_of(4096)
-                    && (stop.load(Ordering::Relaxed) || started.elapsed() > Duration::from_secs(2))
-                {
-                    stop.store(true, Ordering::Relaxed);
-                    return None;
-                }
-                std::hint::spin_loop();
-            }
-            let mut got = slots[1 - me][t % 2].iter().enumerate();
-            if got.any(|(k, slot)| slot.load(Ordering::Relaxed) != value(1 - me, t, k)) {
-                stop.store(true, Ordering::Relaxed);
+            exchange.publish(me, t, &mine);
+            let received = exchange.receive(me, t, &mut theirs);
+            if !received
+                || theirs
+                    .iter()
+                    .enumerate()
+                    .any(|(k, &x)| x != value(1 - me, t, k))
+            {
+                exchange.give_up();
                 return None;
             }
             if (t + 1).is_multiple_of(meetings) {
@@ -289,9 +279,22 @@ pub fn core_meeting_s(values: usize, meetings: usize, rounds: usize) -> Option<f
         Some(round_s)
     };
     let (here, there) = std::thread::scope(|s| {
+        // The watchdog: meetings that take over 2 s in all are given up.
+        s.spawn(|| {
+            let started = Instant::now();
+            while !done.load(Ordering::Relaxed) {
+                if started.elapsed() > Duration::from_secs(2) {
+                    exchange.give_up();
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        });
         let there = s.spawn(|| side(1));
         let here = side(0);
-        (here, there.join().ok().flatten())
+        let there = there.join().ok().flatten();
+        done.store(true, Ordering::Relaxed);
+        (here, there)
     });
     there?;
     let mut round_s = here?;
@@ -306,7 +309,8 @@ mod tests {
     #[test]
     fn two_cores_meet_and_receive_what_the_other_published() {
         // Each side checks every value it receives against what the other published at that
-        // meeting: with one slot per side instead of two a value of the next meeting shows.
+        // meeting: were the exchange's slot written again before the other side had read it, a
+        // value of the next meeting would show.
         let s = core_meeting_s(64, 2_000, 10).expect("every value received as published");
         println!(
             "two threads met 20 000 times, 64 values each way: {:.2} us a meeting (median of 10 rounds)",

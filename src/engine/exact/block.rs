@@ -102,14 +102,14 @@ struct Line<T>(T);
 /// samples it has published; each reads the other's. `abort` stops a core waiting for one that
 /// has panicked.
 #[derive(Debug)]
-struct Exchange {
+pub(crate) struct Exchange {
     ready: [Line<AtomicUsize>; 2],
     slots: [[Vec<AtomicU64>; 2]; 2],
     abort: Line<AtomicBool>,
 }
 
 impl Exchange {
-    fn new(modes: usize) -> Exchange {
+    pub(crate) fn new(modes: usize) -> Exchange {
         let slot = || (0..modes).map(|_| AtomicU64::new(0)).collect();
         Exchange {
             ready: Default::default(),
@@ -119,15 +119,20 @@ impl Exchange {
     }
 
     /// Before a block (neither core in it).
-    fn reset(&self) {
+    pub(crate) fn reset(&self) {
         for r in &self.ready {
             r.0.store(0, Ordering::Relaxed);
         }
         self.abort.0.store(false, Ordering::Relaxed);
     }
 
+    /// Stop both halves waiting at their next meeting (a half that failed, or a watchdog).
+    pub(crate) fn give_up(&self) {
+        self.abort.0.store(true, Ordering::Relaxed);
+    }
+
     /// Half `me` publishes its known force of sample `t`.
-    fn publish(&self, me: usize, t: usize, known: &[f64]) {
+    pub(crate) fn publish(&self, me: usize, t: usize, known: &[f64]) {
         for (slot, x) in self.slots[me][t % 2].iter().zip(known) {
             slot.store(x.to_bits(), Ordering::Relaxed);
         }
@@ -136,7 +141,7 @@ impl Exchange {
 
     /// Half `me` waits for the other's known force of sample `t` and copies it into `into`;
     /// `false` if the other core has given up.
-    fn receive(&self, me: usize, t: usize, into: &mut [f64]) -> bool {
+    pub(crate) fn receive(&self, me: usize, t: usize, into: &mut [f64]) -> bool {
         let other = 1 - me;
         while self.ready[other].0.load(Ordering::Acquire) <= t {
             if self.abort.0.load(Ordering::Relaxed) {
@@ -315,7 +320,7 @@ fn run_half(
 fn stop_on_panic(exchange: &Exchange, run: impl FnOnce()) -> Option<Box<dyn Any + Send>> {
     let caught = catch_unwind(AssertUnwindSafe(run)).err();
     if caught.is_some() {
-        exchange.abort.0.store(true, Ordering::Relaxed);
+        exchange.give_up();
     }
     caught
 }

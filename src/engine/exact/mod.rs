@@ -40,6 +40,7 @@ mod key;
 mod pool;
 mod voice;
 
+pub(crate) use block::Exchange;
 pub use key::ExactKey;
 pub use pool::ExactPool;
 
