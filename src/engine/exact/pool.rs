@@ -535,24 +535,27 @@ impl Policy for ExactPool {
 mod tests {
     use super::*;
     use crate::config::scaling::{parse_key, Scaling};
-    use crate::engine::{Strike, VoicePool};
+    use crate::engine::{Strike, UnisonSpec, VoicePool};
+
+    /// The `grand` keyboard's specs of `names`, and its output rate.
+    fn grand_keys(names: &[&str]) -> (Vec<UnisonSpec>, f64) {
+        let scaling = Scaling::resolve("grand").unwrap();
+        let specs = names
+            .iter()
+            .map(|k| {
+                let key = parse_key(k).unwrap();
+                scaling.key_preset(key).unwrap().unison_spec()
+            })
+            .collect();
+        (specs, scaling.base.output_rate_hz())
+    }
 
     #[test]
     fn the_energies_kept_from_a_blocks_end_are_those_of_the_voices_as_they_are() {
         // Strikes, a damper lowered, a steal with its fade, blocks of uneven lengths, single
         // steps, the policy's retirements, the board set at rest and the state set anew: after
         // each, every energy kept from a block's end equals the voice's energy worked out now.
-        let scaling = Scaling::resolve("grand").unwrap();
-        let rate = scaling.base.output_rate_hz();
-        let specs: Vec<_> = ["A0", "C2", "E3", "C4"]
-            .iter()
-            .map(|k| {
-                scaling
-                    .key_preset(parse_key(k).unwrap())
-                    .unwrap()
-                    .unison_spec()
-            })
-            .collect();
+        let (specs, rate) = grand_keys(&["A0", "C2", "E3", "C4"]);
         let mut pool = ExactPool::build_pool(&specs, 3, rate).unwrap();
         let strike = Strike {
             velocity_m_s: 3.0,
@@ -616,17 +619,7 @@ mod tests {
         // C2 struck, C3 held (free after the first block), E3 struck with its damper down:
         // 0.5 s by blocks of 64 (single precision inside each, double from block to block)
         // against 0.5 s of single steps in double precision.
-        let scaling = Scaling::resolve("grand").unwrap();
-        let rate = scaling.base.output_rate_hz();
-        let specs: Vec<_> = ["C2", "C3", "E3"]
-            .iter()
-            .map(|k| {
-                scaling
-                    .key_preset(parse_key(k).unwrap())
-                    .unwrap()
-                    .unison_spec()
-            })
-            .collect();
+        let (specs, rate) = grand_keys(&["C2", "C3", "E3"]);
         let mut blocks = ExactPool::build_pool(&specs, 3, rate).unwrap();
         for k in 0..3 {
             blocks.assign(k, k);
