@@ -21,7 +21,7 @@ use unacorda::midi::Event;
 use unacorda::play::Piano;
 
 fn keyboard<E: VoicePool>(voices: usize) -> (Piano<E>, unacorda::config::output::OutputSettings) {
-    let scaling = Scaling::resolve("grand").expect("built-in keyboard");
+    let scaling = Scaling::resolve("paper").expect("built-in keyboard");
     let keys: Vec<usize> = (1..=KEYS).collect();
     let piano = Piano::<E>::build(&scaling, &keys, voices).expect("the keyboard builds");
     (piano, scaling.base.output_settings())
@@ -149,7 +149,7 @@ fn latency(c: &mut Criterion) {
 }
 
 fn offline(c: &mut Criterion) {
-    let scaling = Scaling::resolve("grand").expect("built-in keyboard");
+    let scaling = Scaling::resolve("paper").expect("built-in keyboard");
     let events: Vec<_> =
         unacorda::midi::file::read_file(std::path::Path::new("assets/midi/demo.mid"))
             .expect("the demo file")

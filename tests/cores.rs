@@ -23,7 +23,7 @@ static ALLOCATOR: AllocDisabler = AllocDisabler;
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn piano<E: VoicePool>(voices: usize) -> (Piano<E>, OutputSettings) {
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     // Single, double and triple strings, damped and undamped keys.
     let names = ["A0", "C2", "E2", "C3", "G3", "C4", "E5", "C7"];
     let keys: Vec<usize> = names.iter().map(|n| parse_key(n).unwrap()).collect();
@@ -58,7 +58,7 @@ fn few() -> Case {
 /// (the damped keys' felts fall on their strings), the soft pedal, a few struck again: up to 40
 /// voices, enough that the two cores share the steps.
 fn chord() -> Case {
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let keys: Vec<usize> = (0..40).map(|k| 1 + 2 * k).collect();
     let on = |note, velocity| Event::NoteOn { note, velocity };
     let pedal = |pedal, down| Event::Pedal { pedal, down };

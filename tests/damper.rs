@@ -50,7 +50,7 @@ fn released_key_is_damped_held_key_rings() {
 
 #[test]
 fn top_keys_have_no_damper() {
-    let keyboard = Scaling::resolve("grand").unwrap();
+    let keyboard = Scaling::resolve("paper").unwrap();
     let top = keyboard.key_preset(80).unwrap();
     let mut u = unacorda::engine::Rk4Pool::new(&top.unison_spec()).unwrap();
     u.set_damper(true);

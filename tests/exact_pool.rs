@@ -16,7 +16,7 @@ use unacorda::engine::{Policy, Rk4Pool, Strike, VoicePool};
 /// Bridge force T of each of `keys`' voices at the output rate for `seconds`, the first key struck
 /// at 3 m/s, the others held silent (dampers lifted).
 fn forces<E: VoicePool>(keys: &[&str], seconds: f64) -> (Vec<Vec<f64>>, f64) {
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let rate = scaling.base.output_rate_hz();
     let specs: Vec<_> = keys
         .iter()
@@ -87,7 +87,7 @@ fn a_held_key_rings_in_sympathy_as_on_rk4() {
 /// Every key struck at once at 3 m/s, dampers lifted for `up_s`, then down for `down_s`: the
 /// pool's energy (J) every 0.05 s.
 fn every_key(up_s: f64, down_s: f64) -> Vec<f64> {
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let rate = scaling.base.output_rate_hz();
     let specs: Vec<_> = (1..=KEYS)
         .map(|k| scaling.key_preset(k).unwrap().unison_spec())

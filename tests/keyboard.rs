@@ -11,7 +11,7 @@ use unacorda::render::simulate;
 
 #[test]
 fn c2_key_is_the_c2_preset() {
-    let keyboard = Scaling::resolve("grand").unwrap();
+    let keyboard = Scaling::resolve("paper").unwrap();
     let key = keyboard.key_preset(parse_key("C2").unwrap()).unwrap();
     let c2 = Preset::resolve("c2").unwrap();
     println!(
@@ -26,8 +26,85 @@ fn c2_key_is_the_c2_preset() {
 }
 
 #[test]
+fn the_concert_keyboard_is_the_paper_keyboard_with_its_own_losses_and_felt() {
+    // `concert` names `paper` as its base keyboard: the same strings (tensions included), hammers,
+    // layout and board on every key; only the strings' losses and the duplex felt differ.
+    let paper = Scaling::resolve("paper").unwrap();
+    let concert = Scaling::resolve("concert").unwrap();
+    println!("key  c_d paper/concert  zeta_T paper/concert  b1 1/s   b3 s");
+    for k in 1..=KEYS {
+        let (p, c) = (
+            paper.key_preset(k).unwrap().preset,
+            concert.key_preset(k).unwrap().preset,
+        );
+        let (ps, cs) = (&p.strings, &c.strings);
+        if [1, 16, 40, 52, 53, 76, 88].contains(&k) {
+            println!(
+                "{k:3}  {:5} / {:<5}      {:.0e} / {:<4}         {:6.3}  {:.2e}",
+                ps.duplex_damping_n_s_m2,
+                cs.duplex_damping_n_s_m2,
+                ps.damping_ratio_t,
+                cs.damping_ratio_t,
+                cs.loss_b1_per_s,
+                cs.loss_b3_s
+            );
+        }
+        let same = |mut s: unacorda::config::preset::StringsSection| {
+            s.damping_ratio_t = 0.0;
+            s.damping_ratio_p = 0.0;
+            s.loss_b1_per_s = 0.0;
+            s.loss_b3_s = 0.0;
+            s.duplex_damping_n_s_m2 = 0.0;
+            s
+        };
+        assert_eq!(same(ps.clone()), same(cs.clone()), "key {k}: strings");
+        assert_eq!(p.hammer, c.hammer, "key {k}");
+        assert_eq!(p.damper, c.damper, "key {k}");
+        assert_eq!(p.soundboard, c.soundboard, "key {k}");
+        assert_eq!(
+            (ps.loss_b1_per_s, ps.loss_b3_s),
+            (0.0, 0.0),
+            "key {k}: the paper's strings"
+        );
+        assert!(cs.loss_b1_per_s > 0.0 && cs.loss_b3_s > 0.0, "key {k}");
+        assert_eq!(cs.damping_ratio_t, 0.0);
+        assert_eq!(
+            cs.duplex_damping_n_s_m2 > 0.0,
+            ps.duplex_damping_n_s_m2 > 0.0,
+            "key {k}: the felt on the same keys"
+        );
+    }
+    // `grand` is the paper keyboard's earlier name.
+    assert_eq!(
+        Scaling::resolve("grand").unwrap().scaling,
+        paper.scaling,
+        "grand = paper"
+    );
+}
+
+#[test]
+fn malformed_keyboards_are_rejected_with_file_and_field() {
+    let data = |name: &str| format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"));
+    let error = |name: &str| {
+        let e = Scaling::resolve(&data(name)).unwrap_err().to_string();
+        println!("{name}: {e}");
+        e
+    };
+    let e = error("bad_keyboard_loop.toml");
+    assert!(
+        e.contains("bad_keyboard_loop.toml")
+            && e.contains("`base_keyboard`")
+            && e.contains("at most 4")
+    );
+    let e = error("bad_keyboard_losses.toml");
+    assert!(e.contains("bad_keyboard_losses.toml") && e.contains("`losses.key` = [2, 88]"));
+    let e = error("bad_keyboard_no_layout.toml");
+    assert!(e.contains("`layout`") && e.contains("base_keyboard"));
+}
+
+#[test]
 fn every_key_builds_with_the_documented_layout() {
-    let keyboard = Scaling::resolve("grand").unwrap();
+    let keyboard = Scaling::resolve("paper").unwrap();
     println!("key  name  strings wound  L_s m   T0 N   mu g/m  d mm   B        modes T/L  f_max Hz  m_H g  K_H        p    rate kHz  L_s pitch cents");
     for k in 1..=KEYS {
         let lp = keyboard.key_preset(k).unwrap();
@@ -97,7 +174,7 @@ fn every_key_builds_with_the_documented_layout() {
 /// finite, and once the hammer is out of play the energy never rises. Returns the largest
 /// relative rise per step after the hammer's release, and the keys whose hammer was released.
 fn strike_every_key<E: VoicePool>() -> (f64, usize) {
-    let keyboard = Scaling::resolve("grand").unwrap();
+    let keyboard = Scaling::resolve("paper").unwrap();
     let rate = keyboard.base.output_rate_hz();
     let (mut worst, mut released) = (f64::NEG_INFINITY, 0);
     for k in 1..=KEYS {
@@ -155,7 +232,7 @@ fn keys_sound_near_their_pitch() {
     // (`engine::tuning::bridged_pitch_hz`): the struck key's second partial sits where the stiff
     // string (Eq. 2) with its first partial on equal temperament puts it, within the damping's
     // and the unison spread's few cents.
-    let keyboard = Scaling::resolve("grand").unwrap();
+    let keyboard = Scaling::resolve("paper").unwrap();
     println!("second partial of the struck unison (normal playing, 0.6 s) against Eq. 2 on pitch:");
     for name in ["A1", "C4", "A5", "C7"] {
         let k = parse_key(name).unwrap();
@@ -191,7 +268,7 @@ fn keys_prepared_on_several_threads_land_in_order() {
     use unacorda::engine::BuildError;
     use unacorda::engine::VoicePool;
     use unacorda::play::Piano;
-    let keyboard = Scaling::resolve("grand").unwrap();
+    let keyboard = Scaling::resolve("paper").unwrap();
     let keys = [1, 16, 40, 52, 64, 88, 30];
     let rate = keyboard.base.output_rate_hz();
     let specs: Vec<_> = keys

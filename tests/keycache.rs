@@ -30,7 +30,7 @@ fn render(piano: &Piano<ExactPool>) -> Vec<f64> {
 fn keys_read_back_sound_exactly_as_prepared() {
     let dir = std::env::temp_dir().join(format!("unacorda-keycache-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let keys: Vec<usize> = ["A0", "E5"].iter().map(|k| parse_key(k).unwrap()).collect();
     let fresh = Piano::<ExactPool>::build(&scaling, &keys, 2).unwrap();
     let cache = KeyCache::new(dir.clone());

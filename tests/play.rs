@@ -12,7 +12,7 @@ use unacorda::midi::{Event, Pedal};
 use unacorda::render::render_midi_with;
 
 fn key_spec(name: &str) -> (usize, UnisonSpec) {
-    let keyboard = Scaling::resolve("grand").unwrap();
+    let keyboard = Scaling::resolve("paper").unwrap();
     let k = parse_key(name).unwrap();
     (k, keyboard.key_preset(k).unwrap().unison_spec())
 }
@@ -98,7 +98,7 @@ fn perform(
     events: &[(f64, Event)],
     tail_s: f64,
 ) -> (Vec<Vec<unacorda::engine::Observation>>, f64) {
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let timed: Vec<TimedEvent> = events
         .iter()
         .map(|&(time_s, event)| TimedEvent { time_s, event })

@@ -19,7 +19,7 @@ fn piano(
     names: &[&str],
     voices: usize,
 ) -> (Piano<Rk4Pool>, unacorda::config::output::OutputSettings) {
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let keys: Vec<usize> = names.iter().map(|n| parse_key(n).unwrap()).collect();
     (
         Piano::build(&scaling, &keys, voices).unwrap(),
@@ -175,7 +175,7 @@ fn hf_rms(x: &[f64]) -> f64 {
 
 #[test]
 fn stealing_fades_the_voice_off_the_board_without_a_click() {
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let specs: Vec<_> = ["C4", "G4"]
         .iter()
         .map(|n| {

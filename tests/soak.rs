@@ -93,7 +93,7 @@ const MODAL_SUM: f64 = 1e-2;
 fn soak<E: VoicePool>(seconds: f64, engine: &str, two_cores: bool, rise_tolerance: f64) {
     const VOICES: usize = 6;
     const BLOCK: usize = 64;
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let keys: Vec<usize> = (1..=KEYS).collect();
     let piano = Piano::<E>::build(&scaling, &keys, VOICES).unwrap();
     let settings = scaling.base.output_settings();

@@ -44,7 +44,7 @@ fn stability_keys() -> Vec<usize> {
 /// Every key of `keys` sounding on its own voice, hammers out of play, dampers `down` or lifted;
 /// the map's eigenvalues, largest modulus first.
 fn eigenvalues<E: VoicePool>(keys: &[usize], down: bool) -> (Vec<StepEigen>, f64, usize) {
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let rate = scaling.base.output_rate_hz();
     let specs: Vec<_> = keys
         .iter()
@@ -198,7 +198,7 @@ fn chord(release_s: f64, pedal_up_s: Option<f64>) -> Vec<TimedEvent> {
 
 /// Level (dBFS) of every quarter second of `render --midi`'s output on engine `E`.
 fn quarter_seconds<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> Vec<f64> {
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let mut samples = Vec::new();
     let keyboard = Keyboard {
         scaling: &scaling,
@@ -336,7 +336,7 @@ impl Rng {
 /// driving it (and no voice joining or leaving), against the frame before. Returns (such frames,
 /// rises above `tolerance` (relative), largest relative rise).
 fn energy_stress<E: VoicePool>(seconds: f64, tolerance: f64) -> (u64, u64, f64) {
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let keys: Vec<usize> = (1..=KEYS).step_by(4).chain([88]).take(24).collect();
     let piano = Piano::<E>::build(&scaling, &keys, keys.len()).unwrap();
     let settings = scaling.base.output_settings();
@@ -414,7 +414,7 @@ fn undriven_energy_never_rises() {
 /// it.
 fn growth_guard<E: VoicePool>(zeta: f64) -> (Option<f64>, f64) {
     use std::sync::atomic::Ordering;
-    let scaling = Scaling::resolve("grand").unwrap();
+    let scaling = Scaling::resolve("paper").unwrap();
     let key = parse_key("C2").unwrap();
     let mut spec = scaling.key_preset(key).unwrap().unison_spec();
     spec.board.damping_ratio.iter_mut().for_each(|z| *z = zeta);

@@ -155,12 +155,14 @@ pub fn write_all(
 
 /// The T60 of each key's first partial — its fastest and slowest string mode, a bar per key from
 /// one to the other (`keys`: key 1–88, fastest, slowest, in s) — beside published values
-/// (`published`: key, T60 in s, source), log scale (`unacorda analyze --figure`).
+/// (`published`: key, T60 in s, source) and a recorded grand's early and late T60 (`recorded`:
+/// key, early, late, NaN where not measured), log scale (`unacorda analyze --figure`).
 pub fn partial_decay(
     png: &Path,
     keyboard: &str,
     keys: &[(usize, f64, f64)],
     published: &[(usize, f64, &str)],
+    recorded: &[(usize, f64, f64)],
 ) -> Result<(), FigureError> {
     register_font();
     let draw = || -> Result2<()> {
@@ -170,11 +172,12 @@ pub fn partial_decay(
             .iter()
             .flat_map(|k| [k.1, k.2])
             .chain(published.iter().map(|p| p.1))
+            .chain(recorded.iter().flat_map(|r| [r.1, r.2]))
             .filter(|v| v.is_finite() && *v > 0.0);
         let (lo, hi) = values.fold((f64::INFINITY, 0f64), |(a, b), v| (a.min(v), b.max(v)));
         let mut chart = ChartBuilder::on(&root)
             .caption(
-                format!("First partial's T60 per key, keyboard {keyboard}: fastest to slowest string mode (blue), published (red)"),
+                format!("First partial's T60 per key, keyboard {keyboard}: fastest to slowest string mode (blue), recorded grand early and late (green), published (red)"),
                 (FONT, 18),
             )
             .margin(12)
@@ -199,6 +202,17 @@ pub fn partial_decay(
             keys.iter()
                 .map(|&(k, _, slow)| Circle::new((k as f64, slow), 2, COLORS[0].filled())),
         )?;
+        let shown = |v: f64| v.is_finite() && v > 0.0;
+        chart
+            .draw_series(
+                recorded
+                    .iter()
+                    .flat_map(|&(k, early, late)| [(k, early), (k, late)])
+                    .filter(|&(_, t)| shown(t))
+                    .map(|(k, t)| TriangleMarker::new((k as f64 + 0.4, t), 5, COLORS[1].filled())),
+            )?
+            .label("recorded grand (Salamander, Yamaha C5): early and late T60")
+            .legend(|(x, y)| TriangleMarker::new((x + 10, y), 5, COLORS[1].filled()));
         chart
             .draw_series(
                 published
@@ -209,6 +223,7 @@ pub fn partial_decay(
             .legend(|(x, y)| Circle::new((x + 10, y), 5, COLORS[2].filled()));
         chart
             .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
             .label_font((FONT, 13))

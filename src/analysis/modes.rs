@@ -4,9 +4,10 @@
 //! ([`crate::engine::rk4::dense::DenseUnison::linear_system`]). Each is a partial's exact
 //! frequency and decay rate, what any integrator is measured against.
 
+use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::rk4::dense::DenseUnison;
-use crate::engine::UnisonSpec;
 use crate::engine::MAX_STRINGS;
+use crate::engine::{Direction, UnisonSpec};
 
 /// One mode (a complex-conjugate pair of eigenvalues `-sigma ± i omega`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -18,6 +19,10 @@ pub struct LinearMode {
     /// of the energy's quadratic form, contact springs included), and in each string.
     pub shares: [f64; 4],
     pub string_shares: [f64; MAX_STRINGS],
+    /// Share of the strings' transverse kinetic energy on their duplex segments (bridge to hitch
+    /// pin), where the felt of Eq. 13 acts: near 1 for a resonance of the duplex segment, small
+    /// for a partial of the speaking length.
+    pub duplex_share: f64,
 }
 
 impl LinearMode {
@@ -41,6 +46,17 @@ pub fn linear_modes(spec: &UnisonSpec) -> Result<Vec<LinearMode>, ModesError> {
     // Energy per unit squared of each displacement, 1/2 K_ii (K the stiffness with the contact
     // springs, -A's lower-left block); of each velocity, 1/2.
     let stiffness: Vec<f64> = (0..nq).map(|i| -0.5 * a[(nq + i, i)]).collect();
+    // The mass on each string's duplex segment in its modal coordinates, mu ∫ psi_m psi_n over
+    // [L_s, L] (Eq. 13's integral; the same for T and P).
+    let nd = spec.modes.modes_t.max(spec.modes.modes_p);
+    let duplex_mass: Vec<Vec<f64>> = spec
+        .strings
+        .iter()
+        .map(|s| {
+            let mu = s.linear_density_kg_m;
+            duplex_damping_matrix(nd, s.length_m(), s.speaking_length_m, mu, mu)
+        })
+        .collect();
     let eig = a.eigen().map_err(|_| ModesError)?;
     let (u, s) = (eig.U(), eig.S().column_vector());
     let mut modes: Vec<LinearMode> = (0..s.nrows())
@@ -59,11 +75,25 @@ pub fn linear_modes(spec: &UnisonSpec) -> Result<Vec<LinearMode>, ModesError> {
                 }
             }
             shares[3] = board.clone().map(energy).sum::<f64>() / total;
+            let (mut duplex, mut transverse) = (0.0, 0.0);
+            for (dirs, mass) in ranges.iter().zip(&duplex_mass) {
+                for dir in [Direction::T, Direction::P] {
+                    let r = dirs[dir.index()].clone();
+                    let v = |i: usize| u[(nq + r.start + i, m)];
+                    for i in 0..r.len() {
+                        transverse += v(i).norm_sqr();
+                        for j in 0..r.len() {
+                            duplex += mass[i * nd + j] * (v(i).conj() * v(j)).re;
+                        }
+                    }
+                }
+            }
             LinearMode {
                 freq_hz: s[m].im / (2.0 * std::f64::consts::PI),
                 decay_per_s: -s[m].re,
                 shares,
                 string_shares,
+                duplex_share: duplex / transverse.max(f64::MIN_POSITIVE),
             }
         })
         .collect();

@@ -98,15 +98,29 @@ pub struct KeyPartials {
 
 impl KeyPartials {
     pub fn new(spec: &UnisonSpec, target_hz: f64, count: usize) -> Result<KeyPartials, ModesError> {
-        let modes = linear_modes(spec)?;
+        Ok(KeyPartials::of_modes(
+            &linear_modes(spec)?,
+            spec,
+            target_hz,
+            count,
+        ))
+    }
+
+    /// The same from `spec`'s modes, already computed.
+    pub fn of_modes(
+        modes: &[LinearMode],
+        spec: &UnisonSpec,
+        target_hz: f64,
+        count: usize,
+    ) -> KeyPartials {
         let b = spec.strings[0].speaking_inharmonicity();
-        let partials = partials(&modes, stiff_string_hz(target_hz, b), count);
+        let partials = partials(modes, stiff_string_hz(target_hz, b), count);
         let pitch = tuner_pitch(&partials, b);
-        Ok(KeyPartials {
+        KeyPartials {
             target_hz,
             partials,
             pitch,
-        })
+        }
     }
 
     pub fn partial(&self, n: usize) -> Option<&Partial> {
@@ -138,6 +152,7 @@ mod tests {
             decay_per_s,
             shares: [t, 0.0, 1.0 - t, 0.0],
             string_shares: [1.0, 0.0, 0.0],
+            duplex_share: 0.0,
         }
     }
 

@@ -77,6 +77,12 @@ pub struct StringsSection {
     pub damping_ratio_t: f64,
     pub damping_ratio_p: f64,
     pub damping_ratio_l: f64,
+    /// Chaigne & Askenfelt's string losses on T and P (`ModeSet`): `b1` (1/s) and `b3` (s);
+    /// absent means none, as in the paper.
+    #[serde(default)]
+    pub loss_b1_per_s: f64,
+    #[serde(default)]
+    pub loss_b3_s: f64,
     pub duplex_damping_n_s_m2: f64,
 }
 
@@ -294,6 +300,8 @@ impl Preset {
         range("strings.damping_ratio_t", s.damping_ratio_t, 0.0, 0.5)?;
         range("strings.damping_ratio_p", s.damping_ratio_p, 0.0, 0.5)?;
         range("strings.damping_ratio_l", s.damping_ratio_l, 0.0, 0.5)?;
+        range("strings.loss_b1_per_s", s.loss_b1_per_s, 0.0, 100.0)?;
+        range("strings.loss_b3_s", s.loss_b3_s, 0.0, 1e-6)?;
         range(
             "strings.duplex_damping_n_s_m2",
             s.duplex_damping_n_s_m2,
@@ -425,6 +433,8 @@ impl LoadedPreset {
                 damping_ratio_t: s.damping_ratio_t,
                 damping_ratio_p: s.damping_ratio_p,
                 damping_ratio_l: s.damping_ratio_l,
+                loss_b1_per_s: s.loss_b1_per_s,
+                loss_b3_s: s.loss_b3_s,
             },
             duplex_damping_n_s_m2: s.duplex_damping_n_s_m2,
             hammer: HammerParams {

@@ -14,18 +14,75 @@ use serde::Deserialize;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
-const BUILTIN: &[(&str, &str)] = &[("grand", include_str!("../../presets/keyboard.toml"))];
+/// The built-in keyboards: name, file, text. `grand` is the paper's keyboard's earlier name.
+const BUILTIN: &[(&str, &str, &str)] = &[
+    (
+        "concert",
+        "presets/concert.toml",
+        include_str!("../../presets/concert.toml"),
+    ),
+    (
+        "paper",
+        "presets/keyboard.toml",
+        include_str!("../../presets/keyboard.toml"),
+    ),
+    (
+        "grand",
+        "presets/keyboard.toml",
+        include_str!("../../presets/keyboard.toml"),
+    ),
+];
 
 /// The number of keys.
 pub const KEYS: usize = 88;
 
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// A keyboard: its layout, its anchor keys and the strings' losses, resolved (a file that names a
+/// `base_keyboard` takes from it what it does not set itself).
+#[derive(Debug, Clone, PartialEq)]
 pub struct Scaling {
     pub name: String,
     pub base_preset: String,
     pub layout: Layout,
     pub anchors: Vec<Anchor>,
+    pub strings: StringOverrides,
+    pub losses: Vec<LossAnchor>,
+}
+
+/// A scaling file as written.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ScalingFile {
+    name: String,
+    base_preset: Option<String>,
+    /// A built-in keyboard or a file whose layout, anchors, string settings and losses this one
+    /// keeps where it does not give its own.
+    base_keyboard: Option<String>,
+    layout: Option<Layout>,
+    anchors: Option<Vec<Anchor>>,
+    #[serde(default)]
+    strings: StringOverrides,
+    #[serde(default)]
+    losses: Vec<LossAnchor>,
+}
+
+/// String settings of the base preset that a keyboard replaces on every key.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StringOverrides {
+    pub damping_ratio_t: Option<f64>,
+    pub damping_ratio_p: Option<f64>,
+    /// The duplex felt's c_d (N s/m^2, Eq. 13) on the keys whose duplex is damped.
+    pub duplex_damping_n_s_m2: Option<f64>,
+}
+
+/// The strings' frequency-dependent losses at one key (`ModeSet`: `sigma = b1 + b3 omega^2` on
+/// T and P), interpolated between such keys like the anchors.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LossAnchor {
+    pub key: usize,
+    pub b1_per_s: f64,
+    pub b3_s: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -95,11 +152,26 @@ pub fn parse_key(text: &str) -> Option<usize> {
     (1..=KEYS as i32).contains(&key).then_some(key as usize)
 }
 
+/// How many keyboards a `base_keyboard` chain may hold (a file naming itself would never end).
+const MAX_CHAIN: usize = 4;
+
 impl Scaling {
-    /// A built-in scaling by name (`grand`) or a TOML file by path.
+    /// A built-in keyboard by name (`concert`, `paper`, also called `grand`) or a TOML file by
+    /// path.
     pub fn resolve(name_or_path: &str) -> Result<LoadedScaling, PresetError> {
-        let (text, path) = match BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
-            Some((_, text)) => (text.to_string(), PathBuf::from("presets/keyboard.toml")),
+        let (scaling, source) = Scaling::read(name_or_path, 1)?;
+        let base = Preset::resolve(&scaling.base_preset)?;
+        Ok(LoadedScaling {
+            scaling,
+            source,
+            base,
+        })
+    }
+
+    /// The keyboard `name_or_path`, the `depth`-th of a `base_keyboard` chain, resolved.
+    fn read(name_or_path: &str, depth: usize) -> Result<(Scaling, PathBuf), PresetError> {
+        let (text, path) = match BUILTIN.iter().find(|(n, _, _)| *n == name_or_path) {
+            Some((_, path, text)) => (text.to_string(), PathBuf::from(path)),
             None => {
                 let path = PathBuf::from(name_or_path);
                 let text = std::fs::read_to_string(&path).map_err(|source| PresetError::Io {
@@ -109,17 +181,60 @@ impl Scaling {
                 (text, path)
             }
         };
-        let scaling: Scaling = toml::from_str(&text).map_err(|e| PresetError::Parse {
+        let file: ScalingFile = toml::from_str(&text).map_err(|e| PresetError::Parse {
             path: path.clone(),
             message: e.to_string().trim_end().to_owned(),
         })?;
+        let base = match &file.base_keyboard {
+            Some(name) if depth >= MAX_CHAIN => {
+                return Err(PresetError::Range {
+                    path,
+                    field: "base_keyboard",
+                    value: name.clone(),
+                    allowed: format!("a chain of at most {MAX_CHAIN} keyboards"),
+                })
+            }
+            Some(name) => Some(Scaling::read(name, depth + 1)?.0),
+            None => None,
+        };
+        let missing = |field: &'static str| PresetError::Range {
+            path: path.clone(),
+            field,
+            value: "absent".to_owned(),
+            allowed: "given in this file or by its base_keyboard".to_owned(),
+        };
+        let inherit = |own: Option<f64>, f: fn(&StringOverrides) -> Option<f64>| {
+            own.or_else(|| base.as_ref().and_then(|b| f(&b.strings)))
+        };
+        let strings = StringOverrides {
+            damping_ratio_t: inherit(file.strings.damping_ratio_t, |s| s.damping_ratio_t),
+            damping_ratio_p: inherit(file.strings.damping_ratio_p, |s| s.damping_ratio_p),
+            duplex_damping_n_s_m2: inherit(file.strings.duplex_damping_n_s_m2, |s| {
+                s.duplex_damping_n_s_m2
+            }),
+        };
+        let scaling = Scaling {
+            name: file.name,
+            strings,
+            losses: match (file.losses.is_empty(), &base) {
+                (true, Some(b)) => b.losses.clone(),
+                _ => file.losses,
+            },
+            base_preset: file
+                .base_preset
+                .or_else(|| base.as_ref().map(|b| b.base_preset.clone()))
+                .ok_or_else(|| missing("base_preset"))?,
+            layout: file
+                .layout
+                .or_else(|| base.as_ref().map(|b| b.layout.clone()))
+                .ok_or_else(|| missing("layout"))?,
+            anchors: file
+                .anchors
+                .or_else(|| base.as_ref().map(|b| b.anchors.clone()))
+                .ok_or_else(|| missing("anchors"))?,
+        };
         scaling.validate(&path)?;
-        let base = Preset::resolve(&scaling.base_preset)?;
-        Ok(LoadedScaling {
-            scaling,
-            source: path,
-            base,
-        })
+        Ok((scaling, path))
     }
 
     fn validate(&self, path: &Path) -> Result<(), PresetError> {
@@ -161,6 +276,32 @@ impl Scaling {
                 }
             }
         }
+        let loss_keys: Vec<usize> = self.losses.iter().map(|a| a.key).collect();
+        if !loss_keys.is_empty()
+            && (loss_keys.first() != Some(&1)
+                || loss_keys.last() != Some(&KEYS)
+                || loss_keys.windows(2).any(|w| w[0] >= w[1]))
+        {
+            return Err(bad(
+                "losses.key",
+                format!("{loss_keys:?}"),
+                "none, or increasing keys from 1 (A0) to 88 (C8)",
+            ));
+        }
+        for a in &self.losses {
+            for (field, v, hi) in [
+                ("losses.b1_per_s", a.b1_per_s, 100.0),
+                ("losses.b3_s", a.b3_s, 1e-6),
+            ] {
+                if !(v.is_finite() && v > 0.0 && v <= hi) {
+                    return Err(bad(
+                        field,
+                        format!("{v} (key {})", a.key),
+                        &format!("a number in (0, {hi:e}]"),
+                    ));
+                }
+            }
+        }
         let l = &self.layout;
         if !(l.single_until_key < l.bichord_until_key && l.bichord_until_key <= KEYS) {
             return Err(bad(
@@ -180,20 +321,30 @@ impl Scaling {
     }
 }
 
+/// `f` at `key` from points at increasing keys: exact at a point, linear in `ln f` between two,
+/// the end value beyond the ends.
+fn log_linear<A>(
+    points: &[A],
+    key_of: impl Fn(&A) -> usize,
+    key: usize,
+    f: impl Fn(&A) -> f64,
+) -> f64 {
+    let hi = points
+        .partition_point(|a| key_of(a) < key)
+        .min(points.len() - 1);
+    let b = &points[hi];
+    if key_of(b) == key || hi == 0 {
+        return f(b);
+    }
+    let a = &points[hi - 1];
+    let t = (key - key_of(a)) as f64 / (key_of(b) - key_of(a)) as f64;
+    (f(a).ln() * (1.0 - t) + f(b).ln() * t).exp()
+}
+
 impl LoadedScaling {
     /// Interpolate an anchor quantity at `key`: exact at anchors, log-linear between them.
     fn interpolate(&self, key: usize, f: impl Fn(&Anchor) -> f64) -> f64 {
-        let anchors = &self.scaling.anchors;
-        let hi = anchors
-            .partition_point(|a| a.key < key)
-            .min(anchors.len() - 1);
-        let b = &anchors[hi];
-        if b.key == key || hi == 0 {
-            return f(b);
-        }
-        let a = &anchors[hi - 1];
-        let t = (key - a.key) as f64 / (b.key - a.key) as f64;
-        (f(a).ln() * (1.0 - t) + f(b).ln() * t).exp()
+        log_linear(&self.scaling.anchors, |a| a.key, key, f)
     }
 
     /// The per-note preset of `key` (1–88), bridged at its own soundboard point.
@@ -230,8 +381,17 @@ impl LoadedScaling {
             // A plain wire is all core: its diameter follows from its mass.
             (4.0 * s.linear_density_kg_m / (PI * s.density_kg_m3)).sqrt()
         };
-        if key > l.duplex_damped_until_key {
-            s.duplex_damping_n_s_m2 = 0.0;
+        let own = &self.scaling.strings;
+        s.damping_ratio_t = own.damping_ratio_t.unwrap_or(s.damping_ratio_t);
+        s.damping_ratio_p = own.damping_ratio_p.unwrap_or(s.damping_ratio_p);
+        s.duplex_damping_n_s_m2 = match key > l.duplex_damped_until_key {
+            true => 0.0,
+            false => own.duplex_damping_n_s_m2.unwrap_or(s.duplex_damping_n_s_m2),
+        };
+        let losses = &self.scaling.losses;
+        if !losses.is_empty() {
+            s.loss_b1_per_s = log_linear(losses, |a| a.key, key, |a| a.b1_per_s);
+            s.loss_b3_s = log_linear(losses, |a| a.key, key, |a| a.b3_s);
         }
         // Modes below the frequency limit (for the sharpest string of the unison), at most the
         // paper's counts.

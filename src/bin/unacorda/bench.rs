@@ -112,7 +112,7 @@ pub fn bench(
     if only.is_none() {
         single_voice(seconds, &mut report)?;
     }
-    let scaling = Scaling::resolve("grand")?;
+    let scaling = Scaling::resolve("paper")?;
     let settings = scaling.base.output_settings();
     report.rate_hz = settings.rate_hz;
     report.deadline_s = BLOCK as f64 / settings.rate_hz;

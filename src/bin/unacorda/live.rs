@@ -32,8 +32,8 @@ pub struct PlayArgs {
     /// Size of the voice pool, 1–256.
     #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES, value_name = "N")]
     pub voices: usize,
-    /// Keyboard scaling: built-in name (grand) or path to a .toml file.
-    #[arg(long, default_value = "grand")]
+    /// Keyboard: built-in name (concert, the default; paper, the paper's model) or path to a .toml file.
+    #[arg(long, default_value = "concert")]
     pub keyboard: String,
     /// Stop after this many seconds (default: at the end of --midi plus 2 s, else at Ctrl-C).
     #[arg(long, value_name = "S", allow_negative_numbers = true)]

@@ -65,8 +65,8 @@ enum Command {
             allow_negative_numbers = true
         )]
         tail: f64,
-        /// Keyboard scaling for --key and --midi: built-in name (grand) or path to a .toml file.
-        #[arg(long, default_value = "grand")]
+        /// Keyboard for --key and --midi: built-in name (concert, the default; paper, the paper's model) or path to a .toml file.
+        #[arg(long, default_value = "concert")]
         keyboard: String,
         /// Soft pedal: the hammer strikes one string of two (two of three).
         #[arg(long)]

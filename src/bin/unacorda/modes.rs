@@ -18,8 +18,8 @@ pub struct ModesArgs {
     /// A key of the keyboard scaling instead of the preset: a name (C4, Bb0) or 1 (A0) – 88 (C8).
     #[arg(long)]
     key: Option<String>,
-    /// Keyboard scaling for --key: built-in name (grand) or path to a .toml file.
-    #[arg(long, default_value = "grand")]
+    /// Keyboard for --key: built-in name (concert, the default; paper, the paper's model) or path to a .toml file.
+    #[arg(long, default_value = "concert")]
     keyboard: String,
     /// List modes up to this frequency (Hz), 1–100000.
     #[arg(

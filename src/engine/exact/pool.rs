@@ -539,7 +539,7 @@ mod tests {
 
     /// The `grand` keyboard's specs of `names`, and its output rate.
     fn grand_keys(names: &[&str]) -> (Vec<UnisonSpec>, f64) {
-        let scaling = Scaling::resolve("grand").unwrap();
+        let scaling = Scaling::resolve("paper").unwrap();
         let specs = names
             .iter()
             .map(|k| {

@@ -88,9 +88,10 @@ impl StringParams {
 
     /// Mode `n` (1-based) of direction `dir` as an oscillator, damped as `modes` says.
     pub fn oscillator(&self, dir: Direction, n: usize, modes: &ModeSet) -> Oscillator {
+        let omega_rad_s = self.omega(dir, n);
         Oscillator {
-            omega_rad_s: self.omega(dir, n),
-            damping_ratio: modes.damping_ratio(dir),
+            omega_rad_s,
+            damping_ratio: modes.damping_ratio(dir, omega_rad_s),
         }
     }
 
@@ -109,7 +110,13 @@ impl StringParams {
     }
 }
 
-/// Mode counts and damping ratios per polarisation.
+/// Mode counts and losses per polarisation.
+///
+/// A mode of direction `dir` at `omega` decays at `sigma = zeta_dir omega + b1 + b3 omega^2`
+/// (1/s): the paper's constant damping ratio (§2.1) plus, on the transverse polarisations,
+/// Chaigne & Askenfelt's frequency-dependent string losses (JASA 95(2) 1994, Eq. 3:
+/// `y_tt = ... - 2 b1 y_t + 2 b3 y_ttt` gives `1/tau = b1 + b3 omega^2`). The paper's keyboard has
+/// `b1 = b3 = 0`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ModeSet {
     pub modes_t: usize,
@@ -118,6 +125,10 @@ pub struct ModeSet {
     pub damping_ratio_t: f64,
     pub damping_ratio_p: f64,
     pub damping_ratio_l: f64,
+    /// Frequency-independent transverse loss `b1` (1/s).
+    pub loss_b1_per_s: f64,
+    /// Transverse loss growing as `omega^2`, `b3` (s).
+    pub loss_b3_s: f64,
 }
 
 impl ModeSet {
@@ -130,11 +141,13 @@ impl ModeSet {
         }
     }
 
-    pub fn damping_ratio(&self, dir: Direction) -> f64 {
+    /// Damping ratio of a mode of direction `dir` at `omega_rad_s`: `sigma / omega`.
+    pub fn damping_ratio(&self, dir: Direction, omega_rad_s: f64) -> f64 {
+        let strings = self.loss_b1_per_s / omega_rad_s + self.loss_b3_s * omega_rad_s;
         match dir {
-            Direction::T => self.damping_ratio_t,
+            Direction::T => self.damping_ratio_t + strings,
             Direction::L => self.damping_ratio_l,
-            Direction::P => self.damping_ratio_p,
+            Direction::P => self.damping_ratio_p + strings,
         }
     }
 }

@@ -1,0 +1,94 @@
+//! A key struck and recorded at the listener, measured as issue 17's table measures a recorded
+//! grand ([`super::listening`]; the recorded figures are in `docs/data/recorded_grand.csv`, from
+//! `scripts/recorded_grand.py`): its A-weighted level, how its upper bands fade, how many partials
+//! it sounds, its fundamental against its second partial, and the board's low boom.
+
+use super::listening::{a_weighted_level_db, band_change_db, band_power, peaks, power_db};
+use crate::config::preset::LoadedPreset;
+use crate::engine::tuning::stiff_string_hz;
+use crate::engine::{BuildError, Integrator, Strike};
+use crate::render::simulate_with;
+
+/// The two upper bands whose fade issue 17 measures (Hz), at [`LATE_S`] re [`ATTACK_S`].
+pub const UPPER_BANDS_HZ: [(f64, f64); 2] = [(2000.0, 4000.0), (4000.0, 8000.0)];
+pub const ATTACK_S: (f64, f64) = (0.0, 0.03);
+pub const LATE_S: (f64, f64) = (0.5, 1.5);
+/// The stretch whose level and spectrum are taken (s).
+pub const ONSET_S: (f64, f64) = (0.0, 0.5);
+/// The board's low boom: the band and the stretch.
+pub const BOOM_HZ: (f64, f64) = (40.0, 90.0);
+/// Partials counted when they stand within this many dB of the strongest (first 0.5 s) and at
+/// least [`PARTIAL_MARGIN_DB`] above the median of their search span (as the recorded grand's are
+/// counted).
+pub const PARTIAL_RANGE_DB: f64 = 60.0;
+pub const PARTIAL_MARGIN_DB: f64 = 6.0;
+
+/// The sound pressure (Pa) at the listener of `preset`'s key struck at `velocity_m_s` on the exact
+/// engine at the output rate, for `seconds`, the key released after `release_s` (`None`: held).
+pub fn pressure(
+    preset: &LoadedPreset,
+    velocity_m_s: f64,
+    seconds: f64,
+    release_s: Option<f64>,
+) -> Result<(f64, Vec<f64>), BuildError> {
+    let strike = Strike {
+        velocity_m_s,
+        una_corda: false,
+    };
+    let rec = simulate_with(
+        preset,
+        Integrator::Exact,
+        strike,
+        release_s,
+        seconds,
+        |_| {},
+    )?;
+    Ok((rec.rate_hz, rec.channel(|f| f.pressure_pa)))
+}
+
+/// One struck key's figures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StruckKey {
+    /// A-weighted level of the first 0.5 s (dB re 1 Pa²).
+    pub a_level_db: f64,
+    /// The 2–4 and 4–8 kHz bands at 0.5–1.5 s re their first 30 ms (dB).
+    pub upper_bands_db: [f64; 2],
+    /// Partials (of the stiff string's law up to 20 kHz) within 60 dB of the strongest.
+    pub partials_in_range: usize,
+    /// Partial 1 re partial 2, first 0.3 s (dB).
+    pub fundamental_re_second_db: f64,
+    /// The 40–90 Hz band re the whole, first 0.5 s (dB).
+    pub boom_db: f64,
+}
+
+impl StruckKey {
+    /// Measure a recording `x` at `fs` of a key whose first partial is `f1_hz` with
+    /// inharmonicity `b`.
+    pub fn measure(x: &[f64], fs: f64, f1_hz: f64, b: f64) -> StruckKey {
+        let law = stiff_string_hz(f1_hz, b);
+        let partials: Vec<f64> = (1..).map(&law).take_while(|&f| f < 20_000.0).collect();
+        let half = 0.25 * f1_hz;
+        let found = peaks(x, fs, ONSET_S, &partials, half);
+        let strongest = found
+            .iter()
+            .map(|p| p.level_db)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let first_two = peaks(x, fs, (0.0, 0.3), &partials[..2.min(partials.len())], half);
+        let whole = band_power(x, fs, ONSET_S, (0.0, fs / 2.0));
+        StruckKey {
+            a_level_db: a_weighted_level_db(x, fs, ONSET_S.0, ONSET_S.1),
+            upper_bands_db: UPPER_BANDS_HZ
+                .map(|band| band_change_db(x, fs, band, ATTACK_S, LATE_S)),
+            partials_in_range: found
+                .iter()
+                .filter(|p| p.level_db >= strongest - PARTIAL_RANGE_DB)
+                .filter(|p| p.stands_out(PARTIAL_MARGIN_DB))
+                .count(),
+            fundamental_re_second_db: match first_two[..] {
+                [p1, p2] => p1.level_db - p2.level_db,
+                _ => f64::NAN,
+            },
+            boom_db: power_db(band_power(x, fs, ONSET_S, BOOM_HZ) / whole),
+        }
+    }
+}
