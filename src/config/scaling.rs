@@ -7,7 +7,9 @@
 //! `mu = T0 / (2 L_s f_ET)^2`, times a correction exact at the anchors. Each key becomes an ordinary
 //! per-note [`Preset`] bridged at its own point of the soundboard.
 
-use crate::config::preset::{bridge_point_index, LoadedPreset, Preset, PresetError};
+use crate::config::preset::{
+    bridge_point_index, LoadedPreset, Preset, PresetError, StringsSection,
+};
 use crate::engine::physics::string::StringParams;
 use crate::engine::tuning::bridged_pitch_hz;
 use serde::Deserialize;
@@ -46,7 +48,23 @@ pub struct Scaling {
     pub anchors: Vec<Anchor>,
     pub strings: StringOverrides,
     pub losses: Vec<LossAnchor>,
+    pub tuning: Tuning,
 }
+
+/// What a keyboard is tuned to.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Tuning {
+    /// Equal temperament, A4 = 440 Hz.
+    #[default]
+    Equal,
+    /// Octaves stretched from A3–A4 outwards on the keys' own inharmonicity
+    /// ([`LoadedScaling::stretch_cents`]).
+    Stretched,
+}
+
+/// The keys a stretched tuning leaves in equal temperament (A3–A4), from which it sets octaves.
+const TEMPERAMENT_OCTAVE: std::ops::RangeInclusive<usize> = 37..=49;
 
 /// A scaling file as written.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -63,6 +81,8 @@ struct ScalingFile {
     strings: StringOverrides,
     #[serde(default)]
     losses: Vec<LossAnchor>,
+    /// `equal` (the default) or `stretched`; inherited from the base keyboard when absent.
+    tuning: Option<Tuning>,
 }
 
 /// String settings of the base preset that a keyboard replaces on every key.
@@ -216,6 +236,10 @@ impl Scaling {
         let scaling = Scaling {
             name: file.name,
             strings,
+            tuning: file
+                .tuning
+                .or_else(|| base.as_ref().map(|b| b.tuning))
+                .unwrap_or_default(),
             losses: match (file.losses.is_empty(), &base) {
                 (true, Some(b)) => b.losses.clone(),
                 _ => file.losses,
@@ -347,13 +371,12 @@ impl LoadedScaling {
         log_linear(&self.scaling.anchors, |a| a.key, key, f)
     }
 
-    /// The per-note preset of `key` (1–88), bridged at its own soundboard point.
-    pub fn key_preset(&self, key: usize) -> Result<LoadedPreset, PresetError> {
+    /// The base preset's strings section with `key`'s layout and geometry: count, mistuning,
+    /// winding, lengths, tension (interpolated, before tuning), mass and core.
+    fn strings_of(&self, key: usize) -> StringsSection {
         let l = &self.scaling.layout;
-        let mut preset = self.base.preset.clone();
-        preset.name = format!("{} {}", self.scaling.name, crate::board::key_name(key));
-        preset.damper.present = key <= l.dampers_until_key;
-        let s = &mut preset.strings;
+        let mut strings = self.base.preset.strings.clone();
+        let s = &mut strings;
         s.count = if key <= l.single_until_key {
             1
         } else if key <= l.bichord_until_key {
@@ -381,6 +404,45 @@ impl LoadedScaling {
             // A plain wire is all core: its diameter follows from its mass.
             (4.0 * s.linear_density_kg_m / (PI * s.density_kg_m3)).sqrt()
         };
+        strings
+    }
+
+    /// The stretch of `key`'s tuning against equal temperament (cents): 0 for `equal`; for
+    /// `stretched`, the octaves a tuner sets from the temperament octave A3–A4 outwards on the
+    /// keys' own inharmonicity (Eq. 2's `B` of each speaking length): above, each key's first
+    /// partial on the second of the key an octave below (2:1); below, each key's fourth partial
+    /// on the second of the key an octave above (4:2). With `f_n = n f0 sqrt(1 + B n^2)` an
+    /// octave up adds `600 log2((1 + 4B) / (1 + B))` of the lower key, an octave down
+    /// `600 log2((1 + 4B') (1 + B) / ((1 + B') (1 + 16 B)))`, `B'` the upper key's.
+    pub fn stretch_cents(&self, key: usize) -> f64 {
+        if self.scaling.tuning == Tuning::Equal || (TEMPERAMENT_OCTAVE).contains(&key) {
+            return 0.0;
+        }
+        let b = |k: usize| self.strings_of(k).nominal_string().speaking_inharmonicity();
+        let octave = |b: f64| 600.0 * ((1.0 + 4.0 * b) / (1.0 + b)).log2();
+        if key > *TEMPERAMENT_OCTAVE.end() {
+            self.stretch_cents(key - 12) + octave(b(key - 12))
+        } else {
+            let (here, above) = (b(key), b(key + 12));
+            self.stretch_cents(key + 12) + octave(above)
+                - 600.0 * ((1.0 + 16.0 * here) / (1.0 + here)).log2()
+        }
+    }
+
+    /// The pitch `key` is tuned to (Hz): equal temperament (A4 = 440 Hz) and the stretch.
+    pub fn target_hz(&self, key: usize) -> f64 {
+        equal_tempered_hz(key) * 2f64.powf(self.stretch_cents(key) / 1200.0)
+    }
+
+    /// The per-note preset of `key` (1–88), bridged at its own soundboard point.
+    pub fn key_preset(&self, key: usize) -> Result<LoadedPreset, PresetError> {
+        let l = &self.scaling.layout;
+        let mut preset = self.base.preset.clone();
+        preset.name = format!("{} {}", self.scaling.name, crate::board::key_name(key));
+        preset.damper.present = key <= l.dampers_until_key;
+        preset.strings = self.strings_of(key);
+        let s = &mut preset.strings;
+        let f_et = equal_tempered_hz(key);
         let own = &self.scaling.strings;
         s.damping_ratio_t = own.damping_ratio_t.unwrap_or(s.damping_ratio_t);
         s.damping_ratio_p = own.damping_ratio_p.unwrap_or(s.damping_ratio_p);
@@ -414,22 +476,42 @@ impl LoadedScaling {
             .anchors
             .iter()
             .any(|a| a.key == key && a.tension_tuned);
-        if !tuned {
-            // Tune the tension until the string on the bridge and board is on pitch as a tuner
-            // hears it, on partials 2–8 (`bridged_pitch_hz`; a board mode near the first partial
-            // pulls it alone). It converges in a few rounds: the partials go as sqrt(T0), with a
-            // small stiffness term.
+        let target = self.target_hz(key);
+        let mut retuned = None;
+        if tuned {
+            // Tuned on the coupled system to equal temperament: the stretch through the tension.
+            string.tension_n *= (target / f_et).powi(2);
+            s.tension_n = string.tension_n;
+        } else {
+            // Tune the tension until the string on the bridge and board is on its target as a
+            // tuner hears it, on partials 2–8 (`bridged_pitch_hz`; a board mode near the first
+            // partial pulls it alone). It converges in a few rounds: the partials go as sqrt(T0),
+            // with a small stiffness term.
             let k_contact = self.base.contact().stiffness_n_m[0];
             let point = self.base.board.point(&crate::board::key_name(key));
             let board = point.map(|p| (&self.base.board, p));
-            for _ in 0..4 {
-                let (modes, _) = count_modes(&string);
-                let f1 = bridged_pitch_hz(&string, modes, k_contact, board, f_et);
-                string.tension_n *= (f_et / f1).powi(2);
+            let tune = |string: &mut StringParams, modes: Option<usize>| {
+                let mut used = 0;
+                for _ in 0..4 {
+                    used = modes.unwrap_or_else(|| count_modes(string).0);
+                    let f1 = bridged_pitch_hz(string, used, k_contact, board, target);
+                    string.tension_n *= (target / f1).powi(2);
+                }
+                used
+            };
+            let used = tune(&mut string, None);
+            // The last round may carry a mode across the frequency limit, and the truncated
+            // basis then moves the pitch (E7 stretched: 3 modes sound 90 cents above 4): the key
+            // is tuned again with the count the tuned string has, and keeps that count.
+            let last = count_modes(&string).0;
+            if last != used {
+                tune(&mut string, Some(last));
+                retuned = Some(last);
             }
             s.tension_n = string.tension_n;
         }
         (s.modes_t, s.modes_l) = count_modes(&string);
+        s.modes_t = retuned.unwrap_or(s.modes_t);
         s.modes_p = s.modes_t;
         let h = &mut preset.hammer;
         h.mass_kg = self.interpolate(key, |a| a.hammer_mass_kg);

@@ -97,7 +97,7 @@ fn felt_row(scaling: &LoadedScaling, key: usize) -> Result<Option<String>> {
     if spec.duplex_damping_n_s_m2 == 0.0 {
         return Ok(None);
     }
-    let e = felt_effect(&spec, equal_tempered_hz(key), PARTIALS)
+    let e = felt_effect(&spec, scaling.target_hz(key), PARTIALS)
         .with_context(|| format!("key {}", key_name(key)))?;
     let t60 = |m: Option<LinearMode>| m.map_or("-".into(), |m| format!("{:.2}", m.t60_s()));
     let kept: Vec<String> = (1..=PARTIALS)
@@ -116,7 +116,7 @@ fn felt_row(scaling: &LoadedScaling, key: usize) -> Result<Option<String>> {
 
 fn analyse_key(scaling: &LoadedScaling, key: usize) -> Result<KeyFigures> {
     let spec = scaling.key_preset(key)?.unison_spec();
-    let heard = KeyPartials::new(&spec, equal_tempered_hz(key), PARTIALS)
+    let heard = KeyPartials::new(&spec, scaling.target_hz(key), PARTIALS)
         .with_context(|| format!("key {}", key_name(key)))?;
     Ok(KeyFigures { key, heard })
 }
@@ -131,16 +131,18 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "keyboard {}: {} keys from their linearised systems (hammer out of play); cents against equal temperament (A4 = 440 Hz); T60 of each partial's fastest and slowest string mode",
+        "keyboard {} ({:?} tuning): {} keys from their linearised systems (hammer out of play); cents against each key's target, equal temperament (A4 = 440 Hz) stretched by the stretch column; T60 of each partial's fastest and slowest string mode",
         scaling.scaling.name,
+        scaling.scaling.tuning,
         figures.len()
     );
     let _ = writeln!(
         out,
-        "{:>4} {:<4} {:>9} {:>10} {:>9} {:>9} {:>17} {:>17} {:>19}",
+        "{:>4} {:<4} {:>9} {:>9} {:>10} {:>9} {:>9} {:>17} {:>17} {:>19}",
         "key",
         "name",
         "target Hz",
+        "stretch ¢",
         "tuner ¢",
         "fit B",
         "partial1 ¢",
@@ -148,8 +150,9 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
         "partial 2 T60 (s)",
         "recorded p1 T60 (s)"
     );
-    let mut csv =
-        String::from("key,name,target_hz,tuner_cents,partials_fitted,fitted_b,partial1_cents");
+    let mut csv = String::from(
+        "key,name,target_hz,stretch_cents,tuner_cents,partials_fitted,fitted_b,partial1_cents",
+    );
     for n in 1..=PARTIALS {
         let _ = write!(csv, ",p{n}_hz,p{n}_t60_min_s,p{n}_t60_max_s,p{n}_modes");
     }
@@ -165,10 +168,11 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
             |x: Option<f64>, digits: usize| x.map_or("-".into(), |x| format!("{x:+.digits$}"));
         let _ = writeln!(
             out,
-            "{:>4} {:<4} {:>9.3} {:>10} {:>9} {:>9} {:>17} {:>17} {:>19}",
+            "{:>4} {:<4} {:>9.3} {:>+9.1} {:>10} {:>9} {:>9} {:>17} {:>17} {:>19}",
             f.key,
             key_name(f.key),
             f.heard.target_hz,
+            cents(f.heard.target_hz, equal_tempered_hz(f.key)),
             match f.heard.pitch {
                 Some(p) => format!("{} ({})", show(f.tuner_cents(), 1), p.partials),
                 None => format!("{} (1st)", show(f.tuner_cents(), 1)),
@@ -187,10 +191,11 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
         let opt = |x: Option<f64>| x.map_or(String::new(), |x| x.to_string());
         let _ = write!(
             csv,
-            "{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{}",
             f.key,
             key_name(f.key),
             f.heard.target_hz,
+            cents(f.heard.target_hz, equal_tempered_hz(f.key)),
             opt(f.tuner_cents()),
             f.heard.pitch.map_or(0, |p| p.partials),
             opt(f.heard.pitch.map(|p| p.inharmonicity)),
@@ -227,7 +232,7 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
         .collect();
     let _ = writeln!(
         out,
-        "pitch (partials 2–8; the first where none of them is among the modes: {}): {} of {} keys within ±{TUNED_CENTS} cents of equal temperament; furthest: {}",
+        "pitch (partials 2–8; the first where none of them is among the modes: {}): {} of {} keys within ±{TUNED_CENTS} cents of their target; furthest: {}",
         if unheard.is_empty() { "none".to_string() } else { unheard.join(", ") },
         tuned,
         figures.len(),
@@ -316,7 +321,7 @@ fn struck_key(scaling: &LoadedScaling, key: usize) -> Result<StruckKey> {
     let (fs, x) = strike(scaling, key, VELOCITY, struck::LATE_S.1, None)?;
     let spec = scaling.key_preset(key)?.unison_spec();
     let b = spec.strings[0].speaking_inharmonicity();
-    Ok(StruckKey::measure(&x, fs, equal_tempered_hz(key), b))
+    Ok(StruckKey::measure(&x, fs, scaling.target_hz(key), b))
 }
 
 /// The rows of issue 17's table that need the sound: each key struck and heard at the listener,
