@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Fuzz every parser that reads outside input, with cargo-fuzz (libFuzzer, nightly): MIDI files
-# (smf), live MIDI bytes (live_midi), presets (preset), soundboard assets (asset).
+# (smf), live MIDI bytes (live_midi), presets (preset), soundboard assets (asset), keyboard
+# files (keyboard).
 #   bash scripts/fuzz.sh            10 000 runs per target: the smoke run CI does
 #   bash scripts/fuzz.sh 1000000    the full run quoted in docs/robustness.md
 # The random seed is fixed (FUZZ_SEED, default 1) so that CI is reproducible; set another seed
@@ -18,7 +19,7 @@ fi
 command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --version 0.13.2 --locked
 cd fuzz
 mkdir -p logs
-for t in smf live_midi preset asset; do
+for t in smf live_midi preset asset keyboard; do
   mkdir -p "corpus/$t"
   log="logs/$t.log"
   if ! cargo +nightly fuzz run "$t" "corpus/$t" "seeds/$t" -- -runs="$runs" -max_len=8192 -seed="${FUZZ_SEED:-1}" >"$log" 2>&1; then

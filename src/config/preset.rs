@@ -27,13 +27,35 @@ const BUILTIN_ASSETS: &[(&str, &str)] = &[(
 /// The built-in board description that `grand.txt` is generated from.
 pub const GRAND_BOARD_TOML: &str = include_str!("../../assets/soundboard_modes/grand.toml");
 
-/// Read a soundboard description (the generator's input).
-pub fn load_board_spec(path: &Path) -> Result<BoardSpec, PresetError> {
-    let text = std::fs::read_to_string(path).map_err(|source| PresetError::Io {
+/// The largest preset, keyboard or board description read (bytes): the built-in ones are under
+/// 20 kB; a larger file, or a device that never ends (`/dev/zero`), is refused, not read forever.
+pub const MAX_TEXT_BYTES: u64 = 1 << 20;
+
+/// The text of the file at `path`, refused past [`MAX_TEXT_BYTES`].
+pub fn read_text(path: &Path) -> Result<String, PresetError> {
+    use std::io::Read;
+    let io = |source| PresetError::Io {
         path: path.to_owned(),
         source,
-    })?;
-    parse_board_spec(&text, path)
+    };
+    let mut text = String::new();
+    std::fs::File::open(path)
+        .map_err(io)?
+        .take(MAX_TEXT_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(io)?;
+    if text.len() as u64 > MAX_TEXT_BYTES {
+        return Err(PresetError::Parse {
+            path: path.to_owned(),
+            message: format!("longer than {MAX_TEXT_BYTES} bytes: not a description of a piano"),
+        });
+    }
+    Ok(text)
+}
+
+/// Read a soundboard description (the generator's input).
+pub fn load_board_spec(path: &Path) -> Result<BoardSpec, PresetError> {
+    parse_board_spec(&read_text(path)?, path)
 }
 
 /// Parse a soundboard description; `path` names it in errors.
@@ -202,11 +224,7 @@ impl Preset {
         }
         let path = Path::new(name_or_path);
         if path.extension().is_some_and(|e| e == "toml") || path.exists() {
-            let text = std::fs::read_to_string(path).map_err(|source| PresetError::Io {
-                path: path.to_owned(),
-                source,
-            })?;
-            return Self::from_str(&text, path);
+            return Self::from_str(&read_text(path)?, path);
         }
         let names: Vec<&str> = BUILTIN_PRESETS.iter().map(|(n, _)| *n).collect();
         Err(PresetError::Unknown(

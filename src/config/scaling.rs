@@ -8,7 +8,7 @@
 //! per-note [`Preset`] bridged at its own point of the soundboard.
 
 use crate::config::preset::{
-    bridge_point_index, LoadedPreset, Preset, PresetError, StringsSection,
+    bridge_point_index, read_text, LoadedPreset, Preset, PresetError, StringsSection,
 };
 use crate::engine::physics::string::StringParams;
 use crate::engine::tuning::bridged_pitch_hz;
@@ -180,9 +180,19 @@ impl Scaling {
     /// path.
     pub fn resolve(name_or_path: &str) -> Result<LoadedScaling, PresetError> {
         let (scaling, source) = Scaling::read(name_or_path, 1)?;
-        let base = Preset::resolve(&scaling.base_preset)?;
+        scaling.with_base(source)
+    }
+
+    /// A keyboard file's text (`path` names it in errors), its `base_keyboard` chain resolved.
+    pub fn parse(text: &str, path: &Path) -> Result<LoadedScaling, PresetError> {
+        Scaling::from_text(text, path, 1)?.with_base(path.to_owned())
+    }
+
+    /// This keyboard read from `source`, with its base preset.
+    fn with_base(self, source: PathBuf) -> Result<LoadedScaling, PresetError> {
+        let base = Preset::resolve(&self.base_preset)?;
         Ok(LoadedScaling {
-            scaling,
+            scaling: self,
             source,
             base,
         })
@@ -194,14 +204,16 @@ impl Scaling {
             Some((_, path, text)) => (text.to_string(), PathBuf::from(path)),
             None => {
                 let path = PathBuf::from(name_or_path);
-                let text = std::fs::read_to_string(&path).map_err(|source| PresetError::Io {
-                    path: path.clone(),
-                    source,
-                })?;
-                (text, path)
+                (read_text(&path)?, path)
             }
         };
-        let file: ScalingFile = toml::from_str(&text).map_err(|e| PresetError::Parse {
+        Ok((Scaling::from_text(&text, &path, depth)?, path))
+    }
+
+    /// [`Scaling::parse`] at `depth` of a chain.
+    fn from_text(text: &str, path: &Path, depth: usize) -> Result<Scaling, PresetError> {
+        let path = path.to_owned();
+        let file: ScalingFile = toml::from_str(text).map_err(|e| PresetError::Parse {
             path: path.clone(),
             message: e.to_string().trim_end().to_owned(),
         })?;
@@ -258,7 +270,7 @@ impl Scaling {
                 .ok_or_else(|| missing("anchors"))?,
         };
         scaling.validate(&path)?;
-        Ok((scaling, path))
+        Ok(scaling)
     }
 
     fn validate(&self, path: &Path) -> Result<(), PresetError> {
@@ -333,6 +345,14 @@ impl Scaling {
                 l.bichord_until_key.to_string(),
                 "above layout.single_until_key and at most 88",
             ));
+        }
+        for (field, value, lo, hi) in [
+            ("layout.max_modes_t", l.max_modes_t, 1, 400),
+            ("layout.max_modes_l", l.max_modes_l, 0, 50),
+        ] {
+            if !(lo..=hi).contains(&value) {
+                return Err(bad(field, value.to_string(), &format!("{lo} to {hi}")));
+            }
         }
         if !(l.max_mode_freq_hz.is_finite() && l.max_mode_freq_hz > 100.0) {
             return Err(bad(
@@ -455,6 +475,10 @@ impl LoadedScaling {
             s.loss_b1_per_s = log_linear(losses, |a| a.key, key, |a| a.b1_per_s);
             s.loss_b3_s = log_linear(losses, |a| a.key, key, |a| a.b3_s);
         }
+        // The strings in range before the tuner's eigen-problems see them (an absurd anchor is
+        // an error naming its field, not a failed or endless solve).
+        preset.validate(&self.source)?;
+        let s = &mut preset.strings;
         // Modes below the frequency limit (for the sharpest string of the unison), at most the
         // paper's counts.
         let mut string = s.nominal_string();
