@@ -13,6 +13,7 @@ use unacorda::analysis::partials::{cents, KeyPartials, Partial};
 use unacorda::analysis::struck::{self, StruckKey};
 use unacorda::analysis::{listening, recorded};
 use unacorda::board::key_name;
+use unacorda::config::preset::LoadedPreset;
 use unacorda::config::scaling::{equal_tempered_hz, parse_key, LoadedScaling, Scaling, KEYS};
 
 /// Partials looked for on each key.
@@ -311,16 +312,25 @@ fn strike(
     seconds: f64,
     release_s: Option<f64>,
 ) -> Result<(f64, Vec<f64>)> {
-    let speed = unacorda::midi::hammer_speed_m_s(velocity).context("a MIDI velocity 1–127")?;
-    let preset = scaling.key_preset(key)?;
-    Ok(struck::pressure(&preset, speed, seconds, release_s)?)
+    strike_preset(&scaling.key_preset(key)?, velocity, seconds, release_s)
 }
 
-/// [`StruckKey`] of `key` at [`VELOCITY`].
+/// [`strike`] of a key already prepared (its tension tuned).
+fn strike_preset(
+    preset: &LoadedPreset,
+    velocity: u8,
+    seconds: f64,
+    release_s: Option<f64>,
+) -> Result<(f64, Vec<f64>)> {
+    let speed = unacorda::midi::hammer_speed_m_s(velocity).context("a MIDI velocity 1–127")?;
+    Ok(struck::pressure(preset, speed, seconds, release_s)?)
+}
+
+/// [`StruckKey`] of `key` at [`VELOCITY`], the key prepared once.
 fn struck_key(scaling: &LoadedScaling, key: usize) -> Result<StruckKey> {
-    let (fs, x) = strike(scaling, key, VELOCITY, struck::LATE_S.1, None)?;
-    let spec = scaling.key_preset(key)?.unison_spec();
-    let b = spec.strings[0].speaking_inharmonicity();
+    let preset = scaling.key_preset(key)?;
+    let (fs, x) = strike_preset(&preset, VELOCITY, struck::LATE_S.1, None)?;
+    let b = preset.unison_spec().strings[0].speaking_inharmonicity();
     Ok(StruckKey::measure(&x, fs, scaling.target_hz(key), b))
 }
 
@@ -403,8 +413,9 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
         if outside.is_empty() { "none".to_string() } else { outside.join(", ") }
     );
     // C4's dynamics: pp (velocity 30) to ff (127).
+    let c4 = scaling.key_preset(40)?;
     let at = |v: u8| -> Result<(f64, f64)> {
-        let (fs, x) = strike(scaling, 40, v, struck::ONSET_S.1, None)?;
+        let (fs, x) = strike_preset(&c4, v, struck::ONSET_S.1, None)?;
         Ok((
             listening::a_weighted_level_db(&x, fs, struck::ONSET_S.0, struck::ONSET_S.1),
             listening::spectral_centroid_hz(&x, fs, struck::ONSET_S),
