@@ -4,23 +4,34 @@
 use std::path::Path;
 use std::process::Command;
 use unacorda::config::preset::Preset;
+use unacorda::config::scaling::Scaling;
 
 fn data(name: &str) -> String {
     format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"))
 }
 
-fn asset_error(name: &str) -> String {
-    let e = unacorda::config::asset::load_file(Path::new(&data(name)))
-        .unwrap_err()
-        .to_string();
+/// The message with which `load` refuses the data file `name` (printed).
+fn refusal<T: std::fmt::Debug, E: ToString>(
+    name: &str,
+    load: impl Fn(&str) -> Result<T, E>,
+) -> String {
+    let e = load(&data(name)).unwrap_err().to_string();
     println!("{name}: {e}");
     e
 }
 
+fn asset_error(name: &str) -> String {
+    refusal(name, |path| {
+        unacorda::config::asset::load_file(Path::new(path))
+    })
+}
+
 fn preset_error(name: &str) -> String {
-    let e = Preset::resolve(&data(name)).unwrap_err().to_string();
-    println!("{name}: {e}");
-    e
+    refusal(name, Preset::resolve)
+}
+
+fn keyboard_error(name: &str) -> String {
+    refusal(name, Scaling::resolve)
 }
 
 #[test]
@@ -61,6 +72,27 @@ fn malformed_presets_are_rejected_with_field_and_range() {
     let e = Preset::resolve("c3").unwrap_err().to_string();
     println!("c3: {e}");
     assert!(e.contains("unknown preset `c3`") && e.contains("c2"));
+}
+
+#[test]
+fn malformed_keyboards_are_rejected_with_file_and_field() {
+    // Each is refused with the file and the field, before any key is built.
+    let e = keyboard_error("bad_keyboard_loop.toml");
+    assert!(
+        e.contains("bad_keyboard_loop.toml")
+            && e.contains("`base_keyboard`")
+            && e.contains("at most 4")
+    );
+    let e = keyboard_error("bad_keyboard_losses.toml");
+    assert!(e.contains("bad_keyboard_losses.toml") && e.contains("`losses.key` = [2, 88]"));
+    let e = keyboard_error("bad_keyboard_no_layout.toml");
+    assert!(e.contains("`layout`") && e.contains("base_keyboard"));
+    let e = keyboard_error("bad_keyboard_modes.toml");
+    assert!(e.contains("`layout.max_modes_t` = 100000") && e.contains("1 to 400"));
+    // A device that never ends is refused after 1 MiB, not read forever.
+    let e = Scaling::resolve("/dev/zero").unwrap_err().to_string();
+    println!("/dev/zero: {e}");
+    assert!(e.contains("/dev/zero") && e.contains("longer than 1048576 bytes"));
 }
 
 /// Run the CLI; returns (exit status, stderr).

@@ -280,11 +280,14 @@ impl Scaling {
             value,
             allowed: allowed.to_owned(),
         };
+        // Points along the keyboard (anchors, losses) run in increasing keys from A0 to C8.
+        let spans_keyboard = |keys: &[usize]| {
+            keys.first() == Some(&1)
+                && keys.last() == Some(&KEYS)
+                && keys.windows(2).all(|w| w[0] < w[1])
+        };
         let keys: Vec<usize> = self.anchors.iter().map(|a| a.key).collect();
-        if keys.first() != Some(&1)
-            || keys.last() != Some(&KEYS)
-            || keys.windows(2).any(|w| w[0] >= w[1])
-        {
+        if !spans_keyboard(&keys) {
             return Err(bad(
                 "anchors.key",
                 format!("{keys:?}"),
@@ -313,11 +316,7 @@ impl Scaling {
             }
         }
         let loss_keys: Vec<usize> = self.losses.iter().map(|a| a.key).collect();
-        if !loss_keys.is_empty()
-            && (loss_keys.first() != Some(&1)
-                || loss_keys.last() != Some(&KEYS)
-                || loss_keys.windows(2).any(|w| w[0] >= w[1]))
-        {
+        if !loss_keys.is_empty() && !spans_keyboard(&loss_keys) {
             return Err(bad(
                 "losses.key",
                 format!("{loss_keys:?}"),
