@@ -85,6 +85,8 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
     );
     let e = keyboard_error("bad_keyboard_losses.toml");
     assert!(e.contains("bad_keyboard_losses.toml") && e.contains("`losses.key` = [2, 88]"));
+    let e = keyboard_error("bad_keyboard_dampers.toml");
+    assert!(e.contains("`dampers.width_m` = 0.2 (key 1)") && e.contains("[0.001, 0.1]"));
     let e = keyboard_error("bad_keyboard_no_layout.toml");
     assert!(e.contains("`layout`") && e.contains("base_keyboard"));
     let e = keyboard_error("bad_keyboard_modes.toml");

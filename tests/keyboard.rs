@@ -26,7 +26,7 @@ fn c2_key_is_the_c2_preset() {
 }
 
 #[test]
-fn the_concert_keyboard_is_the_paper_keyboard_with_its_own_losses_and_felt() {
+fn the_concert_keyboard_is_the_paper_keyboard_with_its_own_losses_felt_and_dampers() {
     // `concert` names `paper` as its base keyboard: the same strings, hammers, layout and board on
     // every key; only the strings' losses, the duplex felt and the tuning (stretched) differ.
     let paper = Scaling::resolve("paper").unwrap();
@@ -82,7 +82,19 @@ fn the_concert_keyboard_is_the_paper_keyboard_with_its_own_losses_and_felt() {
             );
         }
         assert_eq!(p.hammer, c.hammer, "key {k}");
-        assert_eq!(p.damper, c.damper, "key {k}");
+        // The same keys have dampers; the paper's is c2's point felt on every key, the concert's
+        // a felt with two contact points and a coefficient of its own (tests/damper.rs).
+        assert_eq!(p.damper.present, c.damper.present, "key {k}");
+        assert_eq!(
+            (
+                p.damper.width_m,
+                p.damper.damping_n_s_m,
+                p.damper.position_ratio
+            ),
+            (0.0, 6.0, 0.16),
+            "key {k}: the paper's damper"
+        );
+        assert!(c.damper.width_m > 0.0, "key {k}: the concert felt");
         assert_eq!(p.soundboard, c.soundboard, "key {k}");
         assert_eq!(
             (ps.loss_b1_per_s, ps.loss_b3_s),

@@ -142,6 +142,9 @@ pub struct DamperSection {
     pub present: bool,
     pub position_ratio: f64,
     pub damping_n_s_m: f64,
+    /// Width of the felt along the string (m); 0 (the default) is a point.
+    #[serde(default)]
+    pub width_m: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -340,6 +343,22 @@ impl Preset {
             1.0,
         )?;
         range("damper.damping_n_s_m", self.damper.damping_n_s_m, 0.0, 1e3)?;
+        // The felt lies on the speaking length.
+        let d = &self.damper;
+        let (x_m, half_m) = (d.position_ratio * s.speaking_length_m, d.width_m / 2.0);
+        range("damper.width_m", d.width_m, 0.0, 0.1)?;
+        if d.present && !(x_m - half_m > 0.0 && x_m + half_m < s.speaking_length_m) {
+            return Err(PresetError::Range {
+                path: path.to_owned(),
+                field: "damper.width_m",
+                value: d.width_m.to_string(),
+                allowed: format!(
+                    "a felt within the speaking length: less than {:.4} m at position_ratio {}",
+                    2.0 * x_m.min(s.speaking_length_m - x_m),
+                    d.position_ratio
+                ),
+            });
+        }
         let c = &self.contact;
         range("contact.length_m", c.length_m, 1e-4, 0.1)?;
         range(
@@ -465,6 +484,7 @@ impl LoadedPreset {
             damper: self.preset.damper.present.then_some(DamperParams {
                 position_ratio: self.preset.damper.position_ratio,
                 damping_n_s_m: self.preset.damper.damping_n_s_m,
+                width_m: self.preset.damper.width_m,
             }),
             contact: self.contact(),
             board: self.board.clone(),
@@ -497,5 +517,24 @@ impl LoadedPreset {
     pub fn oversampling(&self, spec: &UnisonSpec) -> usize {
         let needed = self.preset.simulation.min_rate_over_fmax * spec.max_mode_freq_hz();
         (needed / self.output_rate_hz()).ceil().max(1.0) as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A damper felt must lie on the speaking length: one reaching past its end is refused with
+    /// the field and the width that would fit.
+    #[test]
+    fn a_felt_off_the_speaking_length_is_refused() {
+        let mut p = Preset::resolve("c2").unwrap().preset;
+        p.damper.position_ratio = 0.01;
+        p.damper.width_m = 0.05;
+        let e = p.validate(Path::new("c2.toml")).unwrap_err().to_string();
+        println!("{e}");
+        assert!(e.contains("`damper.width_m` = 0.05") && e.contains("less than 0.0"));
+        p.damper.width_m = 0.0;
+        assert!(p.validate(Path::new("c2.toml")).is_ok());
     }
 }

@@ -10,6 +10,7 @@
 use crate::config::preset::{
     bridge_point_index, read_text, LoadedPreset, Preset, PresetError, StringsSection,
 };
+use crate::engine::physics::damper::DamperParams;
 use crate::engine::physics::string::StringParams;
 use crate::engine::tuning::bridged_pitch_hz;
 use serde::Deserialize;
@@ -48,6 +49,7 @@ pub struct Scaling {
     pub anchors: Vec<Anchor>,
     pub strings: StringOverrides,
     pub losses: Vec<LossAnchor>,
+    pub dampers: Vec<DamperAnchor>,
     pub tuning: Tuning,
 }
 
@@ -81,6 +83,8 @@ struct ScalingFile {
     strings: StringOverrides,
     #[serde(default)]
     losses: Vec<LossAnchor>,
+    #[serde(default)]
+    dampers: Vec<DamperAnchor>,
     /// `equal` (the default) or `stretched`; inherited from the base keyboard when absent.
     tuning: Option<Tuning>,
 }
@@ -103,6 +107,21 @@ pub struct LossAnchor {
     pub key: usize,
     pub b1_per_s: f64,
     pub b3_s: f64,
+}
+
+/// The damper at one key: where its felt lies, how far apart its two contact points are, and how
+/// fast it silences the key's first partial (its coefficient follows,
+/// [`DamperParams::coefficient_for_t60`]), interpolated between such keys like the anchors.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DamperAnchor {
+    pub key: usize,
+    /// Centre of the felt as a fraction of the speaking length (-).
+    pub position_ratio: f64,
+    /// Distance between the felt's two contact points along the string (m).
+    pub width_m: f64,
+    /// T60 of the speaking length's first mode with the damper down (s).
+    pub t60_s: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -256,6 +275,10 @@ impl Scaling {
                 (true, Some(b)) => b.losses.clone(),
                 _ => file.losses,
             },
+            dampers: match (file.dampers.is_empty(), &base) {
+                (true, Some(b)) => b.dampers.clone(),
+                _ => file.dampers,
+            },
             base_preset: file
                 .base_preset
                 .or_else(|| base.as_ref().map(|b| b.base_preset.clone()))
@@ -333,6 +356,29 @@ impl Scaling {
                         field,
                         format!("{v} (key {})", a.key),
                         &format!("a number in (0, {hi:e}]"),
+                    ));
+                }
+            }
+        }
+        let damper_keys: Vec<usize> = self.dampers.iter().map(|a| a.key).collect();
+        if !damper_keys.is_empty() && !spans_keyboard(&damper_keys) {
+            return Err(bad(
+                "dampers.key",
+                format!("{damper_keys:?}"),
+                "none, or increasing keys from 1 (A0) to 88 (C8)",
+            ));
+        }
+        for a in &self.dampers {
+            for (field, v, lo, hi) in [
+                ("dampers.position_ratio", a.position_ratio, 0.01, 0.5),
+                ("dampers.width_m", a.width_m, 1e-3, 0.1),
+                ("dampers.t60_s", a.t60_s, 0.02, 60.0),
+            ] {
+                if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                    return Err(bad(
+                        field,
+                        format!("{v} (key {})", a.key),
+                        &format!("a number in [{lo}, {hi}]"),
                     ));
                 }
             }
@@ -536,6 +582,25 @@ impl LoadedScaling {
         (s.modes_t, s.modes_l) = count_modes(&string);
         s.modes_t = retuned.unwrap_or(s.modes_t);
         s.modes_p = s.modes_t;
+        let dampers = &self.scaling.dampers;
+        if !dampers.is_empty() {
+            // The felt's place and width, and the coefficient that gives the first mode its T60
+            // on this key's (tuned) strings.
+            let at = |f: fn(&DamperAnchor) -> f64| log_linear(dampers, |a| a.key, key, f);
+            let mut felt = DamperParams {
+                position_ratio: at(|a| a.position_ratio),
+                damping_n_s_m: 0.0,
+                width_m: at(|a| a.width_m),
+            };
+            felt.damping_n_s_m = felt.coefficient_for_t60(
+                at(|a| a.t60_s),
+                s.speaking_length_m,
+                s.linear_density_kg_m,
+            );
+            let d = &mut preset.damper;
+            (d.position_ratio, d.width_m, d.damping_n_s_m) =
+                (felt.position_ratio, felt.width_m, felt.damping_n_s_m);
+        }
         let h = &mut preset.hammer;
         h.mass_kg = self.interpolate(key, |a| a.hammer_mass_kg);
         h.stiffness_n_m_p = self.interpolate(key, |a| a.hammer_stiffness_n_m_p);

@@ -37,6 +37,7 @@ struct Report {
     dense_real_time_factor: f64,
     denormal_step_us: Denormals,
     callbacks: Vec<CallbackFigure>,
+    damped: Option<DampedFigure>,
     startup: Vec<Startup>,
     memory: Vec<Memory>,
 }
@@ -72,6 +73,15 @@ struct CallbackFigure {
     /// On two cores: how long the two took to meet just before and just after the blocks (us,
     /// [`core_meeting_s`]; `null` where they could not), the machine's state during them.
     meeting_us: Option<[Option<f64>; 2]>,
+}
+
+/// The exact engine's callback with the same voices held (dampers lifted) and released (the
+/// felt's two contact points on every string): median block times as fractions of the deadline.
+#[derive(Serialize)]
+struct DampedFigure {
+    voices: usize,
+    held_median_x_deadline: f64,
+    damped_median_x_deadline: f64,
 }
 
 /// Building the 88-key piano, what `play` does before it sounds.
@@ -145,6 +155,9 @@ pub fn bench(
             engine,
             &mut report,
         )?;
+    }
+    if only.is_none_or(|only| only == "exact") {
+        report.damped = Some(damped(seconds, max_voices.min(32))?);
     }
     if let Some(path) = json {
         let text = serde_json::to_string_pretty(&report).expect("plain data serialises");
@@ -288,6 +301,61 @@ fn callback<E: VoicePool>(
         resident_bytes().unwrap_or(0) as f64 / 1e6
     );
     Ok(())
+}
+
+/// Voices whose dampers are down cost more than held ones (the felt's channels enter each step):
+/// `voices` keys of the concert keyboard spread over those with dampers (A0–F6), struck and held,
+/// then struck and released, their felts set to a T60 of 60 s so that they keep sounding while
+/// timed.
+fn damped(seconds: f64, voices: usize) -> Result<DampedFigure> {
+    use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
+    use unacorda::midi::Event;
+    let text = "name = \"concert, dampers held on\"\nbase_keyboard = \"concert\"\n\
+        [[dampers]]\nkey = 1\nposition_ratio = 0.155\nwidth_m = 0.05\nt60_s = 60.0\n\
+        [[dampers]]\nkey = 88\nposition_ratio = 0.155\nwidth_m = 0.015\nt60_s = 60.0\n";
+    let scaling = Scaling::parse(text, Path::new("(bench)"))?;
+    let damped_keys = scaling.scaling.layout.dampers_until_key;
+    let keys: Vec<usize> = (1..=damped_keys).collect();
+    let cache = unacorda::keycache::KeyCache::from_env();
+    let piano = Piano::<ExactPool>::build_with(&scaling, &keys, voices, cache.as_ref())?;
+    let settings = scaling.base.output_settings();
+    let deadline = BLOCK as f64 / settings.rate_hz;
+    let mut medians = [0.0; 2];
+    for (released, median) in medians.iter_mut().enumerate() {
+        let (mut synth, mut handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE)?;
+        for v in 0..voices {
+            let note = (20 + keys[v * keys.len() / voices.max(1)]) as u8;
+            let frame = v as u64 * 48;
+            let _ = handle.schedule(Scheduled {
+                frame,
+                event: Event::NoteOn { note, velocity: 80 },
+            });
+            if released == 1 {
+                let _ = handle.schedule(Scheduled {
+                    frame: frame + 480,
+                    event: Event::NoteOff { note },
+                });
+            }
+        }
+        let mut out = vec![0f32; BLOCK];
+        for _ in 0..(voices * 48 + 4800).div_ceil(BLOCK) {
+            synth.process(&mut out, 1);
+        }
+        let blocks = ((seconds / deadline) as usize).clamp(20, 45_000);
+        let (t, _) = block_times_s(&mut synth, BLOCK, settings.rate_hz, blocks);
+        *median = percentile(&t, 0.5) / deadline;
+    }
+    println!(
+        "dampers down (exact, one core, {voices} voices of the concert keyboard, {BLOCK}-frame blocks): median {:.3} × deadline held, {:.3} × released (the felt on every string): {:.2} ×",
+        medians[0],
+        medians[1],
+        medians[1] / medians[0]
+    );
+    Ok(DampedFigure {
+        voices,
+        held_median_x_deadline: medians[0],
+        damped_median_x_deadline: medians[1],
+    })
 }
 
 /// One c2 voice on each engine alone, the dense baseline and the denormal tail.

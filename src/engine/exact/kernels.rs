@@ -3,6 +3,7 @@
 //! one pass (8-lane partial sums so that the loop vectorises; AVX2 + FMA where the CPU has them).
 
 use crate::engine::kernels::has_avx2_fma;
+use crate::engine::physics::damper::FELT_POINTS;
 use crate::engine::spec::MAX_STRINGS;
 use faer::c64;
 
@@ -252,8 +253,8 @@ impl Simd {
     }
 }
 
-/// Damper channels of a key at most: T and P of each string.
-pub(crate) const DAMPER_CHANNELS: usize = 2 * MAX_STRINGS;
+/// Damper channels of a key at most: T and P of each string at each point of the felt.
+pub(crate) const DAMPER_CHANNELS: usize = 2 * MAX_STRINGS * FELT_POINTS;
 
 /// Inputs of a damped voice's block: the bridge's motion in three directions and the damper
 /// felt's force on each channel; rows it reads: [`READS`] and the felt's velocity per channel.

@@ -174,8 +174,9 @@ pub(crate) struct KeyModes {
     /// Per direction, the inputs of the shared board's motion `D` at the bridge: every string's
     /// contact spring stretched by it (`k_d D`) and its damper (`c_d Ddot`).
     pub(crate) bridge_input: [[Split; 2]; 3],
-    /// Per damper channel (T and P of each string at the felt): its velocity row and its force's
-    /// input.
+    /// Per damper channel (T and P of each string at each point of the felt, weighted by the
+    /// point's share, [`crate::engine::physics::damper::DamperParams::felt_points`]): its velocity
+    /// row and its force's input.
     pub(crate) damper_row: Vec<Split>,
     pub(crate) damper_input: Vec<Split>,
     /// Per mode, its mechanical energy per `|z|^2` (J, cycle-averaged).
@@ -230,18 +231,20 @@ impl KeyModes {
         });
         let (mut damper_row, mut damper_input) = (vec![], vec![]);
         if let Some(damper) = spec.damper {
-            let x = damper.position_ratio * s0.speaking_length_m;
-            for s in 0..ns {
-                let string = &spec.strings[s];
-                for dir in [Direction::T, Direction::P] {
-                    let v = layout.vector(
-                        layout.strings[s][dir.index()]
-                            .clone()
-                            .enumerate()
-                            .map(|(j, i)| (i, string.mode_shape(j + 1, x))),
-                    );
-                    damper_row.push(Split::new(&modal.row(&v, true)));
-                    damper_input.push(Split::new(&modal.input(&v)));
+            let (points, count) = damper.felt_points(s0.speaking_length_m);
+            for &(x, a) in &points[..count] {
+                for s in 0..ns {
+                    let string = &spec.strings[s];
+                    for dir in [Direction::T, Direction::P] {
+                        let v = layout.vector(
+                            layout.strings[s][dir.index()]
+                                .clone()
+                                .enumerate()
+                                .map(|(j, i)| (i, a * string.mode_shape(j + 1, x))),
+                        );
+                        damper_row.push(Split::new(&modal.row(&v, true)));
+                        damper_input.push(Split::new(&modal.input(&v)));
+                    }
                 }
             }
         }
@@ -267,7 +270,7 @@ impl KeyModes {
 }
 
 /// The damper felt of a key as an implicit feedback on its strings: channel `j` is the T or P
-/// motion of one string at the felt, `f_j = -c v_j`, entering over the step as a force linear in
+/// motion of one string at one point of the felt (weighted by its share), `f_j = -c v_j`, entering over the step as a force linear in
 /// time from `f_j^n` to `f_j^{n+1}` (exact for the modes, trapezoidal for the felt) and solved for
 /// `f^{n+1}` from the velocities after the step — stable however stiff the felt.
 #[derive(Debug, Clone)]

@@ -31,8 +31,9 @@ pub struct Rk4Key<T> {
     pub(super) board_shape: [Vec<T>; 3],
     /// `psi_n(L_e)` of the T modes (identical for every string: same length).
     pub(super) hammer_shape: Vec<T>,
-    /// `psi_n(x_d)` of the transverse modes, and the felt's coefficient (N s/m); empty without damper.
-    pub(super) damper_shape: Vec<T>,
+    /// Per point of the damper felt, `a_k psi_n(x_k)` of the transverse modes
+    /// ([`crate::engine::physics::damper::DamperParams::felt_points`]), and the felt's coefficient (N s/m); empty without damper.
+    pub(super) damper_shapes: Vec<Vec<T>>,
     pub(super) damper_n_s_m: f64,
     /// The duplex matrix (Eq. 13) as `C_d = Wᵀ W`: `W` is `duplex_rank × duplex_n`, row-major.
     pub(super) duplex_w: Vec<T>,
@@ -84,13 +85,18 @@ pub(super) fn build_key<T: Real>(spec: &UnisonSpec) -> Result<Rk4Key<T>, BuildEr
     }
     let s0 = &spec.strings[0];
     let strike_x = spec.hammer.strike_ratio * s0.speaking_length_m;
-    let (damper_shape, damper_n_s_m) = match spec.damper {
+    let (damper_shapes, damper_n_s_m) = match spec.damper {
         Some(d) => {
-            let x = d.position_ratio * s0.speaking_length_m;
-            (
-                (1..=nt.max(np)).map(|k| s0.mode_shape(k, x)).collect(),
-                d.damping_n_s_m,
-            )
+            let (points, count) = d.felt_points(s0.speaking_length_m);
+            let shapes = points[..count]
+                .iter()
+                .map(|&(x, a)| {
+                    let shape: Vec<f64> =
+                        (1..=nt.max(np)).map(|k| a * s0.mode_shape(k, x)).collect();
+                    cast(&shape)
+                })
+                .collect();
+            (shapes, d.damping_n_s_m)
         }
         None => (Vec::new(), 0.0),
     };
@@ -137,7 +143,7 @@ pub(super) fn build_key<T: Real>(spec: &UnisonSpec) -> Result<Rk4Key<T>, BuildEr
         hammer_shape: (1..=nt)
             .map(|k| T::from_f64(s0.mode_shape(k, strike_x)))
             .collect(),
-        damper_shape: cast(&damper_shape),
+        damper_shapes,
         damper_n_s_m,
         duplex_w: cast(&duplex_w),
         duplex_n,

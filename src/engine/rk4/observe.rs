@@ -79,8 +79,8 @@ impl<T: Real> Rk4Pool<T> {
             // product through its rank-r factor (2 × 2 r per entry of W, T and P of every string).
             let r = km.duplex_rank;
             eval += 3 * n + 6 * n + 18 * nb + 4 * r * voice.n_strings * (nt + np);
-            if f[k].damper_down && !km.damper_shape.is_empty() {
-                eval += 4 * voice.n_strings * (nt + np);
+            if f[k].damper_down {
+                eval += 4 * km.damper_shapes.len() * voice.n_strings * (nt + np);
             }
             if f[k].hammer_on {
                 eval += 4 * nt * f[k].struck.iter().filter(|&&s| s).count();

@@ -33,7 +33,7 @@ impl<T: Real> Policy for Rk4Pool<T> {
     }
 
     fn key_has_damper(&self, key: usize) -> bool {
-        !self.model.keys[key].damper_shape.is_empty()
+        !self.model.keys[key].damper_shapes.is_empty()
     }
 
     /// Copies the key's coefficients into the slot.
