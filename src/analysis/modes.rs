@@ -8,6 +8,7 @@ use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::rk4::dense::DenseUnison;
 use crate::engine::MAX_STRINGS;
 use crate::engine::{Direction, UnisonSpec};
+use faer::{c64, Mat};
 
 /// One mode (a complex-conjugate pair of eigenvalues `-sigma ± i omega`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,8 +58,16 @@ pub fn linear_modes(spec: &UnisonSpec) -> Result<Vec<LinearMode>, ModesError> {
             duplex_damping_matrix(nd, s.length_m(), s.speaking_length_m, mu, mu)
         })
         .collect();
-    let eig = a.eigen().map_err(|_| ModesError)?;
-    let (u, s) = (eig.U(), eig.S().column_vector());
+    // Balanced as the engine's modes are (`engine::modal`): velocities in units of the highest
+    // undamped frequency, so that both blocks are of one size. Unbalanced (entries from 1 to
+    // omega^2), faer's QR iteration looped for ever on C3 with its modes kept to 20 kHz and no
+    // duplex felt.
+    let omega_s = (0..nq).map(|i| -a[(nq + i, i)]).fold(1.0, f64::max).sqrt();
+    let scale = |i: usize| if i < nq { 1.0 } else { omega_s };
+    let balanced = Mat::<f64>::from_fn(2 * nq, 2 * nq, |i, j| a[(i, j)] * scale(j) / scale(i));
+    let eig = balanced.eigen().map_err(|_| ModesError)?;
+    let s = eig.S().column_vector();
+    let u = Mat::<c64>::from_fn(2 * nq, s.nrows(), |i, m| eig.U()[(i, m)] * scale(i));
     let mut modes: Vec<LinearMode> = (0..s.nrows())
         .filter(|&m| s[m].im > 0.0)
         .map(|m| {
