@@ -271,14 +271,8 @@ impl Scaling {
                 .tuning
                 .or_else(|| base.as_ref().map(|b| b.tuning))
                 .unwrap_or_default(),
-            losses: match (file.losses.is_empty(), &base) {
-                (true, Some(b)) => b.losses.clone(),
-                _ => file.losses,
-            },
-            dampers: match (file.dampers.is_empty(), &base) {
-                (true, Some(b)) => b.dampers.clone(),
-                _ => file.dampers,
-            },
+            losses: inherit_points(file.losses, base.as_ref().map(|b| &b.losses)),
+            dampers: inherit_points(file.dampers, base.as_ref().map(|b| &b.dampers)),
             base_preset: file
                 .base_preset
                 .or_else(|| base.as_ref().map(|b| b.base_preset.clone()))
@@ -303,7 +297,7 @@ impl Scaling {
             value,
             allowed: allowed.to_owned(),
         };
-        // Points along the keyboard (anchors, losses) run in increasing keys from A0 to C8.
+        // Points along the keyboard (anchors, losses, dampers) run in increasing keys from A0 to C8.
         let spans_keyboard = |keys: &[usize]| {
             keys.first() == Some(&1)
                 && keys.last() == Some(&KEYS)
@@ -338,14 +332,19 @@ impl Scaling {
                 }
             }
         }
-        let loss_keys: Vec<usize> = self.losses.iter().map(|a| a.key).collect();
-        if !loss_keys.is_empty() && !spans_keyboard(&loss_keys) {
-            return Err(bad(
-                "losses.key",
-                format!("{loss_keys:?}"),
+        // Losses and dampers are optional; given, they span the keyboard like the anchors.
+        let optional = |field: &'static str, keys: Vec<usize>| match keys.is_empty()
+            || spans_keyboard(&keys)
+        {
+            true => Ok(()),
+            false => Err(bad(
+                field,
+                format!("{keys:?}"),
                 "none, or increasing keys from 1 (A0) to 88 (C8)",
-            ));
-        }
+            )),
+        };
+        optional("losses.key", self.losses.iter().map(|a| a.key).collect())?;
+        optional("dampers.key", self.dampers.iter().map(|a| a.key).collect())?;
         for a in &self.losses {
             for (field, v, hi) in [
                 ("losses.b1_per_s", a.b1_per_s, 100.0),
@@ -359,14 +358,6 @@ impl Scaling {
                     ));
                 }
             }
-        }
-        let damper_keys: Vec<usize> = self.dampers.iter().map(|a| a.key).collect();
-        if !damper_keys.is_empty() && !spans_keyboard(&damper_keys) {
-            return Err(bad(
-                "dampers.key",
-                format!("{damper_keys:?}"),
-                "none, or increasing keys from 1 (A0) to 88 (C8)",
-            ));
         }
         for a in &self.dampers {
             for (field, v, lo, hi) in [
@@ -407,6 +398,15 @@ impl Scaling {
             ));
         }
         Ok(())
+    }
+}
+
+/// A keyboard's own points along the keyboard (losses, dampers), or its base keyboard's where it
+/// gives none.
+fn inherit_points<A: Clone>(own: Vec<A>, base: Option<&Vec<A>>) -> Vec<A> {
+    match (own.is_empty(), base) {
+        (true, Some(base)) => base.clone(),
+        _ => own,
     }
 }
 

@@ -310,10 +310,11 @@ fn callback<E: VoicePool>(
 fn damped(seconds: f64, voices: usize) -> Result<DampedFigure> {
     use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
     use unacorda::midi::Event;
-    let text = "name = \"concert, dampers held on\"\nbase_keyboard = \"concert\"\n\
-        [[dampers]]\nkey = 1\nposition_ratio = 0.155\nwidth_m = 0.05\nt60_s = 60.0\n\
-        [[dampers]]\nkey = 88\nposition_ratio = 0.155\nwidth_m = 0.015\nt60_s = 60.0\n";
-    let scaling = Scaling::parse(text, Path::new("(bench)"))?;
+    // The concert keyboard's felts (place, width), their decay lengthened.
+    let mut scaling = Scaling::resolve("concert")?;
+    for felt in &mut scaling.scaling.dampers {
+        felt.t60_s = 60.0;
+    }
     let damped_keys = scaling.scaling.layout.dampers_until_key;
     let keys: Vec<usize> = (1..=damped_keys).collect();
     let cache = unacorda::keycache::KeyCache::from_env();

@@ -130,7 +130,7 @@ impl ExactKey {
         let bridge_input = [[gk_t, gc_t], [gk_l, gc_l], [gk_p, gc_p]];
         let damper_row = r.splits(n)?;
         let damper_input = r.splits(n)?;
-        let channels = spec.damper.map_or(0, |d| 2 * ns * d.felt_points(1.0).1);
+        let channels = spec.damper.map_or(0, |d| 2 * ns * d.point_count());
         if damper_row.len() != channels || damper_input.len() != channels {
             return None;
         }

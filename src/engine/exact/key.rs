@@ -270,9 +270,10 @@ impl KeyModes {
 }
 
 /// The damper felt of a key as an implicit feedback on its strings: channel `j` is the T or P
-/// motion of one string at one point of the felt (weighted by its share), `f_j = -c v_j`, entering over the step as a force linear in
-/// time from `f_j^n` to `f_j^{n+1}` (exact for the modes, trapezoidal for the felt) and solved for
-/// `f^{n+1}` from the velocities after the step — stable however stiff the felt.
+/// motion of one string at one point of the felt (weighted by its share), `f_j = -c v_j`,
+/// entering over the step as a force linear in time from `f_j^n` to `f_j^{n+1}` (exact for the
+/// modes, trapezoidal for the felt) and solved for `f^{n+1}` from the velocities after the step —
+/// stable however stiff the felt.
 #[derive(Debug, Clone)]
 pub(crate) struct DamperKey {
     pub(crate) channels: usize,

@@ -29,11 +29,20 @@ impl DamperParams {
     /// [`FELT_POINTS`]).
     pub fn felt_points(&self, speaking_length_m: f64) -> ([(f64, f64); FELT_POINTS], usize) {
         let x = self.position_ratio * speaking_length_m;
-        if self.width_m <= 0.0 {
+        if self.point_count() == 1 {
             return ([(x, 1.0), (x, 0.0)], 1);
         }
         let (d, a) = (self.width_m / 2.0, 0.5f64.sqrt());
         ([(x - d, a), (x + d, a)], FELT_POINTS)
+    }
+
+    /// How many points the felt touches each string at: 1 without a width, else [`FELT_POINTS`].
+    pub fn point_count(&self) -> usize {
+        if self.width_m > 0.0 {
+            FELT_POINTS
+        } else {
+            1
+        }
     }
 
     /// The coefficient (N s/m) with which this felt gives the first mode of the speaking length
