@@ -87,6 +87,20 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
     assert!(e.contains("bad_keyboard_losses.toml") && e.contains("`losses.key` = [2, 88]"));
     let e = keyboard_error("bad_keyboard_dampers.toml");
     assert!(e.contains("`dampers.width_m` = 0.2 (key 1)") && e.contains("[0.001, 0.1]"));
+    let e = keyboard_error("bad_keyboard_voicing.toml");
+    assert!(
+        e.contains("`voicing.felt_stiffness_factor` = 1000000 (key 88)")
+            && e.contains("[0.01, 10000]")
+    );
+    // A listener the asset does not have is refused when the first key is made, naming them.
+    let e = refusal("bad_keyboard_listener.toml", |path| {
+        Scaling::resolve(path).and_then(|s| s.key_preset(40))
+    });
+    assert!(
+        e.contains("bad_keyboard_listener.toml")
+            && e.contains("`radiation.listener` = `balcony`")
+            && e.contains("above, treble, bass")
+    );
     let e = keyboard_error("bad_keyboard_no_layout.toml");
     assert!(e.contains("`layout`") && e.contains("base_keyboard"));
     let e = keyboard_error("bad_keyboard_modes.toml");

@@ -26,9 +26,10 @@ fn c2_key_is_the_c2_preset() {
 }
 
 #[test]
-fn the_concert_keyboard_is_the_paper_keyboard_with_its_own_losses_felt_and_dampers() {
+fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
     // `concert` names `paper` as its base keyboard: the same strings, hammers, layout and board on
-    // every key; only the strings' losses, the duplex felt and the tuning (stretched) differ.
+    // every key; only the strings' losses, the duplex felt, the dampers, the tuning (stretched),
+    // the top hammers' voicing and the listener differ.
     let paper = Scaling::resolve("paper").unwrap();
     let concert = Scaling::resolve("concert").unwrap();
     println!("key  c_d paper/concert  zeta_T paper/concert  b1 1/s   b3 s");
@@ -81,7 +82,26 @@ fn the_concert_keyboard_is_the_paper_keyboard_with_its_own_losses_felt_and_dampe
                 cs.modes_t, ps.modes_t
             );
         }
-        assert_eq!(p.hammer, c.hammer, "key {k}");
+        // The same hammers but for the voicing of the top: the felt's K times 1 up to F#7, 4 at
+        // A7, 64 at C8, log-linear in key number between (docs/parameters.md).
+        let voiced = match k {
+            ..=82 => 1.0,
+            83..=85 => 4f64.powf((k - 82) as f64 / 3.0),
+            _ => 4.0 * 16f64.powf((k - 85) as f64 / 3.0),
+        };
+        let ratio = c.hammer.stiffness_n_m_p / p.hammer.stiffness_n_m_p;
+        assert!(
+            (ratio / voiced - 1.0).abs() < 1e-9,
+            "key {k}: voiced {ratio}"
+        );
+        let unvoiced = unacorda::config::preset::HammerSection {
+            stiffness_n_m_p: p.hammer.stiffness_n_m_p,
+            ..c.hammer.clone()
+        };
+        assert_eq!(p.hammer, unvoiced, "key {k}");
+        // Heard as the paper's monopole, and at the listener above the board.
+        assert_eq!(p.radiation.listener, None, "key {k}");
+        assert_eq!(c.radiation.listener.as_deref(), Some("above"), "key {k}");
         // The same keys have dampers; the paper's is c2's point felt on every key, the concert's
         // a felt with two contact points and a coefficient of its own (tests/damper.rs).
         assert_eq!(p.damper.present, c.damper.present, "key {k}");

@@ -129,18 +129,8 @@ fn linear_subproblem(rate_hz: f64, damped: bool) -> UnisonSpec {
     spec.modes.modes_p = 20;
     spec.modes.modes_l = 2;
     // Board modes up to 1 kHz keep the fastest motion resolvable at the fine steps used here.
-    let keep: Vec<usize> = (0..spec.board.len())
-        .filter(|&k| spec.board.freq_hz[k] < 1000.0)
-        .collect();
-    let pick = |v: &Vec<f64>| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
-    spec.board.freq_hz = pick(&spec.board.freq_hz);
-    spec.board.damping_ratio = pick(&spec.board.damping_ratio);
-    spec.board.volume_m2_per_sqrt_kg = pick(&spec.board.volume_m2_per_sqrt_kg);
-    for p in &mut spec.board.points {
-        for d in 0..3 {
-            p.shape[d] = pick(&p.shape[d]);
-        }
-    }
+    let keep: Vec<bool> = spec.board.freq_hz.iter().map(|&f| f < 1000.0).collect();
+    spec.board.retain(|k| keep[k]);
     if !damped {
         spec.modes.damping_ratio_t = 0.0;
         spec.modes.damping_ratio_p = 0.0;

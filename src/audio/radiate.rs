@@ -1,7 +1,8 @@
-//! From the board to the listener: the board radiates as a monopole (DESIGN.md §1.7), the sound
-//! pressure at distance `r` being `p = rho0 / (4 pi r) dQ/dt` of its net volume velocity `Q`;
-//! what goes out is bounded by a soft clipper. Used live ([`super::synth`]) and offline
-//! (`render::strike`) alike.
+//! From the board to the listener (DESIGN.md §1.7): the engines read the board's radiating source
+//! `Q` — its net volume velocity, or the monopole at 1 m equivalent to its modes' Rayleigh
+//! integrals at a listener ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`])
+//! — and the sound pressure at distance `r` is `p = rho0 / (4 pi r) dQ/dt`; what goes out is
+//! bounded by a soft clipper. Used live ([`super::synth`]) and offline (`render::strike`) alike.
 
 /// The monopole: `Q` sampled at the engine's rate, differentiated step to step.
 #[derive(Debug, Clone)]

@@ -28,6 +28,8 @@
 //! the mid-plane, moves in the plane by `-lever ∇w` when the board rotates under it, which gives
 //! the L (along the strings) and P (across them) components (DESIGN.md §4).
 
+pub mod radiation;
+
 use crate::engine::physics::soundboard::{BridgePoint, SoundboardModes};
 use faer::{Mat, Side};
 use serde::Deserialize;
@@ -44,6 +46,9 @@ pub struct BoardSpec {
     pub bridges: Vec<BridgeSpec>,
     pub basis: BasisSpec,
     pub reduction: ReductionSpec,
+    /// Listeners at which each mode's radiation is worked out (`radiation`); may be none.
+    #[serde(default)]
+    pub listeners: Vec<radiation::ListenerSpec>,
 }
 
 /// The orthotropic plate (paper Table 1). Grain (E1) along x.
@@ -390,6 +395,24 @@ impl BoardSpec {
             check("ribs.shear_modulus_pa", r.shear_modulus_pa, 1e6, 1e12)?;
             check("ribs.density_kg_m3", r.density_kg_m3, 50.0, 3000.0)?;
         }
+        for (i, l) in self.listeners.iter().enumerate() {
+            let [x, y, z] = l.position_m;
+            check("listeners.position_m (x)", x, -10.0, 10.0)?;
+            check("listeners.position_m (y)", y, -10.0, 10.0)?;
+            check("listeners.position_m (z)", z, 0.05, 10.0)?;
+            let plain = !l.name.is_empty()
+                && !l
+                    .name
+                    .contains(|c: char| c.is_whitespace() || c == '@' || c == '#');
+            let unique = self.listeners[..i].iter().all(|o| o.name != l.name);
+            if !(plain && unique) {
+                return Err(BoardError::Range {
+                    field: "listeners.name".to_owned(),
+                    value: format!("`{}`", l.name),
+                    allowed: "a unique name without spaces, `@` or `#`".to_owned(),
+                });
+            }
+        }
         for b in &self.bridges {
             for pt in &b.curve_m {
                 check("bridges.curve_m (x)", pt[0], 0.0, p.width_m)?;
@@ -594,6 +617,8 @@ impl BoardSpec {
                     shape: [vec![], vec![], vec![]],
                 })
                 .collect(),
+            listeners: vec![],
+            heard: None,
         };
         let mut kept: Vec<(usize, f64)> = Vec::new();
         for mode in 0..n {
@@ -676,26 +701,9 @@ pub fn reduce(
             }
         }
     }
-    let pick = |v: &[f64]| -> Vec<f64> {
-        v.iter()
-            .zip(&keep)
-            .filter(|(_, &k)| k)
-            .map(|(x, _)| *x)
-            .collect()
-    };
-    SoundboardModes {
-        freq_hz: pick(&full.freq_hz),
-        damping_ratio: pick(&full.damping_ratio),
-        volume_m2_per_sqrt_kg: pick(&full.volume_m2_per_sqrt_kg),
-        points: full
-            .points
-            .iter()
-            .map(|bp| BridgePoint {
-                name: bp.name.clone(),
-                shape: [pick(&bp.shape[0]), pick(&bp.shape[1]), pick(&bp.shape[2])],
-            })
-            .collect(),
-    }
+    let mut reduced = full.clone();
+    reduced.retain(|k| keep[k]);
+    reduced
 }
 
 /// Solve and reduce the board, with the header lines that say how the asset was made (the text
@@ -704,7 +712,8 @@ pub fn generate_asset(
     spec: &BoardSpec,
     command: &str,
 ) -> Result<(SolvedBoard, SoundboardModes, Vec<String>), BoardError> {
-    let solved = spec.solve()?;
+    let mut solved = spec.solve()?;
+    radiation::listen(spec, &mut solved);
     let r = &spec.reduction;
     let points: Vec<&str> = r.points.iter().map(String::as_str).collect();
     let reduced = reduce(&solved.modes, &points, r.f_min_hz, r.f_max_hz);
@@ -745,5 +754,18 @@ pub fn generate_asset(
         reduced.len(),
         r.points.join(", ")
     ));
+    if !spec.listeners.is_empty() {
+        let at: Vec<String> = spec
+            .listeners
+            .iter()
+            .map(|l| format!("{} at {:?} m", l.name, l.position_m))
+            .collect();
+        header.push(format!(
+            "listeners (Rayleigh integral of each mode at its frequency, {} m grid, c = {} m/s): {}",
+            radiation::GRID_SPACING_M,
+            radiation::SOUND_SPEED_M_S,
+            at.join(", ")
+        ));
+    }
     Ok((solved, reduced, header))
 }

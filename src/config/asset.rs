@@ -5,14 +5,16 @@
 //! ```text
 //! format: unacorda-soundboard-modes 1
 //! points: C2 C4                      # names of the bridge points, separated by spaces
-//! columns: freq_hz zeta volume_m2_per_sqrt_kg T@C2 L@C2 P@C2 T@C4 L@C4 P@C4
+//! listeners: above                   # optional: names of the listeners
+//! columns: freq_hz zeta volume_m2_per_sqrt_kg T@C2 L@C2 P@C2 T@C4 L@C4 P@C4 Dre@above Dim@above
 //! 21.52 0.03 1.23e-2 4.5e-2 -1.2e-3 3.4e-4 ...   # one row per mode
 //! ```
 //! Units: `freq_hz` Hz (> 0), `zeta` damping ratio in [0, 1), `volume_m2_per_sqrt_kg` the mode's
 //! net volume displacement per unit modal coordinate (m^2/sqrt(kg)), `T@X`, `L@X`, `P@X` the
-//! mass-normalised mode shape at point X in each direction (1/sqrt(kg)).
+//! mass-normalised mode shape at point X in each direction (1/sqrt(kg)), `Dre@Y`, `Dim@Y` the
+//! mode's Rayleigh integral at listener Y ([`crate::board::radiation`], m/sqrt(kg)).
 
-use crate::engine::physics::soundboard::{BridgePoint, SoundboardModes};
+use crate::engine::physics::soundboard::{BridgePoint, Listener, SoundboardModes};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -55,6 +57,7 @@ pub fn parse(text: &str, path: &Path) -> Result<SoundboardModes, AssetError> {
     };
     let mut format_seen = false;
     let mut points: Option<Vec<String>> = None;
+    let mut listeners: Option<Vec<String>> = None;
     let mut columns: Option<Vec<String>> = None;
     let mut rows: Vec<Vec<f64>> = Vec::new();
     for (idx, raw) in text.lines().enumerate() {
@@ -67,6 +70,7 @@ pub fn parse(text: &str, path: &Path) -> Result<SoundboardModes, AssetError> {
         for (tag, seen) in [
             ("format:", format_seen),
             ("points:", points.is_some()),
+            ("listeners:", listeners.is_some()),
             ("columns:", columns.is_some()),
         ] {
             if line.starts_with(tag) && (seen || !rows.is_empty()) {
@@ -98,11 +102,19 @@ pub fn parse(text: &str, path: &Path) -> Result<SoundboardModes, AssetError> {
                 ));
             }
             points = Some(names);
+        } else if let Some(v) = line.strip_prefix("listeners:") {
+            if columns.is_some() {
+                return Err(syntax(
+                    line_no,
+                    "`listeners:` must come before `columns:`".into(),
+                ));
+            }
+            listeners = Some(v.split_whitespace().map(str::to_owned).collect());
         } else if let Some(v) = line.strip_prefix("columns:") {
             let Some(names) = &points else {
                 return Err(syntax(line_no, "`columns:` must follow `points:`".into()));
             };
-            let expected = expected_columns(names);
+            let expected = expected_columns(names, listeners.as_deref().unwrap_or_default());
             let got: Vec<String> = v.split_whitespace().map(str::to_owned).collect();
             if got != expected {
                 return Err(syntax(
@@ -182,6 +194,7 @@ pub fn parse(text: &str, path: &Path) -> Result<SoundboardModes, AssetError> {
         return Err(content("no modes: at least one mode row is required"));
     }
     let col = |c: usize| rows.iter().map(|r| r[c]).collect::<Vec<f64>>();
+    let at = 3 + 3 * names.len();
     Ok(SoundboardModes {
         freq_hz: col(0),
         damping_ratio: col(1),
@@ -194,6 +207,17 @@ pub fn parse(text: &str, path: &Path) -> Result<SoundboardModes, AssetError> {
                 shape: [col(3 + 3 * p), col(4 + 3 * p), col(5 + 3 * p)],
             })
             .collect(),
+        listeners: listeners
+            .unwrap_or_default()
+            .into_iter()
+            .enumerate()
+            .map(|(l, name)| Listener {
+                name,
+                rayleigh_re: col(at + 2 * l),
+                rayleigh_im: col(at + 2 * l + 1),
+            })
+            .collect(),
+        heard: None,
     })
 }
 
@@ -205,8 +229,16 @@ pub fn to_text(modes: &SoundboardModes, header: &[String]) -> String {
     }
     let names: Vec<String> = modes.points.iter().map(|p| p.name.clone()).collect();
     let _ = writeln!(out, "format: {FORMAT_TAG}");
+    let heard: Vec<String> = modes.listeners.iter().map(|l| l.name.clone()).collect();
     let _ = writeln!(out, "points: {}", names.join(" "));
-    let _ = writeln!(out, "columns: {}", expected_columns(&names).join(" "));
+    if !heard.is_empty() {
+        let _ = writeln!(out, "listeners: {}", heard.join(" "));
+    }
+    let _ = writeln!(
+        out,
+        "columns: {}",
+        expected_columns(&names, &heard).join(" ")
+    );
     for k in 0..modes.len() {
         let _ = write!(
             out,
@@ -218,12 +250,15 @@ pub fn to_text(modes: &SoundboardModes, header: &[String]) -> String {
                 let _ = write!(out, " {:.9e}", d[k]);
             }
         }
+        for l in &modes.listeners {
+            let _ = write!(out, " {:.9e} {:.9e}", l.rayleigh_re[k], l.rayleigh_im[k]);
+        }
         out.push('\n');
     }
     out
 }
 
-fn expected_columns(points: &[String]) -> Vec<String> {
+fn expected_columns(points: &[String], listeners: &[String]) -> Vec<String> {
     let mut cols: Vec<String> = ["freq_hz", "zeta", "volume_m2_per_sqrt_kg"]
         .iter()
         .map(|s| s.to_string())
@@ -232,6 +267,10 @@ fn expected_columns(points: &[String]) -> Vec<String> {
         for d in crate::engine::Direction::ALL {
             cols.push(format!("{}@{p}", d.name()));
         }
+    }
+    for l in listeners {
+        cols.push(format!("Dre@{l}"));
+        cols.push(format!("Dim@{l}"));
     }
     cols
 }
@@ -250,6 +289,12 @@ mod tests {
                 name: "C2".into(),
                 shape: [vec![0.5, -0.25], vec![0.01, 0.02], vec![-0.03, 0.04]],
             }],
+            listeners: vec![Listener {
+                name: "above".into(),
+                rayleigh_re: vec![3e-3, -1e-4],
+                rayleigh_im: vec![2e-5, 4e-4],
+            }],
+            heard: None,
         };
         let text = to_text(&sb, &["test".into()]);
         let back = parse(&text, Path::new("mem")).unwrap();

@@ -175,6 +175,11 @@ pub struct SimulationSection {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RadiationSection {
+    /// The listener of the soundboard asset the board radiates to (each mode by its Rayleigh
+    /// integral there, DESIGN.md §1.7); absent: the monopole of the net volume velocity heard
+    /// at `distance_m` (the paper's board).
+    #[serde(default)]
+    pub listener: Option<String>,
     pub distance_m: f64,
     pub air_density_kg_m3: f64,
     pub full_scale_pa: f64,
@@ -267,6 +272,8 @@ impl Preset {
         };
         let bridge_point =
             bridge_point_index(&board, &preset.soundboard.bridge_point, path, &asset_name)?;
+        let mut board = board;
+        board.heard = listener_index(&board, &preset.radiation.listener, path, &asset_name)?;
         Ok(LoadedPreset {
             preset,
             source: path.to_owned(),
@@ -428,6 +435,34 @@ pub(crate) fn bridge_point_index(
         })
 }
 
+/// The index of the listener `name` in `board` (`None` for none), or an error naming the file,
+/// the field and the listeners the asset has.
+pub(crate) fn listener_index(
+    board: &SoundboardModes,
+    name: &Option<String>,
+    path: &Path,
+    asset: &str,
+) -> Result<Option<usize>, PresetError> {
+    let Some(name) = name else {
+        return Ok(None);
+    };
+    match board.listener(name) {
+        Some(l) => Ok(Some(l)),
+        None => {
+            let names: Vec<&str> = board.listeners.iter().map(|l| l.name.as_str()).collect();
+            Err(PresetError::Range {
+                path: path.to_owned(),
+                field: "radiation.listener",
+                value: format!("`{name}`"),
+                allowed: match names.is_empty() {
+                    true => format!("none: the asset {asset} has no listeners"),
+                    false => format!("a listener of the asset {asset}: {}", names.join(", ")),
+                },
+            })
+        }
+    }
+}
+
 impl LoadedPreset {
     /// The strings of the unison, string `i` retuned by `mistuning_cents[i]` through its tension.
     pub fn strings(&self) -> Vec<StringParams> {
@@ -507,7 +542,10 @@ impl LoadedPreset {
         crate::config::output::OutputSettings {
             rate_hz: self.output_rate_hz(),
             air_density_kg_m3: r.air_density_kg_m3,
-            distance_m: r.distance_m,
+            distance_m: match r.listener {
+                Some(_) => crate::engine::physics::soundboard::LISTENER_REFERENCE_M,
+                None => r.distance_m,
+            },
             full_scale_pa: r.full_scale_pa,
             silence_j: crate::engine::SILENCE_J,
         }

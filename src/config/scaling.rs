@@ -8,7 +8,8 @@
 //! per-note [`Preset`] bridged at its own point of the soundboard.
 
 use crate::config::preset::{
-    bridge_point_index, read_text, LoadedPreset, Preset, PresetError, StringsSection,
+    bridge_point_index, listener_index, read_text, LoadedPreset, Preset, PresetError,
+    StringsSection,
 };
 use crate::engine::physics::damper::DamperParams;
 use crate::engine::physics::string::StringParams;
@@ -50,7 +51,11 @@ pub struct Scaling {
     pub strings: StringOverrides,
     pub losses: Vec<LossAnchor>,
     pub dampers: Vec<DamperAnchor>,
+    pub voicing: Vec<VoicingAnchor>,
     pub tuning: Tuning,
+    /// The soundboard asset's listener every key radiates to (`radiation.listener`); `None`: the
+    /// base preset's.
+    pub listener: Option<String>,
 }
 
 /// What a keyboard is tuned to.
@@ -83,8 +88,11 @@ struct ScalingFile {
     strings: StringOverrides,
     #[serde(default)]
     losses: Vec<LossAnchor>,
+    listener: Option<String>,
     #[serde(default)]
     dampers: Vec<DamperAnchor>,
+    #[serde(default)]
+    voicing: Vec<VoicingAnchor>,
     /// `equal` (the default) or `stretched`; inherited from the base keyboard when absent.
     tuning: Option<Tuning>,
 }
@@ -122,6 +130,17 @@ pub struct DamperAnchor {
     pub width_m: f64,
     /// T60 of the speaking length's first mode with the damper down (s).
     pub t60_s: f64,
+}
+
+/// The hammers' voicing at one key: how much harder its felt is than the anchors' (a technician
+/// hardens the top hammers so that the treble carries), interpolated between such keys like the
+/// anchors.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VoicingAnchor {
+    pub key: usize,
+    /// Factor on the felt's stiffness `K` (Eq. 8) (-).
+    pub felt_stiffness_factor: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -271,8 +290,12 @@ impl Scaling {
                 .tuning
                 .or_else(|| base.as_ref().map(|b| b.tuning))
                 .unwrap_or_default(),
+            listener: file
+                .listener
+                .or_else(|| base.as_ref().and_then(|b| b.listener.clone())),
             losses: inherit_points(file.losses, base.as_ref().map(|b| &b.losses)),
             dampers: inherit_points(file.dampers, base.as_ref().map(|b| &b.dampers)),
+            voicing: inherit_points(file.voicing, base.as_ref().map(|b| &b.voicing)),
             base_preset: file
                 .base_preset
                 .or_else(|| base.as_ref().map(|b| b.base_preset.clone()))
@@ -297,7 +320,8 @@ impl Scaling {
             value,
             allowed: allowed.to_owned(),
         };
-        // Points along the keyboard (anchors, losses, dampers) run in increasing keys from A0 to C8.
+        // Points along the keyboard (anchors, losses, dampers, voicing) run in increasing keys
+        // from A0 to C8.
         let spans_keyboard = |keys: &[usize]| {
             keys.first() == Some(&1)
                 && keys.last() == Some(&KEYS)
@@ -332,7 +356,8 @@ impl Scaling {
                 }
             }
         }
-        // Losses and dampers are optional; given, they span the keyboard like the anchors.
+        // Losses, dampers and voicing are optional; given, they span the keyboard like the
+        // anchors.
         let optional = |field: &'static str, keys: Vec<usize>| match keys.is_empty()
             || spans_keyboard(&keys)
         {
@@ -345,6 +370,17 @@ impl Scaling {
         };
         optional("losses.key", self.losses.iter().map(|a| a.key).collect())?;
         optional("dampers.key", self.dampers.iter().map(|a| a.key).collect())?;
+        optional("voicing.key", self.voicing.iter().map(|a| a.key).collect())?;
+        for a in &self.voicing {
+            let v = a.felt_stiffness_factor;
+            if !(v.is_finite() && (0.01..=1e4).contains(&v)) {
+                return Err(bad(
+                    "voicing.felt_stiffness_factor",
+                    format!("{v} (key {})", a.key),
+                    "a number in [0.01, 10000]",
+                ));
+            }
+        }
         for a in &self.losses {
             for (field, v, hi) in [
                 ("losses.b1_per_s", a.b1_per_s, 100.0),
@@ -401,7 +437,7 @@ impl Scaling {
     }
 }
 
-/// A keyboard's own points along the keyboard (losses, dampers), or its base keyboard's where it
+/// A keyboard's own points along the keyboard (losses, dampers, voicing), or its base keyboard's where it
 /// gives none.
 fn inherit_points<A: Clone>(own: Vec<A>, base: Option<&Vec<A>>) -> Vec<A> {
     match (own.is_empty(), base) {
@@ -604,9 +640,16 @@ impl LoadedScaling {
         let h = &mut preset.hammer;
         h.mass_kg = self.interpolate(key, |a| a.hammer_mass_kg);
         h.stiffness_n_m_p = self.interpolate(key, |a| a.hammer_stiffness_n_m_p);
+        let voicing = &self.scaling.voicing;
+        if !voicing.is_empty() {
+            h.stiffness_n_m_p *= log_linear(voicing, |a| a.key, key, |a| a.felt_stiffness_factor);
+        }
         h.exponent = self.interpolate(key, |a| a.hammer_exponent);
         h.strike_ratio = self.interpolate(key, |a| a.strike_ratio);
         preset.soundboard.bridge_point = crate::board::key_name(key);
+        if let Some(listener) = &self.scaling.listener {
+            preset.radiation.listener = Some(listener.clone());
+        }
         preset.validate(&self.source)?;
         let bridge_point = bridge_point_index(
             &self.base.board,
@@ -614,10 +657,17 @@ impl LoadedScaling {
             &self.source,
             &preset.soundboard.asset,
         )?;
+        let mut board = self.base.board.clone();
+        board.heard = listener_index(
+            &board,
+            &preset.radiation.listener,
+            &self.source,
+            &preset.soundboard.asset,
+        )?;
         Ok(LoadedPreset {
             preset,
             source: self.source.clone(),
-            board: self.base.board.clone(),
+            board,
             bridge_point,
         })
     }

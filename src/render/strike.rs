@@ -96,12 +96,12 @@ impl<E: Engine> Renderer<E> {
         let ratio = (preset.output_rate_hz() * instrument.step_s())
             .recip()
             .round() as usize;
-        let r = &preset.preset.radiation;
+        let out = preset.output_settings();
         let rate_hz = 1.0 / instrument.step_s();
         Renderer {
             instrument,
             decimator: Decimator::new(ratio, CHANNELS),
-            radiation: Monopole::new(r.air_density_kg_m3, r.distance_m, rate_hz),
+            radiation: Monopole::new(out.air_density_kg_m3, out.distance_m, rate_hz),
             output_rate_hz: preset.output_rate_hz(),
             inputs: [0.0; CHANNELS],
             outputs: [0.0; CHANNELS],

@@ -49,7 +49,8 @@ pub(crate) struct SharedBoard {
     modes: Vec<usize>,
     /// Per mode (padded to whole lanes with modes that never move): `e^{lambda h}`, the weights
     /// of the modal force at the start and the end of the step, `lambda`, `omega^2`, `2 Re(to)`,
-    /// and the net volume velocity per unit modal velocity (m^3/s per sqrt(kg) m/s).
+    /// and the radiating source per unit modal velocity and displacement
+    /// ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`]).
     e: Split,
     from: Split,
     to: Split,
@@ -57,6 +58,7 @@ pub(crate) struct SharedBoard {
     omega2: Vec<f64>,
     t: Vec<f64>,
     volume: Vec<f64>,
+    volume_q: Vec<f64>,
     /// `(I - T W)^{-1}`, `m × m`, column by column (the step applies it a column at a time:
     /// [`matvec`]). `W` itself is never needed: `T W q = q - q_known`.
     inverse: Vec<f64>,
@@ -88,7 +90,8 @@ impl SharedBoard {
         let zero = c64::new(0.0, 0.0);
         let (mut e, mut from, mut to, mut lambda) =
             (vec![zero; m], vec![zero; m], vec![zero; m], vec![zero; m]);
-        let (mut omega2, mut volume) = (vec![0.0; m], vec![0.0; m]);
+        let (mut omega2, mut volume, mut volume_q) = (vec![0.0; m], vec![0.0; m], vec![0.0; m]);
+        let [by_v, by_q] = board.radiation_weights();
         for (i, &k) in modes.iter().enumerate() {
             let osc = board.oscillator(k);
             let (w, zeta) = (osc.omega_rad_s, osc.damping_ratio);
@@ -101,7 +104,8 @@ impl SharedBoard {
             to[i] = g * (w2 / h);
             lambda[i] = l;
             omega2[i] = w * w;
-            volume[i] = board.volume_m2_per_sqrt_kg[k];
+            volume[i] = by_v[k];
+            volume_q[i] = by_q[k];
         }
         let t = to.iter().map(|x| 2.0 * x.re).collect();
         let mut inverse = vec![0.0; m * m];
@@ -115,6 +119,7 @@ impl SharedBoard {
             omega2,
             t,
             volume,
+            volume_q,
             inverse,
             x: vec![0.0; 3 * m],
             y: vec![0.0; 3 * m],
@@ -196,7 +201,7 @@ impl SharedBoard {
 
     /// One step of the shared modes under the keys' known forces `known` (modal, the sum of
     /// every key's `Phi_k F_k` with `D^{n+1}` left out), solved with the keys' `Z D^{n+1}`
-    /// (module notes); returns the board's net volume velocity after it (m^3/s). The keys then
+    /// (module notes); returns the board's radiating source after it (m^3/s). The keys then
     /// read `D^{n+1}` with [`SharedBoard::at`].
     pub(crate) fn step(&self, state: &mut BoardState, known: &[f64], simd: Simd) -> f64 {
         let m = self.modes();
@@ -221,7 +226,8 @@ impl SharedBoard {
             state.z.im[k] += to.im[k] * wq;
             state.force[k] = known[k] + wq;
             let l = self.lambda[k];
-            volume += self.volume[k] * 2.0 * (l.re * state.z.re[k] - l.im * state.z.im[k]);
+            volume += self.volume[k] * 2.0 * (l.re * state.z.re[k] - l.im * state.z.im[k])
+                + self.volume_q[k] * 2.0 * state.z.re[k];
         }
         volume
     }

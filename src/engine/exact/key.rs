@@ -220,6 +220,15 @@ impl KeyModes {
             }));
         }
         let board_row = |x: &[f64]| Split::new(&modal.row(&layout.board_vector(x), true));
+        // The radiating source: the board modes' velocities and displacements, weighted.
+        let [by_v, by_q] = spec.board.radiation_weights();
+        let mut radiation = modal.row(&layout.board_vector(&by_v), true);
+        for (r, q) in radiation
+            .iter_mut()
+            .zip(modal.row(&layout.board_vector(&by_q), false))
+        {
+            *r += q;
+        }
         let bridge_input = std::array::from_fn(|d| {
             let mut w = vec![0.0; layout.n];
             for s in 0..ns {
@@ -256,7 +265,7 @@ impl KeyModes {
             strike_input,
             force_row,
             bridge_velocity_row: std::array::from_fn(|d| board_row(&point[d])),
-            volume_row: board_row(&spec.board.volume_m2_per_sqrt_kg),
+            volume_row: Split::new(&radiation),
             bridge_input,
             damper_row,
             damper_input,

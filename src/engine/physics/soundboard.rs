@@ -1,8 +1,9 @@
 //! The reduced modal soundboard (paper Eq. 4–5).
 //!
 //! The board is a set of mass-normalised modes with natural frequency, damping ratio, net volume
-//! (for radiation, DESIGN.md §1.7) and, at each named bridge point, the three mode-shape components
-//! T, L, P. The driving-point mobility at a point is
+//! (for radiation, DESIGN.md §1.7), at each named bridge point the three mode-shape components
+//! T, L, P, and at each named listener how the mode radiates there. The driving-point mobility at
+//! a point is
 //! `Y_ij(omega) = sum_k i omega phi_i,k phi_j,k / (omega_k^2 - omega^2 + 2 i zeta_k omega_k omega)`.
 
 use super::Oscillator;
@@ -17,7 +18,26 @@ pub struct SoundboardModes {
     pub volume_m2_per_sqrt_kg: Vec<f64>,
     /// Bridge points, each with its mode shapes.
     pub points: Vec<BridgePoint>,
+    /// Listeners over the board, each with every mode's Rayleigh integral there (may be none).
+    pub listeners: Vec<Listener>,
+    /// The listener the engines radiate to ([`SoundboardModes::radiation_weights`]); `None`: the
+    /// monopole of the net volume velocity (the paper's board).
+    pub heard: Option<usize>,
 }
+
+/// How each mode radiates to one listener over the board as a baffled plate: its Rayleigh
+/// integral `D_m = ∫ phi_m(x) e^{-i k (R - R0)} / R dA` at the mode's own frequency
+/// (`crate::board::radiation`), real and imaginary parts (m/sqrt(kg)).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Listener {
+    pub name: String,
+    pub rayleigh_re: Vec<f64>,
+    pub rayleigh_im: Vec<f64>,
+}
+
+/// The distance (m) at which the radiated source `Y` of a listener is an equivalent monopole:
+/// `p = rho0 / (4 pi LISTENER_REFERENCE_M) dY/dt` ([`SoundboardModes::radiation_weights`]).
+pub const LISTENER_REFERENCE_M: f64 = 1.0;
 
 /// Mode-shape components at one bridge point (Eq. 5: `Phi_b = [phi_T; phi_L; phi_P]`).
 #[derive(Debug, Clone, PartialEq)]
@@ -42,6 +62,53 @@ impl SoundboardModes {
 
     pub fn is_empty(&self) -> bool {
         self.freq_hz.is_empty()
+    }
+
+    /// What the engines read as the board's radiating source `Y` (m^3/s): per mode, the weight
+    /// of its modal velocity and of its modal displacement. Without a listener, the net volume
+    /// velocity (weights `V_m`, 0), whose pressure at `r` is `rho0 / (4 pi r) dY/dt`. With one,
+    /// the Rayleigh integral (`p = rho0 / (2 pi) sum_m D_m qdd_m`) as a monopole at
+    /// [`LISTENER_REFERENCE_M`]: `2 r_ref (Re D_m qdot_m - omega_m Im D_m q_m)`, whose phasor at
+    /// the mode's frequency is `2 r_ref D_m Qdot_m`.
+    pub fn radiation_weights(&self) -> [Vec<f64>; 2] {
+        match self.heard.and_then(|l| self.listeners.get(l)) {
+            None => [self.volume_m2_per_sqrt_kg.clone(), vec![0.0; self.len()]],
+            Some(l) => {
+                let r2 = 2.0 * LISTENER_REFERENCE_M;
+                [
+                    l.rayleigh_re.iter().map(|d| r2 * d).collect(),
+                    (0..self.len())
+                        .map(|k| -r2 * 2.0 * PI * self.freq_hz[k] * l.rayleigh_im[k])
+                        .collect(),
+                ]
+            }
+        }
+    }
+
+    /// The index of the listener called `name`.
+    pub fn listener(&self, name: &str) -> Option<usize> {
+        self.listeners.iter().position(|l| l.name == name)
+    }
+
+    /// Keep the modes `keep` says (the reduction; tests that cut the board).
+    pub fn retain(&mut self, keep: impl Fn(usize) -> bool) {
+        let pick = |v: &mut Vec<f64>| {
+            let mut k = 0;
+            v.retain(|_| {
+                k += 1;
+                keep(k - 1)
+            });
+        };
+        pick(&mut self.freq_hz);
+        pick(&mut self.damping_ratio);
+        pick(&mut self.volume_m2_per_sqrt_kg);
+        for p in &mut self.points {
+            p.shape.iter_mut().for_each(pick);
+        }
+        for l in &mut self.listeners {
+            pick(&mut l.rayleigh_re);
+            pick(&mut l.rayleigh_im);
+        }
     }
 
     /// The bridge point called `name`.
@@ -71,5 +138,51 @@ impl SoundboardModes {
             }
         }
         y
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Listener, SoundboardModes, LISTENER_REFERENCE_M};
+    use std::f64::consts::PI;
+
+    /// A mode moving as `q = cos(omega t)` radiates `p = rho0 / (2 pi) Re(D qdd)` to a listener
+    /// (the Rayleigh integral with its phase): the weights on `qdot` and `q`, heard as a monopole
+    /// at the reference distance, give exactly that at every instant.
+    #[test]
+    fn the_weights_radiate_the_rayleigh_integral_with_its_phase() {
+        let (f_hz, re, im) = (440.0, 3e-3, -2e-3);
+        let board = SoundboardModes {
+            freq_hz: vec![f_hz],
+            damping_ratio: vec![0.0],
+            volume_m2_per_sqrt_kg: vec![1e-2],
+            points: vec![],
+            listeners: vec![Listener {
+                name: "above".into(),
+                rayleigh_re: vec![re],
+                rayleigh_im: vec![im],
+            }],
+            heard: Some(0),
+        };
+        let [by_v, by_q] = board.radiation_weights();
+        let (w, rho) = (2.0 * PI * f_hz, 1.2);
+        let mut worst: f64 = 0.0;
+        for i in 0..100 {
+            let t = i as f64 * 3.7e-5;
+            // dY/dt of Y = a qdot + b q, heard at the reference distance.
+            let dy = by_v[0] * (-w * w * (w * t).cos()) + by_q[0] * (-w * (w * t).sin());
+            let heard = rho / (4.0 * PI * LISTENER_REFERENCE_M) * dy;
+            // rho0 / (2 pi) Re(D (-omega^2) e^{i omega t}).
+            let rayleigh = rho / (2.0 * PI) * (-w * w) * (re * (w * t).cos() - im * (w * t).sin());
+            worst = worst.max((heard - rayleigh).abs() / (rho / (2.0 * PI) * w * w * re.hypot(im)));
+        }
+        println!("a mode heard through its weights vs rho0/(2 pi) Re(D qdd): worst {worst:.1e} of the amplitude");
+        assert!(worst < 1e-12);
+        // Without a listener, the monopole of the net volume velocity.
+        let monopole = SoundboardModes {
+            heard: None,
+            ..board
+        };
+        assert_eq!(monopole.radiation_weights(), [vec![1e-2], vec![0.0]]);
     }
 }

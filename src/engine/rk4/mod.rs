@@ -52,7 +52,9 @@ struct Model<T> {
     bridge_shape: Vec<T>,
     /// The voices' keys' `static_shape`.
     static_shape: Vec<T>,
-    board_volume: Vec<T>,
+    /// The board's radiating source per unit modal velocity and displacement
+    /// ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`]).
+    board_radiation: [Vec<T>; 2],
     h: f64,
 }
 
@@ -186,7 +188,7 @@ impl<T: Real> Rk4Pool<T> {
             damp,
             bridge_shape,
             static_shape,
-            board_volume: cast(&first.board.volume_m2_per_sqrt_kg),
+            board_radiation: first.board.radiation_weights().map(|w| cast(&w)),
             h,
         };
         let max_rank = model.keys.iter().map(|k| k.duplex_rank).max().unwrap_or(0);

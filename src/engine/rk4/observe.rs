@@ -52,9 +52,13 @@ impl<T: Real> Rk4Pool<T> {
         obs
     }
 
-    /// Net volume velocity of the board (m^3/s), the source of the radiated sound.
+    /// The board's radiating source (m^3/s): its net volume velocity, or its equivalent at a
+    /// listener ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`]).
     pub fn volume_velocity_m3_s(&self) -> f64 {
-        T::dot_wide::<false>(&self.model.board_volume, &self.v[self.model.board.clone()])
+        let [by_v, by_q] = &self.model.board_radiation;
+        let board = self.model.board.clone();
+        T::dot_wide::<false>(by_v, &self.v[board.clone()])
+            + T::dot_wide::<false>(by_q, &self.q[board])
     }
 
     /// Floating-point operations of one RK4 step in the current state (active voices, hammers,
