@@ -49,6 +49,11 @@ fn malformed_assets_are_rejected_with_file_line_and_field() {
     assert!(
         e.contains("bad_asset_points_after_rows.txt:6:") && e.contains("header `points:` repeated")
     );
+    let e = asset_error("bad_asset_listeners.txt");
+    assert!(
+        e.contains("bad_asset_listeners.txt:5:")
+            && e.contains("`listeners:` must come before `columns:`")
+    );
     let e = asset_error("does_not_exist.txt");
     assert!(e.contains("does_not_exist.txt") && e.contains("cannot read"));
 }

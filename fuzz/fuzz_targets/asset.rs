@@ -11,6 +11,10 @@ fuzz_target!(|data: &[u8]| {
                 .points
                 .iter()
                 .all(|p| p.shape.iter().flatten().all(|x| x.is_finite())));
+            assert!(board.listeners.iter().all(|l| {
+                l.rayleigh_re.len() == board.freq_hz.len()
+                    && l.rayleigh_re.iter().chain(&l.rayleigh_im).all(|x| x.is_finite())
+            }));
         }
     }
 });

@@ -3,7 +3,8 @@
 //! segment's first resonance, which it is there to mute.
 
 use super::modes::{linear_modes, LinearMode, ModesError};
-use super::partials::{KeyPartials, STRING_SHARE};
+use super::partials::KeyPartials;
+use crate::engine::tuning::STRING_SHARE;
 use crate::engine::UnisonSpec;
 
 /// Share of a string mode's transverse kinetic energy on the duplex segment from which it is a

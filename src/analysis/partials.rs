@@ -8,12 +8,8 @@
 //! the first partial alone does not move it.
 
 use super::modes::{linear_modes, LinearMode, ModesError};
-use crate::engine::tuning::{stiff_string_fit, stiff_string_hz, PARTIAL_WINDOW};
+use crate::engine::tuning::{stiff_string_fit, stiff_string_hz, PARTIAL_WINDOW, STRING_SHARE};
 use crate::engine::UnisonSpec;
-
-/// Share of a mode's energy in the strings' transverse (T) motion from which it counts as a
-/// string mode of a partial (a mode shared with the board, T 50 % and board 43 %, does not).
-pub const STRING_SHARE: f64 = 0.6;
 
 /// Partial `n` of a key.
 #[derive(Debug, Clone, Copy, PartialEq)]

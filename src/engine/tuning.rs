@@ -22,11 +22,17 @@ use std::f64::consts::PI;
 /// puts it (also the analysis's window: [`crate::analysis::partials`]).
 pub const PARTIAL_WINDOW: f64 = 0.3;
 
-/// The coupled partials `1..=count` (Hz) nearest in character to the string's: for each `n`, of
-/// the eigenvalues within [`PARTIAL_WINDOW`] of the spacing `expected_hz(1)` of `expected_hz(n)`,
-/// the one whose mode has the largest share of its motion in the string, if that is at least
-/// half (none where no string mode is there: a board mode's frequency would pull the tuning
-/// anywhere). `board` is `None` for a rigid bridge.
+/// Share of a mode's energy in the string's transverse motion from which it counts as a string
+/// mode of a partial (also the analysis's: [`crate::analysis::partials`]; a mode shared with the
+/// board, string 50 % and board 43 %, does not).
+pub const STRING_SHARE: f64 = 0.6;
+
+/// The coupled partials `1..=count` (Hz) as a listener meets them: for each `n`, the eigenvalues
+/// within [`PARTIAL_WINDOW`] of the spacing `expected_hz(1)` of `expected_hz(n)` whose modes hold
+/// at least [`STRING_SHARE`] of their motion in the string, averaged weighted by that share (the
+/// analysis's partial, so that a key is tuned as it is measured); none where no string mode is
+/// there (a board mode's frequency would pull the tuning anywhere). `board` is `None` for a
+/// rigid bridge.
 pub fn bridged_partials_hz(
     string: &StringParams,
     modes: usize,
@@ -68,21 +74,27 @@ pub fn bridged_partials_hz(
     (1..=count)
         .filter_map(|p| {
             let centre = expected_hz(p);
-            (0..n)
+            let (weight, sum) = (0..n)
                 .filter(|&m| (freq_hz[m] - centre).abs() <= PARTIAL_WINDOW * spacing)
-                .max_by(|&a, &b| share(a).total_cmp(&share(b)))
-                .filter(|&m| share(m) >= 0.5)
-                .map(|m| (p, freq_hz[m]))
+                .filter(|&m| share(m) >= STRING_SHARE)
+                .fold((0.0, 0.0), |(w, f), m| {
+                    (w + share(m), f + share(m) * freq_hz[m])
+                });
+            (weight > 0.0).then(|| (p, sum / weight))
         })
         .collect()
 }
 
 /// Eq. 2's law fitted to partials 2–8 of `partials` (`(n, Hz)`): `f_n^2 = a n^2 + b n^4` with
 /// `a = f0^2`, `b = f0^2 B`, each equation divided by `f_n^2` so that every partial weighs by its
-/// error in cents. Returns the law's first partial `f0 sqrt(1 + B)` (Hz), its `B`, and how many
-/// partials it was fitted to; from one or two, `B` is `nominal_b` and only `f0` is fitted.
-/// `None` without any of partials 2–8. What a tuner hears: a board mode that pulls the first
-/// partial alone does not move it.
+/// error in cents. A partial that a board mode pulls off the law counts little, as a tuner's ear
+/// discounts it: the fit is reweighted ([`OUTLIER_CENTS`], Cauchy weights `1 / (1 + (r/c)^2)` of
+/// each partial's distance `r` from the law, until they settle), which is continuous in the
+/// partials, so that a small change of tension never jumps the pitch. Returns the law's first
+/// partial `f0 sqrt(1 + B)` (Hz), its `B`, and how many partials it rests on (weight at least
+/// one half); from one or two, `B` is `nominal_b` and only `f0` is fitted. `None` without any of
+/// partials 2–8. What a tuner hears: a board mode that pulls the first partial alone does not
+/// move it.
 pub fn stiff_string_fit(partials: &[(usize, f64)], nominal_b: f64) -> Option<(f64, f64, usize)> {
     let used: Vec<(f64, f64)> = partials
         .iter()
@@ -92,22 +104,7 @@ pub fn stiff_string_fit(partials: &[(usize, f64)], nominal_b: f64) -> Option<(f6
     if used.is_empty() {
         return None;
     }
-    let (a, b) = if used.len() >= 3 {
-        // Normal equations of rows (n^2 / f^2, n^4 / f^2) = 1.
-        let (mut s11, mut s12, mut s22, mut r1, mut r2) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for &(n, f) in &used {
-            let (x1, x2) = (n * n / (f * f), n.powi(4) / (f * f));
-            (s11, s12, s22, r1, r2) = (
-                s11 + x1 * x1,
-                s12 + x1 * x2,
-                s22 + x2 * x2,
-                r1 + x1,
-                r2 + x2,
-            );
-        }
-        let det = s11 * s22 - s12 * s12;
-        ((r1 * s22 - r2 * s12) / det, (s11 * r2 - s12 * r1) / det)
-    } else {
+    if used.len() < 3 {
         // f0 from each partial with B given, averaged in cents.
         let log_f0 = used
             .iter()
@@ -115,10 +112,47 @@ pub fn stiff_string_fit(partials: &[(usize, f64)], nominal_b: f64) -> Option<(f6
             .sum::<f64>()
             / used.len() as f64;
         let f0_sq = (2.0 * log_f0).exp();
-        (f0_sq, f0_sq * nominal_b)
-    };
-    (a > 0.0).then(|| ((a + b).sqrt(), b / a, used.len()))
+        return Some((
+            f0_sq.sqrt() * (1.0 + nominal_b).sqrt(),
+            nominal_b,
+            used.len(),
+        ));
+    }
+    let mut weight = vec![1.0; used.len()];
+    let (mut a, mut b) = (0.0, 0.0);
+    for _ in 0..50 {
+        // Weighted normal equations of rows (n^2 / f^2, n^4 / f^2) = 1.
+        let (mut s11, mut s12, mut s22, mut r1, mut r2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (&(n, f), w) in used.iter().zip(&weight) {
+            let (x1, x2) = (n * n / (f * f), n.powi(4) / (f * f));
+            (s11, s12, s22, r1, r2) = (
+                s11 + w * x1 * x1,
+                s12 + w * x1 * x2,
+                s22 + w * x2 * x2,
+                r1 + w * x1,
+                r2 + w * x2,
+            );
+        }
+        let det = s11 * s22 - s12 * s12;
+        (a, b) = ((r1 * s22 - r2 * s12) / det, (s11 * r2 - s12 * r1) / det);
+        let mut moved: f64 = 0.0;
+        for (&(n, f), w) in used.iter().zip(weight.iter_mut()) {
+            let cents = 600.0 * (f * f / (a * n * n + b * n.powi(4))).log2();
+            let next = 1.0 / (1.0 + (cents / OUTLIER_CENTS).powi(2));
+            moved = moved.max((next - *w).abs());
+            *w = if next.is_finite() { next } else { 0.0 };
+        }
+        if moved < 1e-9 {
+            break;
+        }
+    }
+    let counted = weight.iter().filter(|&&w| w >= 0.5).count();
+    (a > 0.0 && a.is_finite() && b.is_finite()).then(|| ((a + b).sqrt(), b / a, counted))
 }
+
+/// The scale of a tuner's fit's weights (cents): a partial this far from the law weighs one half,
+/// one pulled 15 cents by a board mode 1/26.
+pub const OUTLIER_CENTS: f64 = 3.0;
 
 /// The stiff string's partials with the first at `target_hz` and inharmonicity `b` (Eq. 2).
 pub fn stiff_string_hz(target_hz: f64, b: f64) -> impl Fn(usize) -> f64 {
@@ -151,4 +185,38 @@ pub fn bridged_pitch_hz(
         .map(|(f1, _, _)| f1)
         .or_else(|| found.iter().find(|p| p.0 == 1).map(|p| p.1))
         .unwrap_or(target_hz)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{stiff_string_fit, stiff_string_hz};
+
+    /// Partials 2–8 of a stiff string (E1-like: 41.1 Hz, B = 1.5e-4), one of them pulled by a
+    /// board mode: the fit's pitch stays on the string's as the pull grows from 0 to 30 cents,
+    /// and moves with it continuously (no jump as a partial loses its weight).
+    #[test]
+    fn a_pulled_partial_does_not_pull_the_pitch() {
+        let (f1, b) = (41.1, 1.5e-4);
+        let law = stiff_string_hz(f1, b);
+        let pitch = |pull_cents: f64| {
+            let partials: Vec<(usize, f64)> = (2..=8)
+                .map(|n| {
+                    let pull = if n == 2 { pull_cents } else { 0.0 };
+                    (n, law(n) * 2f64.powf(pull / 1200.0))
+                })
+                .collect();
+            let (f, _, counted) = stiff_string_fit(&partials, b).unwrap();
+            (1200.0 * (f / f1).log2(), counted)
+        };
+        let (mut worst, mut jump, mut last): (f64, f64, f64) = (0.0, 0.0, 0.0);
+        for i in 0..=300 {
+            let (cents, _) = pitch(i as f64 * 0.1);
+            worst = worst.max(cents.abs());
+            jump = jump.max((cents - last).abs());
+            last = cents;
+        }
+        let (at_pull, counted) = pitch(26.7);
+        println!("partial 2 pulled 0–30 cents: pitch at most {worst:.2} cents off, steps of 0.1 cent move it at most {jump:.3}; pulled 26.7 (E1's): {at_pull:+.2} cents on {counted} partials");
+        assert!(worst < 2.0 && jump < 0.1 && at_pull.abs() < 0.5 && counted == 6);
+    }
 }
