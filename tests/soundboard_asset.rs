@@ -23,6 +23,22 @@ fn grand() -> BoardSpec {
     .unwrap()
 }
 
+/// The grand board's plate alone, simply supported on every edge (no ribs, bridges or
+/// listeners), on `terms` × `terms` basis functions, every mode from 1 Hz to 20 kHz kept: the plate
+/// whose modes are known in closed form.
+fn bare_simply_supported(terms: usize) -> BoardSpec {
+    let mut spec = grand();
+    spec.plate.edges = Edges::SimplySupported;
+    spec.ribs = None;
+    spec.bridges.clear();
+    spec.listeners.clear();
+    spec.basis.terms_x = terms;
+    spec.basis.terms_y = terms;
+    spec.reduction.f_min_hz = 1.0;
+    spec.reduction.f_max_hz = 2e4;
+    spec
+}
+
 /// The grand board solved and reduced once for the tests below, with the asset text it gives.
 struct Generated {
     spec: BoardSpec,
@@ -160,14 +176,7 @@ fn driving_point_mobility_is_an_infinite_plates() {
 
 #[test]
 fn simply_supported_bare_plate_matches_the_closed_form() {
-    let mut spec = grand();
-    spec.plate.edges = Edges::SimplySupported;
-    spec.ribs = None;
-    spec.bridges.clear();
-    spec.basis.terms_x = 12;
-    spec.basis.terms_y = 12;
-    spec.reduction.f_min_hz = 1.0;
-    spec.reduction.f_max_hz = 2e4;
+    let spec = bare_simply_supported(12);
     let solved = spec.solve().unwrap();
     // Leissa §11.3 from Table 1's raw values, typed here (not the engine's rigidities): modes
     // (m, n), `f = pi/2 sqrt((D1 k^4 + 2 (nu12 D2 + 2 D66) k^2 l^2 + D2 l^4) / (rho h))` with
@@ -301,15 +310,7 @@ fn asset_loads_with_every_key() {
 fn a_simply_supported_modes_radiation_is_the_closed_form_far_field() {
     use faer::c64;
     use unacorda::board::radiation::{BoardGrid, GRID_SPACING_M, SOUND_SPEED_M_S};
-    let mut spec = grand();
-    spec.plate.edges = Edges::SimplySupported;
-    spec.ribs = None;
-    spec.bridges.clear();
-    spec.listeners.clear();
-    spec.basis.terms_x = 8;
-    spec.basis.terms_y = 8;
-    spec.reduction.f_min_hz = 1.0;
-    spec.reduction.f_max_hz = 2e4;
+    let spec = bare_simply_supported(8);
     let solved = spec.solve().unwrap();
     let grid = BoardGrid::new(&spec, &solved, GRID_SPACING_M);
     let (a, b, rho_h) = (1.37f64, 1.0f64, 488.0 * 0.008);
