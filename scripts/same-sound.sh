@@ -2,7 +2,7 @@
 # Behaviour unchanged, sample for sample: render a fixed set of sounds and compare their SHA-256
 # with the sums recorded in tests/data/same-sound.sha256 (a refactoring must leave every sample as
 # it was). The set: c2 normal and una corda on both integrators (4 s), keys A0, C4 and C7 (RK4,
-# 4 s), and the demo MIDI file on both integrators.
+# 4 s, mono) and C4 in stereo, and the demo MIDI file on both integrators (mono) and in stereo.
 #   bash scripts/same-sound.sh          render and compare (exit 1 and name the files that differ)
 #   bash scripts/same-sound.sh record   render and record the sums (after an intended change)
 # The sums hold for one build on one kind of CPU (the AVX2 + FMA path here): floating point is
@@ -18,11 +18,13 @@ render() { "$bin" render --offline "$@" >/dev/null 2>&1; }
 for integrator in rk4 exact; do
   render --preset c2 --seconds 4 --integrator "$integrator" --out "$out/c2_normal_$integrator.wav"
   render --preset c2 --una-corda --seconds 4 --integrator "$integrator" --out "$out/c2_una_corda_$integrator.wav"
-  render --midi assets/midi/demo.mid --integrator "$integrator" --out "$out/demo_$integrator.wav"
+  render --midi assets/midi/demo.mid --mono --integrator "$integrator" --out "$out/demo_$integrator.wav"
 done
+render --midi assets/midi/demo.mid --out "$out/demo_exact_stereo.wav"
 for key in A0 C4 C7; do
-  render --key "$key" --seconds 4 --out "$out/key_$key.wav"
+  render --key "$key" --mono --seconds 4 --out "$out/key_$key.wav"
 done
+render --key C4 --seconds 4 --out "$out/key_C4_stereo.wav"
 (cd "$out" && sha256sum -- *.wav) >"$out/sums"
 if [ "${1:-check}" = record ]; then
   cp "$out/sums" "$sums"

@@ -140,7 +140,7 @@ pub fn exact_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> (VoiceSpeed
     for _ in 0..(0.01 * rate_hz) as usize {
         voice.step();
     }
-    let mut block = [0.0; 64];
+    let mut block = [[0.0; 2]; 64];
     let blocks = ((seconds * rate_hz).max(1.0) as usize).div_ceil(block.len());
     let steps = blocks * block.len();
     let flops = voice.flops_per_step() * steps as f64;

@@ -106,6 +106,15 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
             && e.contains("`radiation.listener` = `balcony`")
             && e.contains("above, treble, bass")
     );
+    // So is a stereo pair naming one.
+    let e = refusal("bad_keyboard_stereo.toml", |path| {
+        Scaling::resolve(path).and_then(|s| s.key_preset(40))
+    });
+    assert!(
+        e.contains("bad_keyboard_stereo.toml")
+            && e.contains("`radiation.stereo (right)` = `gallery`")
+            && e.contains("above, treble, bass")
+    );
     let e = keyboard_error("bad_keyboard_no_layout.toml");
     assert!(e.contains("`layout`") && e.contains("base_keyboard"));
     let e = keyboard_error("bad_keyboard_modes.toml");

@@ -322,7 +322,7 @@ fn interleave(case: &Case) {
     let alternates = Alternates::default();
     let runs = [false, true].map(|alternating| {
         let mut piano = case.piano.clone();
-        let mut out = vec![0.0; 64];
+        let mut out = vec![[0.0; 2]; 64];
         let mut all = Vec::new();
         let mut script = case.script.iter().peekable();
         for block in 0..case.blocks as u64 {
@@ -331,7 +331,7 @@ fn interleave(case: &Case) {
             }
             let pair = alternating.then_some(&alternates as &dyn Pair);
             piano.instrument.run(&mut out, pair);
-            all.extend_from_slice(&out);
+            all.extend_from_slice(&out.concat());
         }
         all
     });

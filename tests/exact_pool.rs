@@ -40,7 +40,7 @@ fn forces<E: VoicePool>(keys: &[&str], seconds: f64) -> (Vec<Vec<f64>>, f64) {
         },
     );
     let per = (1.0 / (rate * pool.step_s())).round() as usize;
-    let mut scratch = vec![0.0; per];
+    let mut scratch = vec![[0.0; 2]; per];
     let mut out = vec![Vec::new(); keys.len()];
     for _ in 0..(seconds * rate) as usize {
         pool.run(&mut scratch, None);
@@ -104,7 +104,7 @@ fn every_key(up_s: f64, down_s: f64) -> Vec<f64> {
         );
     }
     let mut energy = Vec::new();
-    let mut block = vec![0.0; (0.05 * rate) as usize];
+    let mut block = vec![[0.0; 2]; (0.05 * rate) as usize];
     for b in 0..((up_s + down_s) / 0.05).round() as usize {
         if b == (up_s / 0.05).round() as usize {
             (0..KEYS).for_each(|k| pool.set_damper_voice(k, true));

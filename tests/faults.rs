@@ -54,7 +54,10 @@ fn report(what: &str, out: &Output) -> String {
 /// Seconds of sound in a WAV that hound reads completely, or a panic naming what is wrong.
 fn valid_wav_seconds(path: &Path) -> f64 {
     let reader = hound::WavReader::open(path).expect("a valid WAV header");
-    let rate = f64::from(reader.spec().sample_rate);
+    let (rate, channels) = (
+        f64::from(reader.spec().sample_rate),
+        usize::from(reader.spec().channels),
+    );
     let n = reader.len() as usize;
     let samples: Vec<f32> = reader
         .into_samples::<f32>()
@@ -62,7 +65,8 @@ fn valid_wav_seconds(path: &Path) -> f64 {
         .expect("every sample the header announces is there");
     assert_eq!(samples.len(), n);
     assert!(samples.iter().all(|s| s.is_finite() && s.abs() <= 1.0));
-    n as f64 / rate
+    assert_eq!(n % channels, 0, "whole frames");
+    (n / channels) as f64 / rate
 }
 
 /// The number in `text` just before `unit` after `after` (e.g. "first 1.23 s").
@@ -130,9 +134,10 @@ fn ctrl_c_during_a_render_leaves_a_valid_wav_and_says_how_much() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // Wait until more than a second of sound has reached the file, then interrupt.
+    // Wait until more than a second of sound has reached the file (the concert keyboard in
+    // stereo: 8 bytes a frame), then interrupt.
     let t = Instant::now();
-    while std::fs::metadata(&wav).map_or(0, |m| m.len()) < 48_000 * 4 {
+    while std::fs::metadata(&wav).map_or(0, |m| m.len()) < 48_000 * 8 {
         assert!(
             t.elapsed() < Duration::from_secs(120),
             "the render wrote nothing"

@@ -102,6 +102,10 @@ fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
         // Heard as the paper's monopole, and at the listener above the board.
         assert_eq!(p.radiation.listener, None, "key {k}");
         assert_eq!(c.radiation.listener.as_deref(), Some("above"), "key {k}");
+        // In stereo by the pair over the two ends of the bridges, bass on the left.
+        assert_eq!(p.radiation.stereo, None, "key {k}");
+        let pair = c.radiation.stereo.clone().map(|lr| lr.map(String::from));
+        assert_eq!(pair, Some(["bass".into(), "treble".into()]), "key {k}");
         // The same keys have dampers; the paper's is c2's point felt on every key, the concert's
         // a felt with two contact points and a coefficient of its own (tests/damper.rs).
         assert_eq!(p.damper.present, c.damper.present, "key {k}");
@@ -223,12 +227,15 @@ fn strike_every_key<E: VoicePool>() -> (f64, usize) {
                 una_corda: false,
             },
         );
-        let mut out = [0.0];
+        let mut out = [[0.0; 2]];
         let mut last = None;
         for _ in 0..(0.02 / pool.step_s()) as usize {
             pool.run(&mut out, None);
             let e = pool.mechanical_energy_j();
-            assert!(e.is_finite() && out[0].is_finite(), "key {k}: not finite");
+            assert!(
+                e.is_finite() && out[0].iter().all(|x| x.is_finite()),
+                "key {k}: not finite"
+            );
             if pool.is_driven() {
                 continue;
             }
@@ -323,10 +330,10 @@ fn keys_prepared_on_several_threads_land_in_order() {
             Policy::assign(pool, 0, bank);
             Policy::strike_voice(pool, 0, strike);
         }
-        let (mut a, mut b) = (vec![0.0; 200], vec![0.0; 200]);
+        let (mut a, mut b) = (vec![[0.0; 2]; 200], vec![[0.0; 2]; 200]);
         VoicePool::run(&mut sequential, &mut a, None);
         VoicePool::run(&mut threaded, &mut b, None);
-        assert!(a.iter().any(|&x| x != 0.0), "key {key} sounds");
+        assert!(a.iter().any(|&x| x[0] != 0.0), "key {key} sounds");
         assert_eq!(a, b, "key {key} (bank index {bank})");
     }
     println!(

@@ -21,9 +21,9 @@ fn render(piano: &Piano<ExactPool>) -> Vec<f64> {
             },
         );
     }
-    let mut out = vec![0.0; 4800];
+    let mut out = vec![[0.0; 2]; 4800];
     pool.run(&mut out, None);
-    out
+    out.concat()
 }
 
 #[test]

@@ -281,28 +281,37 @@ fn cli_renders_a_midi_file() {
     let dir = tempfile::tempdir().unwrap();
     let (mid, wav) = (dir.path().join("two.mid"), dir.path().join("two.wav"));
     smf.save(&mid).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_unacorda"))
-        .args([
-            "render",
-            "--offline",
-            "--midi",
-            mid.to_str().unwrap(),
-            "--tail",
-            "0.1",
-            "--out",
-            wav.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    println!("{}", stderr.trim());
-    assert!(out.status.success() && stderr.contains("on 2 keys"));
-    let samples: Vec<f32> = hound::WavReader::open(&wav)
-        .unwrap()
-        .into_samples::<f32>()
-        .map(Result::unwrap)
-        .collect();
-    // Last event at 192 ticks = 0.2 s (120 bpm), plus the 0.1 s tail.
-    assert_eq!(samples.len(), (0.3 * 48_000.0) as usize);
-    assert!(samples.iter().all(|s| s.is_finite()) && samples.iter().any(|s| s.abs() > 1e-3));
+    // The concert keyboard in stereo (its pair of listeners), and with --mono at its listener.
+    for (mono, channels) in [(false, 2), (true, 1)] {
+        let mut args = vec!["render", "--offline", "--midi", mid.to_str().unwrap()];
+        args.extend(["--tail", "0.1", "--out", wav.to_str().unwrap()]);
+        if mono {
+            args.push("--mono");
+        }
+        let out = Command::new(env!("CARGO_BIN_EXE_unacorda"))
+            .args(&args)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        println!("{}", stderr.trim());
+        let sound = if mono { "mono" } else { "stereo" };
+        assert!(out.status.success() && stderr.contains("on 2 keys") && stderr.contains(sound));
+        let reader = hound::WavReader::open(&wav).unwrap();
+        assert_eq!(reader.spec().channels, channels);
+        let samples: Vec<f32> = reader.into_samples::<f32>().map(Result::unwrap).collect();
+        // Last event at 192 ticks = 0.2 s (120 bpm), plus the 0.1 s tail.
+        assert_eq!(
+            samples.len(),
+            (0.3 * 48_000.0) as usize * usize::from(channels)
+        );
+        assert!(samples.iter().all(|s| s.is_finite()) && samples.iter().any(|s| s.abs() > 1e-3));
+        if !mono {
+            let differ = samples.chunks(2).filter(|lr| lr[0] != lr[1]).count();
+            println!(
+                "stereo: the channels differ in {differ} of {} frames",
+                samples.len() / 2
+            );
+            assert!(differ > samples.len() / 4);
+        }
+    }
 }

@@ -28,7 +28,7 @@ pub fn one_step_map<E: VoicePool>(pool: &E) -> (Mat<f64>, LinearState) {
     let mut probe = pool.clone();
     let mut map = Mat::<f64>::zeros(n, n);
     let mut unit = vec![0.0; n];
-    let mut out = [0.0];
+    let mut out = [[0.0; 2]];
     for j in 0..n {
         unit[j] = 1.0;
         probe.set_linear_state(&unit);

@@ -25,6 +25,7 @@ pub const PARTIAL_MARGIN_DB: f64 = 6.0;
 
 /// The sound pressure (Pa) at the listener of `preset`'s key struck at `velocity_m_s` on the exact
 /// engine at the output rate, for `seconds`, the key released after `release_s` (`None`: held).
+/// Heard in mono, at `radiation.listener` (a measuring microphone), the stereo pair set aside.
 pub fn pressure(
     preset: &LoadedPreset,
     velocity_m_s: f64,
@@ -35,8 +36,10 @@ pub fn pressure(
         velocity_m_s,
         una_corda: false,
     };
+    let mut preset = preset.clone();
+    preset.make_mono();
     let rec = simulate_with(
-        preset,
+        &preset,
         Integrator::Exact,
         strike,
         release_s,

@@ -1,8 +1,8 @@
 //! The audio thread's work, the same for live play and offline render: take the piano events due
 //! in this block from a bounded lock-free queue (each at its own output frame), take control
 //! commands from a channel, advance the shared-soundboard instrument at the internal rate, turn the
-//! board's volume velocity into sound pressure (a monopole, DESIGN.md §1.7) and decimate it to the
-//! output rate. [`Synth::process`] never allocates, locks, prints or blocks (a test runs it under
+//! board's radiating source of each channel (left, right) into sound pressure (DESIGN.md §1.7) and
+//! decimate it to the output rate. [`Synth::process`] never allocates, locks, prints or blocks (a test runs it under
 //! `assert_no_alloc`), and runs with denormals flushed to zero. Nothing non-finite or outside
 //! [-1, 1] leaves it: a voice that blows up is reset within the block, and a soft clipper bounds
 //! the output.
@@ -12,8 +12,7 @@ use super::helper::Helper;
 use super::radiate::{soft_clip, Monopole, KNEE};
 use super::Decimator;
 use crate::config::output::OutputSettings;
-use crate::engine::Pair;
-use crate::engine::VoicePool;
+use crate::engine::{Pair, VoicePool, CHANNELS};
 use crate::midi::Event;
 use crate::play::Piano;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
@@ -91,13 +90,13 @@ pub struct Synth<E: VoicePool> {
     clock: Arc<Clock>,
     stats: Arc<Stats>,
     decimator: Decimator,
-    radiation: Monopole,
+    radiation: [Monopole; CHANNELS],
     scale: f64,
     silence_j: f64,
     frame: u64,
     running: bool,
-    /// The board's volume velocity after each step of the current run of steps.
-    volume: Vec<f64>,
+    /// The board's radiating source of each channel after each step of the current run of steps.
+    volume: Vec<[f64; CHANNELS]>,
     helper: Option<Helper>,
     /// The growth guard: the pool's energy when nothing last began to drive it, which voices were
     /// sounding then (a hash), and the blocks in a row its energy has stood above that.
@@ -158,13 +157,15 @@ impl<E: VoicePool> Synth<E> {
             returned: returned_tx,
             clock: clock.clone(),
             stats: stats.clone(),
-            decimator: Decimator::new(ratio as usize, 1),
-            radiation: Monopole::new(out.air_density_kg_m3, out.distance_m, internal_rate_hz),
+            decimator: Decimator::new(ratio as usize, CHANNELS),
+            radiation: std::array::from_fn(|_| {
+                Monopole::new(out.air_density_kg_m3, out.distance_m, internal_rate_hz)
+            }),
             scale: 1.0 / out.full_scale_pa,
             silence_j: out.silence_j,
             frame: 0,
             running: true,
-            volume: vec![0.0; RUN_FRAMES * ratio as usize],
+            volume: vec![[0.0; CHANNELS]; RUN_FRAMES * ratio as usize],
             helper: None,
             reference_j: 0.0,
             sounding: 0,
@@ -201,7 +202,8 @@ impl<E: VoicePool> Synth<E> {
         self.frame
     }
 
-    /// Fill an interleaved block of `channels` channels (every channel the same signal).
+    /// Fill an interleaved block of `channels` channels: the left and right channels in the first
+    /// two (the rest silent), or their mean in one (a mono piano's two channels are the same).
     pub fn process(&mut self, out: &mut [f32], channels: usize) {
         // SAFETY: as in `process_with`.
         unsafe {
@@ -255,7 +257,7 @@ impl<E: VoicePool> Synth<E> {
                 Control::Shutdown => self.running = false,
                 Control::Replace(new) => {
                     let old = std::mem::replace(&mut self.piano, new);
-                    self.radiation.restart(0.0);
+                    self.radiation.iter_mut().for_each(|r| r.restart(0.0));
                     (self.reference_j, self.sounding, self.rising_blocks) = (0.0, 0, 0);
                     if let Err(TrySendError::Full(old) | TrySendError::Disconnected(old)) =
                         self.returned.try_send(old)
@@ -269,6 +271,8 @@ impl<E: VoicePool> Synth<E> {
         let block_start = self.frame;
         let driven_at_start = self.piano.instrument.is_driven();
         let ratio = self.decimator.ratio();
+        // The output channels that carry sound: the left and right, or their mean in one.
+        let width = channels.min(CHANNELS);
         let mut frames = out.chunks_exact_mut(channels);
         loop {
             while let Some(&Scheduled { frame, event }) = self.events.try_peek() {
@@ -298,22 +302,29 @@ impl<E: VoicePool> Synth<E> {
             let mut blown = false;
             let (mut clipped, mut peak) = (0, 0f32);
             for i in 0..n {
-                let y = if self.running {
-                    (self.pressure_pa(i * ratio..(i + 1) * ratio) * self.scale) as f32
-                } else {
-                    0.0
+                let p = match self.running {
+                    true => self.pressure_pa(i * ratio..(i + 1) * ratio),
+                    false => [0.0; CHANNELS],
                 };
+                let mut y: [f32; CHANNELS] = match channels {
+                    1 => [(0.5 * (p[0] + p[1]) * self.scale) as f32; CHANNELS],
+                    _ => p.map(|p| (p * self.scale) as f32),
+                };
+                let y = &mut y[..width];
                 // Something blew up: silence until it is reset, below.
-                blown |= !y.is_finite();
-                let y = if blown {
-                    0.0
-                } else {
-                    clipped += u64::from(y.abs() > KNEE);
-                    peak = peak.max(y.abs());
-                    soft_clip(y)
-                };
+                blown |= y.iter().any(|y| !y.is_finite());
+                for y in y.iter_mut() {
+                    *y = if blown {
+                        0.0
+                    } else {
+                        clipped += u64::from(y.abs() > KNEE);
+                        peak = peak.max(y.abs());
+                        soft_clip(*y)
+                    };
+                }
                 if let Some(frame_out) = frames.next() {
-                    frame_out.fill(y);
+                    frame_out.fill(0.0);
+                    frame_out[..width].copy_from_slice(y);
                 }
                 tap(&self.piano.instrument, self.frame);
                 self.frame += 1;
@@ -351,9 +362,8 @@ impl<E: VoicePool> Synth<E> {
     /// Reset whatever has blown up, and the output stage's memory with it if anything did.
     fn reset_runaways(&mut self) {
         let n = self.piano.instrument.reset_runaways(RUNAWAY_J);
-        if n > 0 || !self.radiation.is_finite() {
-            self.radiation
-                .restart(self.piano.instrument.volume_velocity_m3_s());
+        if n > 0 || self.radiation.iter().any(|r| !r.is_finite()) {
+            self.restart_radiation();
             self.decimator.reset();
             self.stats.resets.fetch_add(n as u64, Ordering::Relaxed);
         }
@@ -380,7 +390,7 @@ impl<E: VoicePool> Synth<E> {
         if self.rising_blocks >= GROWTH_BLOCKS {
             // Every voice holding energy, and the board.
             let n = inst.reset_runaways(0.0);
-            self.radiation.restart(inst.volume_velocity_m3_s());
+            self.restart_radiation();
             self.decimator.reset();
             self.stats.resets.fetch_add(n as u64, Ordering::Relaxed);
             self.stats.growth_resets.fetch_add(1, Ordering::Relaxed);
@@ -388,15 +398,24 @@ impl<E: VoicePool> Synth<E> {
         }
     }
 
-    /// The sound pressure (Pa) of one output frame from the volume velocities of its steps.
-    fn pressure_pa(&mut self, steps: std::ops::Range<usize>) -> f64 {
-        let mut out = [0.0];
+    /// The radiation's memory set to where the instrument is now (after a reset).
+    fn restart_radiation(&mut self) {
+        let q = self.piano.instrument.radiated_m3_s();
+        for (r, q) in self.radiation.iter_mut().zip(q) {
+            r.restart(q);
+        }
+    }
+
+    /// The sound pressure (Pa) of each channel of one output frame from the radiating sources of
+    /// its steps.
+    fn pressure_pa(&mut self, steps: std::ops::Range<usize>) -> [f64; CHANNELS] {
+        let mut out = [0.0; CHANNELS];
         for i in steps {
             let q = self.volume[i];
-            let p = self.radiation.pressure_pa(q);
-            self.decimator.push(&[p], &mut out);
+            let p: [f64; CHANNELS] = std::array::from_fn(|c| self.radiation[c].pressure_pa(q[c]));
+            self.decimator.push(&p, &mut out);
         }
-        out[0]
+        out
     }
 }
 

@@ -1,8 +1,8 @@
-//! WAV output (32-bit float, mono) through hound, streamed block by block so that a long render
+//! WAV output (32-bit float, mono or stereo) through hound, streamed block by block so that a long render
 //! never holds its sound in memory and an interrupted or failed one leaves a valid file.
 //!
 //! The header is brought up to date every second of sound (hound's `flush`), and when a write
-//! fails (disk full, file-size limit) the file is cut back to its last whole sample and its
+//! fails (disk full, file-size limit) the file is cut back to its last whole frame and its
 //! header rewritten in place — which needs no new space — so what reached the disk stays playable.
 
 use std::fs::{File, OpenOptions};
@@ -40,26 +40,27 @@ pub enum WavError {
     },
 }
 
-/// A mono 32-bit float WAV being written.
+/// A 32-bit float WAV being written, its channels interleaved.
 pub struct WavStream {
     writer: Option<Writer>,
     path: PathBuf,
     rate_hz: u32,
-    frames: u64,
+    channels: u16,
+    samples: u64,
     since_checkpoint: u64,
 }
 
-/// Bytes per frame: one channel of 32-bit float.
-const FRAME_BYTES: u64 = 4;
+/// Bytes per sample: 32-bit float.
+const SAMPLE_BYTES: u64 = 4;
 
-/// Frames a WAV can hold: its sizes are 32-bit (less the header's share).
-const MAX_FRAMES: u64 = (u32::MAX as u64 - 1024) / FRAME_BYTES;
+/// Samples a WAV can hold: its sizes are 32-bit (less the header's share).
+const MAX_SAMPLES: u64 = (u32::MAX as u64 - 1024) / SAMPLE_BYTES;
 
 impl WavStream {
-    /// Create (or truncate) `path` for sound at `rate_hz`.
-    pub fn create(path: &Path, rate_hz: u32) -> Result<WavStream, WavError> {
+    /// Create (or truncate) `path` for sound at `rate_hz` in `channels` channels (1 or 2).
+    pub fn create(path: &Path, rate_hz: u32, channels: u16) -> Result<WavStream, WavError> {
         let spec = hound::WavSpec {
-            channels: 1,
+            channels,
             sample_rate: rate_hz,
             bits_per_sample: 32,
             sample_format: hound::SampleFormat::Float,
@@ -72,27 +73,29 @@ impl WavStream {
             writer: Some(writer),
             path: path.to_owned(),
             rate_hz,
-            frames: 0,
+            channels,
+            samples: 0,
             since_checkpoint: 0,
         })
     }
 
-    /// Append `samples` (full scale ±1). On failure the file is repaired to what reached the disk
+    /// Append `samples` (full scale ±1, whole frames of interleaved channels). On failure the file is repaired to what reached the disk
     /// and the error says how much that is; the stream accepts nothing more.
     pub fn write(&mut self, samples: &[f32]) -> Result<(), WavError> {
         let Some(w) = self.writer.as_mut() else {
             return Ok(());
         };
-        if self.frames + samples.len() as u64 > MAX_FRAMES {
+        if self.samples + samples.len() as u64 > MAX_SAMPLES {
             return Err(WavError::TooLong {
                 path: self.path.clone(),
-                max_s: MAX_FRAMES as f64 / f64::from(self.rate_hz),
+                max_s: MAX_SAMPLES as f64 / self.samples_per_s(),
             });
         }
         let mut result = samples.iter().try_for_each(|&s| w.write_sample(s));
-        self.frames += samples.len() as u64;
+        self.samples += samples.len() as u64;
         self.since_checkpoint += samples.len() as u64;
-        if result.is_ok() && self.since_checkpoint >= u64::from(self.rate_hz) {
+        let second = u64::from(self.rate_hz) * u64::from(self.channels);
+        if result.is_ok() && self.since_checkpoint >= second {
             self.since_checkpoint = 0;
             result = w.flush();
         }
@@ -101,7 +104,11 @@ impl WavStream {
 
     /// Seconds of sound handed to the stream so far.
     pub fn written_s(&self) -> f64 {
-        self.frames as f64 / f64::from(self.rate_hz)
+        self.samples as f64 / self.samples_per_s()
+    }
+
+    fn samples_per_s(&self) -> f64 {
+        f64::from(self.rate_hz) * f64::from(self.channels)
     }
 
     /// Write the final header; returns the seconds written.
@@ -121,7 +128,7 @@ impl WavStream {
         // the header from the file's real length.
         drop(self.writer.take());
         let (path, written_s) = (self.path.clone(), self.written_s());
-        match repair(&self.path) {
+        match repair(&self.path, self.channels) {
             Ok(frames) => WavError::Write {
                 path,
                 written_s,
@@ -140,8 +147,8 @@ impl WavStream {
 
 /// Cut a WAV written by [`WavStream`] back to its last whole frame and set the RIFF and data sizes
 /// from that length, in place (the header exists: hound writes it when the file is created).
-/// Returns the frames the file holds.
-fn repair(path: &Path) -> io::Result<u64> {
+/// Returns the frames (of `channels` samples) the file holds.
+fn repair(path: &Path, channels: u16) -> io::Result<u64> {
     let mut file = OpenOptions::new().read(true).write(true).open(path)?;
     let len = file.metadata()?.len();
     let mut head = [0u8; 128];
@@ -162,8 +169,9 @@ fn repair(path: &Path) -> io::Result<u64> {
         }
         at += 8 + size as usize;
     };
-    let frames = len.saturating_sub(data_start) / FRAME_BYTES;
-    let data_bytes = frames * FRAME_BYTES;
+    let frame_bytes = SAMPLE_BYTES * u64::from(channels.max(1));
+    let frames = len.saturating_sub(data_start) / frame_bytes;
+    let data_bytes = frames * frame_bytes;
     file.set_len(data_start + data_bytes)?;
     let riff = u32::try_from(data_start + data_bytes - 8).map_err(|_| bad())?;
     file.seek(SeekFrom::Start(4))?;
@@ -174,10 +182,16 @@ fn repair(path: &Path) -> io::Result<u64> {
     Ok(frames)
 }
 
-/// Write `samples` (full scale ±1) as a 32-bit float mono WAV at `rate_hz`; returns the seconds.
-pub fn write_f32(path: &Path, rate_hz: u32, samples: &[f32]) -> Result<f64, WavError> {
-    let mut w = WavStream::create(path, rate_hz)?;
-    for block in samples.chunks(4096) {
+/// Write `samples` (full scale ±1, `channels` interleaved) as a 32-bit float WAV at `rate_hz`;
+/// returns the seconds.
+pub fn write_f32(
+    path: &Path,
+    rate_hz: u32,
+    channels: u16,
+    samples: &[f32],
+) -> Result<f64, WavError> {
+    let mut w = WavStream::create(path, rate_hz, channels)?;
+    for block in samples.chunks(4096 * usize::from(channels.max(1))) {
         w.write(block)?;
     }
     w.finish()

@@ -618,7 +618,7 @@ impl BoardSpec {
                 })
                 .collect(),
             listeners: vec![],
-            heard: None,
+            heard: [None; 2],
         };
         let mut kept: Vec<(usize, f64)> = Vec::new();
         for mode in 0..n {

@@ -217,7 +217,7 @@ pub fn parse(text: &str, path: &Path) -> Result<SoundboardModes, AssetError> {
                 rayleigh_im: col(at + 2 * l + 1),
             })
             .collect(),
-        heard: None,
+        heard: [None; 2],
     })
 }
 
@@ -294,7 +294,7 @@ mod tests {
                 rayleigh_re: vec![3e-3, -1e-4],
                 rayleigh_im: vec![2e-5, 4e-4],
             }],
-            heard: None,
+            heard: [None; 2],
         };
         let text = to_text(&sb, &["test".into()]);
         let back = parse(&text, Path::new("mem")).unwrap();

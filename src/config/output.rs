@@ -11,6 +11,9 @@ pub struct OutputSettings {
     pub distance_m: f64,
     /// Sound pressure at digital full scale (Pa).
     pub full_scale_pa: f64,
+    /// Channels of the sound: 1 (mono: both engine channels hear one listener) or 2 (a stereo
+    /// pair of listeners, left and right).
+    pub channels: u16,
     /// Voices whose strings hold less energy than this stop being simulated (J).
     pub silence_j: f64,
 }

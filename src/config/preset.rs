@@ -180,9 +180,32 @@ pub struct RadiationSection {
     /// at `distance_m` (the paper's board).
     #[serde(default)]
     pub listener: Option<String>,
+    /// The listeners of the left and right channels (a stereo pair over the board, e.g. `bass`
+    /// and `treble`: the pianist's view); absent: both channels hear `listener`.
+    #[serde(default)]
+    pub stereo: Option<[String; 2]>,
     pub distance_m: f64,
     pub air_density_kg_m3: f64,
     pub full_scale_pa: f64,
+}
+
+impl RadiationSection {
+    /// The output stage at `rate_hz` for this radiation: a listener's source is a monopole at
+    /// [`crate::engine::physics::soundboard::LISTENER_REFERENCE_M`], the net volume velocity one
+    /// at `distance_m`; two channels for a stereo pair.
+    pub fn output_settings(&self, rate_hz: f64) -> crate::config::output::OutputSettings {
+        crate::config::output::OutputSettings {
+            rate_hz,
+            air_density_kg_m3: self.air_density_kg_m3,
+            distance_m: match (&self.listener, &self.stereo) {
+                (None, None) => self.distance_m,
+                _ => crate::engine::physics::soundboard::LISTENER_REFERENCE_M,
+            },
+            full_scale_pa: self.full_scale_pa,
+            channels: if self.stereo.is_some() { 2 } else { 1 },
+            silence_j: crate::engine::SILENCE_J,
+        }
+    }
 }
 
 /// What can be wrong with a preset.
@@ -273,7 +296,7 @@ impl Preset {
         let bridge_point =
             bridge_point_index(&board, &preset.soundboard.bridge_point, path, &asset_name)?;
         let mut board = board;
-        board.heard = listener_index(&board, &preset.radiation.listener, path, &asset_name)?;
+        board.heard = heard(&board, &preset.radiation, path, &asset_name)?;
         Ok(LoadedPreset {
             preset,
             source: path.to_owned(),
@@ -435,11 +458,49 @@ pub(crate) fn bridge_point_index(
         })
 }
 
+/// What each channel of `board` hears under `radiation` ([`SoundboardModes::heard`]): the stereo
+/// pair's listeners where it has one, else `listener` in both (`None`: the monopole); an error
+/// names the file, the field and the listeners the asset has.
+pub(crate) fn heard(
+    board: &SoundboardModes,
+    radiation: &RadiationSection,
+    path: &Path,
+    asset: &str,
+) -> Result<[Option<usize>; 2], PresetError> {
+    let mono = listener_index(
+        board,
+        &radiation.listener,
+        "radiation.listener",
+        path,
+        asset,
+    )?;
+    match &radiation.stereo {
+        None => Ok([mono; 2]),
+        Some([left, right]) => Ok([
+            listener_index(
+                board,
+                &Some(left.clone()),
+                "radiation.stereo (left)",
+                path,
+                asset,
+            )?,
+            listener_index(
+                board,
+                &Some(right.clone()),
+                "radiation.stereo (right)",
+                path,
+                asset,
+            )?,
+        ]),
+    }
+}
+
 /// The index of the listener `name` in `board` (`None` for none), or an error naming the file,
 /// the field and the listeners the asset has.
-pub(crate) fn listener_index(
+fn listener_index(
     board: &SoundboardModes,
     name: &Option<String>,
+    field: &'static str,
     path: &Path,
     asset: &str,
 ) -> Result<Option<usize>, PresetError> {
@@ -452,7 +513,7 @@ pub(crate) fn listener_index(
             let names: Vec<&str> = board.listeners.iter().map(|l| l.name.as_str()).collect();
             Err(PresetError::Range {
                 path: path.to_owned(),
-                field: "radiation.listener",
+                field,
                 value: format!("`{name}`"),
                 allowed: match names.is_empty() {
                     true => format!("none: the asset {asset} has no listeners"),
@@ -535,20 +596,18 @@ impl LoadedPreset {
         self.preset.simulation.output_rate_hz as f64
     }
 
+    /// Both channels heard at `radiation.listener`, the stereo pair set aside (a front end's
+    /// `--mono`).
+    pub fn make_mono(&mut self) {
+        self.preset.radiation.stereo = None;
+        let listener = self.preset.radiation.listener.as_deref();
+        self.board.heard = [listener.and_then(|name| self.board.listener(name)); 2];
+    }
+
     /// The output stage the preset describes: rate, radiation, full scale, and the default
     /// threshold below which a voice stops being simulated.
     pub fn output_settings(&self) -> crate::config::output::OutputSettings {
-        let r = &self.preset.radiation;
-        crate::config::output::OutputSettings {
-            rate_hz: self.output_rate_hz(),
-            air_density_kg_m3: r.air_density_kg_m3,
-            distance_m: match r.listener {
-                Some(_) => crate::engine::physics::soundboard::LISTENER_REFERENCE_M,
-                None => r.distance_m,
-            },
-            full_scale_pa: r.full_scale_pa,
-            silence_j: crate::engine::SILENCE_J,
-        }
+        self.preset.radiation.output_settings(self.output_rate_hz())
     }
 
     /// Internal steps per output sample.

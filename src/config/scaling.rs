@@ -8,7 +8,7 @@
 //! per-note [`Preset`] bridged at its own point of the soundboard.
 
 use crate::config::preset::{
-    bridge_point_index, listener_index, read_text, LoadedPreset, Preset, PresetError,
+    bridge_point_index, heard, read_text, LoadedPreset, Preset, PresetError, RadiationSection,
     StringsSection,
 };
 use crate::engine::physics::damper::DamperParams;
@@ -56,6 +56,9 @@ pub struct Scaling {
     /// The soundboard asset's listener every key radiates to (`radiation.listener`); `None`: the
     /// base preset's.
     pub listener: Option<String>,
+    /// The listeners of the left and right channels (`radiation.stereo`); `None`: the base
+    /// preset's.
+    pub stereo: Option<[String; 2]>,
 }
 
 /// What a keyboard is tuned to.
@@ -89,6 +92,7 @@ struct ScalingFile {
     #[serde(default)]
     losses: Vec<LossAnchor>,
     listener: Option<String>,
+    stereo: Option<[String; 2]>,
     #[serde(default)]
     dampers: Vec<DamperAnchor>,
     #[serde(default)]
@@ -293,6 +297,9 @@ impl Scaling {
             listener: file
                 .listener
                 .or_else(|| base.as_ref().and_then(|b| b.listener.clone())),
+            stereo: file
+                .stereo
+                .or_else(|| base.as_ref().and_then(|b| b.stereo.clone())),
             losses: inherit_points(file.losses, base.as_ref().map(|b| &b.losses)),
             dampers: inherit_points(file.dampers, base.as_ref().map(|b| &b.dampers)),
             voicing: inherit_points(file.voicing, base.as_ref().map(|b| &b.voicing)),
@@ -467,6 +474,31 @@ fn log_linear<A>(
 }
 
 impl LoadedScaling {
+    /// The radiation every key has: the base preset's, with the keyboard's listener and stereo
+    /// pair where it sets them.
+    pub fn radiation(&self) -> RadiationSection {
+        let mut r = self.base.preset.radiation.clone();
+        if let Some(listener) = &self.scaling.listener {
+            r.listener = Some(listener.clone());
+        }
+        if let Some(stereo) = &self.scaling.stereo {
+            r.stereo = Some(stereo.clone());
+        }
+        r
+    }
+
+    /// The output stage of the keyboard's keys ([`RadiationSection::output_settings`]).
+    pub fn output_settings(&self) -> crate::config::output::OutputSettings {
+        self.radiation().output_settings(self.base.output_rate_hz())
+    }
+
+    /// Every key heard at the keyboard's `listener` in both channels, the stereo pair set aside
+    /// (a front end's `--mono`).
+    pub fn make_mono(&mut self) {
+        self.scaling.stereo = None;
+        self.base.preset.radiation.stereo = None;
+    }
+
     /// Interpolate an anchor quantity at `key`: exact at anchors, log-linear between them.
     fn interpolate(&self, key: usize, f: impl Fn(&Anchor) -> f64) -> f64 {
         log_linear(&self.scaling.anchors, |a| a.key, key, f)
@@ -647,9 +679,7 @@ impl LoadedScaling {
         h.exponent = self.interpolate(key, |a| a.hammer_exponent);
         h.strike_ratio = self.interpolate(key, |a| a.strike_ratio);
         preset.soundboard.bridge_point = crate::board::key_name(key);
-        if let Some(listener) = &self.scaling.listener {
-            preset.radiation.listener = Some(listener.clone());
-        }
+        preset.radiation = self.radiation();
         preset.validate(&self.source)?;
         let bridge_point = bridge_point_index(
             &self.base.board,
@@ -658,9 +688,9 @@ impl LoadedScaling {
             &preset.soundboard.asset,
         )?;
         let mut board = self.base.board.clone();
-        board.heard = listener_index(
+        board.heard = heard(
             &board,
-            &preset.radiation.listener,
+            &preset.radiation,
             &self.source,
             &preset.soundboard.asset,
         )?;

@@ -25,8 +25,8 @@ pub use parallel::Pair;
 pub use pool::Policy;
 pub use rk4::Rk4Pool;
 pub use spec::{
-    BuildError, Direction, Energy, LinearState, Observation, Strike, UnisonSpec, MAX_STRINGS,
-    SILENCE_J, STEAL_FADE_S,
+    BuildError, Direction, Energy, LinearState, Observation, Strike, UnisonSpec, CHANNELS,
+    MAX_STRINGS, SILENCE_J, STEAL_FADE_S,
 };
 
 /// A pool of voices on one shared board, as the player and the audio callback drive it: RK4 at
@@ -67,10 +67,12 @@ pub trait VoicePool: Policy + Clone + Send + std::fmt::Debug + 'static {
     }
     fn step_s(&self) -> f64;
     fn step(&mut self);
-    /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity after
-    /// each; an engine that can split its voices over two cores does so through `pair`.
-    fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn Pair>);
-    fn volume_velocity_m3_s(&self) -> f64;
+    /// Advance `sound.len()` steps, writing the board's radiating source of each channel
+    /// (m^3/s: its net volume velocity, or its equivalent at the channel's listener) after each;
+    /// an engine that can split its voices over two cores does so through `pair`.
+    fn run(&mut self, sound: &mut [[f64; CHANNELS]], pair: Option<&dyn Pair>);
+    /// The radiating source of each channel after the last step (m^3/s).
+    fn radiated_m3_s(&self) -> [f64; CHANNELS];
     fn observe_voice(&self, k: usize) -> Observation;
     fn bytes_per_voice(&self) -> usize;
     /// The linear part's state: the active voices' strings, then the board.
@@ -161,11 +163,11 @@ macro_rules! voice_pool {
             fn step(&mut self) {
                 <$t>::step(self)
             }
-            fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn Pair>) {
-                <$t>::run(self, volume_velocity, pair)
+            fn run(&mut self, sound: &mut [[f64; CHANNELS]], pair: Option<&dyn Pair>) {
+                <$t>::run(self, sound, pair)
             }
-            fn volume_velocity_m3_s(&self) -> f64 {
-                <$t>::volume_velocity_m3_s(self)
+            fn radiated_m3_s(&self) -> [f64; CHANNELS] {
+                <$t>::radiated_m3_s(self)
             }
             fn observe_voice(&self, k: usize) -> Observation {
                 <$t>::observe_voice(self, k)
@@ -196,6 +198,8 @@ pub trait Engine {
     fn step(&mut self);
     /// Forces and volume velocity now (Eq. 19), of the first voice.
     fn observe(&self) -> Observation;
+    /// The board's radiating source of each sound channel now (m^3/s).
+    fn radiated_m3_s(&self) -> [f64; CHANNELS];
     fn strike(&mut self, strike: Strike);
     fn set_damper(&mut self, down: bool);
     /// Internal step (s).
@@ -208,6 +212,9 @@ impl Engine for Rk4Pool {
     }
     fn observe(&self) -> Observation {
         Rk4Pool::observe(self)
+    }
+    fn radiated_m3_s(&self) -> [f64; CHANNELS] {
+        Rk4Pool::radiated_m3_s(self)
     }
     fn strike(&mut self, strike: Strike) {
         Rk4Pool::strike(self, strike)
@@ -226,6 +233,9 @@ impl Engine for exact::ExactUnison {
     }
     fn observe(&self) -> Observation {
         exact::ExactUnison::observe(self)
+    }
+    fn radiated_m3_s(&self) -> [f64; CHANNELS] {
+        exact::ExactUnison::radiated_m3_s(self)
     }
     fn strike(&mut self, strike: Strike) {
         exact::ExactUnison::strike(self, strike)

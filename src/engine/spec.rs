@@ -14,6 +14,11 @@ pub use crate::engine::physics::Direction;
 /// The most strings a unison can hold (a treble trichord).
 pub const MAX_STRINGS: usize = 3;
 
+/// Output channels the engines radiate, left and right: each the sound at one listener over the
+/// board ([`crate::engine::physics::soundboard::SoundboardModes::heard`]), the same one in both
+/// for a mono piano.
+pub const CHANNELS: usize = 2;
+
 /// Everything needed to build one key of a voice pool; plain data, every field public.
 #[derive(Debug, Clone)]
 pub struct UnisonSpec {

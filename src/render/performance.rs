@@ -28,7 +28,9 @@ pub enum RenderError {
 #[derive(Debug, Clone)]
 pub struct Performance {
     pub rate_hz: f64,
-    /// Sound pressure normalised to full scale, one channel.
+    /// Channels of the sound: 1, or 2 for a keyboard heard in stereo.
+    pub channels: u16,
+    /// Sound pressure normalised to full scale, the channels interleaved.
     pub samples: Vec<f32>,
     /// The piano keys (1–88) the file plays.
     pub keys: Vec<usize>,
@@ -40,6 +42,8 @@ pub struct Performance {
 #[derive(Debug, Clone)]
 pub struct Rendered {
     pub rate_hz: f64,
+    /// Channels of the sound the sink was handed (interleaved): 1, or 2 for a stereo keyboard.
+    pub channels: u16,
     /// Frames handed to the sink, and the frames the whole performance lasts.
     pub frames: u64,
     pub total_frames: u64,
@@ -99,6 +103,7 @@ pub fn render_midi_with(
     )?;
     Ok(Performance {
         rate_hz: r.rate_hz,
+        channels: r.channels,
         samples,
         keys: r.keys,
         voices: r.voices,
@@ -118,7 +123,8 @@ pub struct Offline {
 }
 
 /// A MIDI performance on the engine `E` (RK4 [`Rk4Pool`] or the exact engine
-/// [`crate::engine::exact::ExactPool`]), handing each block of samples to `sink`
+/// [`crate::engine::exact::ExactPool`]), handing each block of samples (in the keyboard's
+/// channels, interleaved: [`Rendered::channels`]) to `sink`
 /// as it is made (a WAV being written) instead of keeping them, the prepared keys read from and
 /// kept in the keyboard's cache where it has one; the render stops early when `sink` breaks
 /// (interrupted, or the disk is full). Without `tap` the engine runs from event to event (in
@@ -158,8 +164,9 @@ pub fn render_midi_into<E: crate::engine::VoicePool>(
     let voices = voices.min(keys.len());
     let scaling = keyboard.scaling;
     let piano = crate::play::Piano::<E>::build_with(scaling, &keys, voices, keyboard.cache)?;
-    let settings = scaling.base.output_settings();
-    let fs = settings.rate_hz;
+    let settings = scaling.output_settings();
+    let (fs, channels) = (settings.rate_hz, settings.channels);
+    let width = usize::from(channels);
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
     if cores >= 2 {
         synth.use_second_core().map_err(RenderError::Helper)?;
@@ -167,17 +174,18 @@ pub fn render_midi_into<E: crate::engine::VoicePool>(
     let end_s = events.last().map_or(0.0, |e| e.time_s) + tail_s;
     let total_frames = (end_s * fs).round() as u64;
     let n_blocks = total_frames.div_ceil(OFFLINE_BLOCK as u64).max(1);
-    let mut block = [0f32; OFFLINE_BLOCK];
+    let mut block = [0f32; 2 * OFFLINE_BLOCK];
     let (mut next, mut frames) = (0, 0u64);
     for b in 0..n_blocks {
         let n = (total_frames - frames).min(OFFLINE_BLOCK as u64) as usize;
         next = handle.schedule_timed(events, next, 0);
+        let block = &mut block[..n * width];
         match tap.as_deref_mut() {
-            Some(tap) => synth.process_with(&mut block[..n], 1, tap),
-            None => synth.process(&mut block[..n], 1),
+            Some(tap) => synth.process_with(block, width, tap),
+            None => synth.process(block, width),
         }
         frames += n as u64;
-        if sink(&block[..n]).is_break() {
+        if sink(block).is_break() {
             break;
         }
         if b % 64 == 0 {
@@ -187,6 +195,7 @@ pub fn render_midi_into<E: crate::engine::VoicePool>(
     progress(1.0);
     Ok(Rendered {
         rate_hz: fs,
+        channels,
         frames,
         total_frames,
         keys,

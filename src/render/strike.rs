@@ -2,8 +2,8 @@
 //! forces (Eq. 19) and radiated sound.
 //!
 //! The [`Renderer`] advances the [`Rk4Pool`] at the internal rate, reads the outputs after each step,
-//! turns the board's net volume velocity into pressure at the listener (a monopole,
-//! `p = rho0 / (4 pi r) dQ/dt`, DESIGN.md §1.7) and decimates every channel through the same
+//! turns the board's radiating source of each sound channel into pressure at its listener
+//! (`p = rho0 / (4 pi r) dQ/dt`, DESIGN.md §1.7) and decimates every channel through the same
 //! anti-alias filter to the output rate.
 
 use crate::audio::radiate::Monopole;
@@ -14,16 +14,19 @@ use crate::engine::MAX_STRINGS;
 use crate::engine::{BuildError, Observation, Rk4Pool, Strike};
 use crate::engine::{Engine, Integrator};
 
-/// Number of decimated channels: hammer (3), bridge (3 × 3), total (3), bridge velocity (3), pressure.
-const CHANNELS: usize = MAX_STRINGS + 3 * MAX_STRINGS + 3 + 3 + 1;
+/// Number of decimated channels: hammer (3), bridge (3 × 3), total (3), bridge velocity (3),
+/// pressure left and right.
+const CHANNELS: usize = MAX_STRINGS + 3 * MAX_STRINGS + 3 + 3 + 2;
 
 /// One output-rate frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Frame {
     /// Forces and velocities at the bridge and hammer (Eq. 19), low-passed with the audio.
     pub obs: Observation,
-    /// Sound pressure at the listener (Pa).
+    /// Sound pressure at the left channel's listener (Pa), and at the right one's (the same for
+    /// a mono preset).
     pub pressure_pa: f64,
+    pub pressure_right_pa: f64,
 }
 
 impl Frame {
@@ -35,7 +38,7 @@ impl Frame {
             .chain(o.bridge_force_n.iter().flatten())
             .chain(&o.total_force_n)
             .chain(&o.bridge_velocity_m_s)
-            .chain(std::iter::once(&self.pressure_pa));
+            .chain([&self.pressure_pa, &self.pressure_right_pa]);
         for (slot, v) in out.iter_mut().zip(flat) {
             *slot = *v;
         }
@@ -57,6 +60,7 @@ impl Frame {
             .iter_mut()
             .for_each(|x| *x = next());
         f.pressure_pa = next();
+        f.pressure_right_pa = next();
         f
     }
 }
@@ -66,7 +70,7 @@ impl Frame {
 pub struct Renderer<E: Engine> {
     instrument: E,
     decimator: Decimator,
-    radiation: Monopole,
+    radiation: [Monopole; 2],
     output_rate_hz: f64,
     inputs: [f64; CHANNELS],
     outputs: [f64; CHANNELS],
@@ -101,7 +105,9 @@ impl<E: Engine> Renderer<E> {
         Renderer {
             instrument,
             decimator: Decimator::new(ratio, CHANNELS),
-            radiation: Monopole::new(out.air_density_kg_m3, out.distance_m, rate_hz),
+            radiation: std::array::from_fn(|_| {
+                Monopole::new(out.air_density_kg_m3, out.distance_m, rate_hz)
+            }),
             output_rate_hz: preset.output_rate_hz(),
             inputs: [0.0; CHANNELS],
             outputs: [0.0; CHANNELS],
@@ -139,9 +145,11 @@ impl<E: Engine> Renderer<E> {
         loop {
             self.instrument.step();
             let obs = self.instrument.observe();
+            let [left, right] = self.instrument.radiated_m3_s();
             Frame {
                 obs,
-                pressure_pa: self.radiation.pressure_pa(obs.volume_velocity_m3_s),
+                pressure_pa: self.radiation[0].pressure_pa(left),
+                pressure_right_pa: self.radiation[1].pressure_pa(right),
             }
             .pack(&mut self.inputs);
             if self.decimator.push(&self.inputs, &mut self.outputs) {

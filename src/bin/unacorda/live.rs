@@ -35,6 +35,11 @@ pub struct PlayArgs {
     /// Keyboard: built-in name (concert, the default; paper, the paper's model) or path to a .toml file.
     #[arg(long, default_value = "concert")]
     pub keyboard: String,
+    /// One channel, heard at the keyboard's listener, instead of its stereo pair (concert: `bass`
+    /// left, `treble` right; heard from `above` in mono). A mono piano plays the same sound on
+    /// both channels of a stereo device.
+    #[arg(long)]
+    pub mono: bool,
     /// Stop after this many seconds (default: at the end of --midi plus 2 s, else at Ctrl-C).
     #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub seconds: Option<f64>,
@@ -145,7 +150,10 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         Some(path) => Some(unacorda::midi::file::read_file(path)?),
         None => None,
     };
-    let scaling = Scaling::resolve(&args.keyboard)?;
+    let mut scaling = Scaling::resolve(&args.keyboard)?;
+    if args.mono {
+        scaling.make_mono();
+    }
     let keys: Vec<usize> = (1..=KEYS).collect();
     eprintln!("building {} keys on one soundboard…", keys.len());
     let started = std::time::Instant::now();
@@ -164,7 +172,7 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
             );
         }
     }
-    let settings = scaling.base.output_settings();
+    let settings = scaling.output_settings();
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
     if cores == 2 {
         synth.use_second_core()?;
@@ -182,10 +190,15 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     let mut output =
         open(synth, &args, settings.rate_hz as u32, &callback_stats).map_err(|(e, _)| e)?;
     eprintln!(
-        "playing on {} ({} ch, {} Hz, {} voices, {cores} core{})",
+        "playing on {} ({} ch, {} Hz, {} sound, {} voices, {cores} core{})",
         output.device,
         output.channels,
         output.rate_hz,
+        if settings.channels == 2 {
+            "stereo"
+        } else {
+            "mono"
+        },
         args.voices,
         if cores == 2 { "s" } else { "" }
     );

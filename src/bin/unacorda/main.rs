@@ -99,7 +99,11 @@ enum Command {
         /// Release the key after this many seconds: the damper falls on the strings.
         #[arg(long, value_name = "S", allow_negative_numbers = true)]
         release_at: Option<f64>,
-        /// Output WAV file.
+        /// One channel, heard at the keyboard's (or preset's) listener, instead of its stereo
+        /// pair of listeners (concert: `bass` left, `treble` right; heard from `above` in mono).
+        #[arg(long)]
+        mono: bool,
+        /// Output WAV file (32-bit float; two channels for a stereo keyboard).
         #[arg(long)]
         out: PathBuf,
     },
@@ -192,20 +196,21 @@ fn progress_bar(seconds: f64, label: &str) -> ProgressBar {
     pb
 }
 
-/// Write the recording's sound pressure as a WAV (0 dBFS = `full_scale_pa`); returns its peak (dBFS).
-fn write_wav(out: &Path, rec: &Recording, full_scale_pa: f64) -> Result<f64> {
+/// Write the recording's sound pressure as a WAV of `channels` channels (0 dBFS =
+/// `full_scale_pa`); returns its peak (dBFS).
+fn write_wav(out: &Path, rec: &Recording, full_scale_pa: f64, channels: u16) -> Result<f64> {
     let samples: Vec<f32> = rec
         .frames
         .iter()
-        .map(|f| (f.pressure_pa / full_scale_pa) as f32)
+        .flat_map(|f| {
+            [f.pressure_pa, f.pressure_right_pa]
+                .into_iter()
+                .take(channels.into())
+        })
+        .map(|p| (p / full_scale_pa) as f32)
         .collect();
-    write_samples(out, rec.rate_hz, &samples)
-}
-
-/// Write full-scale samples as a WAV; returns their peak (dBFS).
-fn write_samples(out: &Path, rate_hz: f64, samples: &[f32]) -> Result<f64> {
     let peak = samples.iter().fold(0f32, |m, s| m.max(s.abs()));
-    unacorda::audio::wav::write_f32(out, rate_hz as u32, samples)?;
+    unacorda::audio::wav::write_f32(out, rec.rate_hz as u32, channels, &samples)?;
     Ok(20.0 * f64::from(peak).max(1e-12).log10())
 }
 
@@ -222,8 +227,8 @@ fn render_midi_file<E: unacorda::engine::VoicePool>(
 ) -> Result<()> {
     let pb = progress_bar(length_s, "rendering");
     let started = std::time::Instant::now();
-    let rate_hz = scaling.base.output_settings().rate_hz;
-    let mut wav = WavStream::create(out, rate_hz as u32)?;
+    let settings = scaling.output_settings();
+    let mut wav = WavStream::create(out, settings.rate_hz as u32, settings.channels)?;
     // Ctrl-C ends the render at the next block and keeps what is written, a valid WAV.
     let interrupted = Arc::new(AtomicBool::new(false));
     {
@@ -277,11 +282,12 @@ fn render_midi_file<E: unacorda::engine::VoicePool>(
     let written_s = wav.finish()?;
     let took_s = started.elapsed().as_secs_f64();
     let summary = format!(
-        "{} events on {} keys sharing one soundboard, {} voices, {:.1} s of sound in {:.1} s ({:.2} × real time on {cores} core{}, the keys' preparation included), peak {:.1} dBFS",
+        "{} events on {} keys sharing one soundboard, {} voices, {:.1} s of {} sound in {:.1} s ({:.2} × real time on {cores} core{}, the keys' preparation included), peak {:.1} dBFS",
         events.len(),
         r.keys.len(),
         r.voices,
         written_s,
+        if r.channels == 2 { "stereo" } else { "mono" },
         took_s,
         written_s / took_s,
         if cores == 1 { "" } else { "s" },
@@ -324,6 +330,7 @@ fn run(cli: Cli) -> Result<()> {
             midi_velocity,
             seconds,
             release_at,
+            mono,
             out,
         } => {
             if !offline {
@@ -336,7 +343,10 @@ fn run(cli: Cli) -> Result<()> {
                     bail!("--tail {tail}: expected a duration in [0, 60] s");
                 }
                 let events = unacorda::midi::file::read_file(&path)?;
-                let scaling = Scaling::resolve(&keyboard)?;
+                let mut scaling = Scaling::resolve(&keyboard)?;
+                if mono {
+                    scaling.make_mono();
+                }
                 if !(1.0..=86_400.0).contains(&max_seconds) {
                     bail!("--max-seconds {max_seconds}: expected a duration in [1, 86400] s");
                 }
@@ -360,7 +370,7 @@ fn run(cli: Cli) -> Result<()> {
             if !(0.001..=600.0).contains(&seconds) {
                 bail!("--seconds {seconds}: expected a duration in [0.001, 600] s");
             }
-            let loaded = match &key {
+            let mut loaded = match &key {
                 Some(name) => {
                     let k = unacorda::config::scaling::parse_key(name).with_context(|| {
                         format!("--key {name}: expected A0–C8 (e.g. C4, Bb0, F#6) or 1–88")
@@ -369,6 +379,9 @@ fn run(cli: Cli) -> Result<()> {
                 }
                 None => Preset::resolve(&preset)?,
             };
+            if mono {
+                loaded.make_mono();
+            }
             let velocity_m_s = match (velocity, midi_velocity) {
                 (_, Some(v)) => unacorda::midi::hammer_speed_m_s(v)
                     .with_context(|| format!("--midi-velocity {v}: expected 1–127"))?,
@@ -398,13 +411,15 @@ fn run(cli: Cli) -> Result<()> {
                 |f| pb.set_position((f * 1000.0) as u64),
             )?;
             pb.finish_and_clear();
-            let peak_dbfs = write_wav(&out, &rec, loaded.preset.radiation.full_scale_pa)?;
+            let channels = loaded.output_settings().channels;
+            let peak_dbfs = write_wav(&out, &rec, loaded.preset.radiation.full_scale_pa, channels)?;
             eprintln!(
-                "wrote {} ({}, {:.2} s at {} Hz, peak {:.1} dBFS, {})",
+                "wrote {} ({}, {:.2} s at {} Hz {}, peak {:.1} dBFS, {})",
                 out.display(),
                 loaded.preset.name,
                 seconds,
                 rec.rate_hz,
+                if channels == 2 { "stereo" } else { "mono" },
                 peak_dbfs,
                 if una_corda { "una corda" } else { "normal" }
             );

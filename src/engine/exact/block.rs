@@ -9,10 +9,13 @@
 //! forces.
 
 use super::interface::{BoardState, SharedBoard};
-use super::kernels::{fold_block, free_block, Reversed, Simd, Split, BLOCK, DIRECTIONS, READS};
+use super::kernels::{
+    fold_block, free_block, Reversed, Simd, Split, BLOCK, DIRECTIONS, READS, SOUND_READS,
+};
 use super::key::ExactKey;
 use super::voice::Voice;
 use crate::engine::pool::fade_step;
+use crate::engine::spec::CHANNELS;
 use crate::engine::Pair;
 use std::any::Any;
 use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
@@ -40,7 +43,7 @@ pub(crate) struct Steps {
     pub(crate) part: BoardState,
     copy: BoardState,
     exchange: Exchange,
-    pub(crate) volume: [f64; BLOCK],
+    pub(crate) volume: [[f64; CHANNELS]; BLOCK],
 }
 
 /// One half of the voices' working values within the steps: the stage states of a hammer step,
@@ -52,8 +55,8 @@ pub(crate) struct Half {
     known: Vec<f64>,
     other: Vec<f64>,
     sum: Vec<f64>,
-    volume: [f64; BLOCK],
-    board_volume: [f64; BLOCK],
+    volume: [[f64; CHANNELS]; BLOCK],
+    board_volume: [[f64; CHANNELS]; BLOCK],
 }
 
 impl Steps {
@@ -64,15 +67,15 @@ impl Steps {
             known: vec![0.0; m],
             other: vec![0.0; m],
             sum: vec![0.0; m],
-            volume: [0.0; BLOCK],
-            board_volume: [0.0; BLOCK],
+            volume: [[0.0; CHANNELS]; BLOCK],
+            board_volume: [[0.0; CHANNELS]; BLOCK],
         };
         Steps {
             halves: [half.clone(), half],
             part: board.state(),
             copy: board.state(),
             exchange: Exchange::new(m),
-            volume: [0.0; BLOCK],
+            volume: [[0.0; CHANNELS]; BLOCK],
         }
     }
 }
@@ -182,7 +185,7 @@ pub(crate) fn begin(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
             _ => {
                 let out: &mut [[f64; BLOCK]; READS] = (&mut v.block_read[..READS])
                     .try_into()
-                    .expect("the first reads are the four rows");
+                    .expect("the first reads are the undamped key's");
                 free_block(cx.simd, &key.block, &key.ef, &mut v.w, out, len);
             }
         }
@@ -250,16 +253,18 @@ fn known(cx: &Context<'_>, voices: &mut [Voice], half: &mut Half, t: usize) {
 }
 
 /// After the shared board has stepped: every voice reads its displacement at its bridge and
-/// finishes its step. Returns the voices' volume velocity.
-fn finish(cx: &Context<'_>, voices: &mut [Voice], part: &BoardState) -> f64 {
-    let mut total = 0.0;
+/// finishes its step. Returns the voices' radiating source of each channel.
+fn finish(cx: &Context<'_>, voices: &mut [Voice], part: &BoardState) -> [f64; CHANNELS] {
+    let mut total = [0.0; CHANNELS];
     for v in voices.iter_mut() {
         let (true, Some(k)) = (v.state.active, v.state.key) else {
             continue;
         };
         let next = cx.board.at(part, &cx.points[k], cx.simd);
         v.post_step(&cx.keys[k], next);
-        total += v.read[0];
+        for (t, &r) in total.iter_mut().zip(&SOUND_READS) {
+            *t += v.read[r];
+        }
     }
     total
 }
@@ -283,7 +288,8 @@ pub(crate) fn run(cx: &Context<'_>, voices: [&mut [Voice]; 2], steps: &mut Steps
         known(cx, v1, h1, t);
         sum(&h0.known, &h1.known, &mut h0.sum);
         let board = cx.board.step(&mut steps.part, &h0.sum, cx.simd);
-        steps.volume[t] = finish(cx, v0, &steps.part) + finish(cx, v1, &steps.part) + board;
+        let (first, second) = (finish(cx, v0, &steps.part), finish(cx, v1, &steps.part));
+        steps.volume[t] = std::array::from_fn(|c| first[c] + second[c] + board[c]);
     }
 }
 
@@ -358,7 +364,8 @@ pub(crate) fn run_on_two(
         resume_unwind(e);
     }
     for t in 0..len {
-        volume[t] = h0.volume[t] + h1.volume[t] + h0.board_volume[t];
+        volume[t] =
+            std::array::from_fn(|c| h0.volume[t][c] + h1.volume[t][c] + h0.board_volume[t][c]);
     }
     true
 }

@@ -6,11 +6,11 @@
 
 use super::kernels::Split;
 use super::key::{ExactKey, KeyModes};
-use crate::engine::spec::UnisonSpec;
+use crate::engine::spec::{UnisonSpec, CHANNELS};
 use faer::c64;
 
 /// Changes whenever the layout or what the coefficients mean changes.
-const VERSION: u64 = 3;
+const VERSION: u64 = 4;
 
 #[derive(Default)]
 struct Writer(Vec<u8>);
@@ -87,7 +87,7 @@ impl ExactKey {
         w.splits(&m.strike_input);
         w.splits(&m.force_row.concat());
         w.splits(&m.bridge_velocity_row);
-        w.split(&m.volume_row);
+        w.splits(&m.volume_rows);
         w.splits(&m.bridge_input.concat());
         w.splits(&m.damper_row);
         w.splits(&m.damper_input);
@@ -125,7 +125,7 @@ impl ExactKey {
             .map(|_| Some([rows.next()?, rows.next()?, rows.next()?]))
             .collect::<Option<Vec<_>>>()?;
         let bridge_velocity_row = r.split_array::<3>(n)?;
-        let volume_row = r.split(n)?;
+        let volume_rows = r.split_array::<CHANNELS>(n)?;
         let [gk_t, gc_t, gk_l, gc_l, gk_p, gc_p] = r.split_array::<6>(n)?;
         let bridge_input = [[gk_t, gc_t], [gk_l, gc_l], [gk_p, gc_p]];
         let damper_row = r.splits(n)?;
@@ -144,7 +144,7 @@ impl ExactKey {
             strike_input,
             force_row,
             bridge_velocity_row,
-            volume_row,
+            volume_rows,
             bridge_input,
             damper_row,
             damper_input,

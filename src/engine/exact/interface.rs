@@ -30,6 +30,7 @@
 use super::kernels::{fma, Simd, Split, LANES};
 use crate::engine::modal::input_weights;
 use crate::engine::physics::soundboard::SoundboardModes;
+use crate::engine::spec::CHANNELS;
 use faer::c64;
 
 /// The board's modes below this frequency (Hz) are shared by every key; each key carries those
@@ -49,7 +50,7 @@ pub(crate) struct SharedBoard {
     modes: Vec<usize>,
     /// Per mode (padded to whole lanes with modes that never move): `e^{lambda h}`, the weights
     /// of the modal force at the start and the end of the step, `lambda`, `omega^2`, `2 Re(to)`,
-    /// and the radiating source per unit modal velocity and displacement
+    /// and each channel's radiating source per unit modal velocity and displacement
     /// ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`]).
     e: Split,
     from: Split,
@@ -57,8 +58,8 @@ pub(crate) struct SharedBoard {
     lambda: Vec<c64>,
     omega2: Vec<f64>,
     t: Vec<f64>,
-    volume: Vec<f64>,
-    volume_q: Vec<f64>,
+    volume: [Vec<f64>; CHANNELS],
+    volume_q: [Vec<f64>; CHANNELS],
     /// `(I - T W)^{-1}`, `m × m`, column by column (the step applies it a column at a time:
     /// [`matvec`]). `W` itself is never needed: `T W q = q - q_known`.
     inverse: Vec<f64>,
@@ -90,8 +91,11 @@ impl SharedBoard {
         let zero = c64::new(0.0, 0.0);
         let (mut e, mut from, mut to, mut lambda) =
             (vec![zero; m], vec![zero; m], vec![zero; m], vec![zero; m]);
-        let (mut omega2, mut volume, mut volume_q) = (vec![0.0; m], vec![0.0; m], vec![0.0; m]);
-        let [by_v, by_q] = board.radiation_weights();
+        let mut omega2 = vec![0.0; m];
+        let mut volume: [Vec<f64>; CHANNELS] = std::array::from_fn(|_| vec![0.0; m]);
+        let mut volume_q = volume.clone();
+        let weights: [[Vec<f64>; 2]; CHANNELS] =
+            std::array::from_fn(|c| board.radiation_weights(c));
         for (i, &k) in modes.iter().enumerate() {
             let osc = board.oscillator(k);
             let (w, zeta) = (osc.omega_rad_s, osc.damping_ratio);
@@ -104,8 +108,10 @@ impl SharedBoard {
             to[i] = g * (w2 / h);
             lambda[i] = l;
             omega2[i] = w * w;
-            volume[i] = by_v[k];
-            volume_q[i] = by_q[k];
+            for (c, [by_v, by_q]) in weights.iter().enumerate() {
+                volume[c][i] = by_v[k];
+                volume_q[c][i] = by_q[k];
+            }
         }
         let t = to.iter().map(|x| 2.0 * x.re).collect();
         let mut inverse = vec![0.0; m * m];
@@ -201,9 +207,14 @@ impl SharedBoard {
 
     /// One step of the shared modes under the keys' known forces `known` (modal, the sum of
     /// every key's `Phi_k F_k` with `D^{n+1}` left out), solved with the keys' `Z D^{n+1}`
-    /// (module notes); returns the board's radiating source after it (m^3/s). The keys then
-    /// read `D^{n+1}` with [`SharedBoard::at`].
-    pub(crate) fn step(&self, state: &mut BoardState, known: &[f64], simd: Simd) -> f64 {
+    /// (module notes); returns the board's radiating source of each channel after it (m^3/s).
+    /// The keys then read `D^{n+1}` with [`SharedBoard::at`].
+    pub(crate) fn step(
+        &self,
+        state: &mut BoardState,
+        known: &[f64],
+        simd: Simd,
+    ) -> [f64; CHANNELS] {
         let m = self.modes();
         let (e, from, to) = (&self.e, &self.from, &self.to);
         for k in 0..m {
@@ -214,7 +225,7 @@ impl SharedBoard {
             state.known[k] = 2.0 * re;
         }
         matvec(simd.avx2(), &self.inverse, &state.known, &mut state.q);
-        let mut volume = 0.0;
+        let mut volume = [0.0; CHANNELS];
         for k in 0..m {
             // W q from T W q = q - q_known (T > 0 on every mode but the padding, where q = 0).
             let wq = if self.t[k] > 0.0 {
@@ -226,8 +237,13 @@ impl SharedBoard {
             state.z.im[k] += to.im[k] * wq;
             state.force[k] = known[k] + wq;
             let l = self.lambda[k];
-            volume += self.volume[k] * 2.0 * (l.re * state.z.re[k] - l.im * state.z.im[k])
-                + self.volume_q[k] * 2.0 * state.z.re[k];
+            let (v, q) = (
+                2.0 * (l.re * state.z.re[k] - l.im * state.z.im[k]),
+                2.0 * state.z.re[k],
+            );
+            for (c, y) in volume.iter_mut().enumerate() {
+                *y += self.volume[c][k] * v + self.volume_q[c][k] * q;
+            }
         }
         volume
     }

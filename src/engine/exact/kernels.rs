@@ -4,7 +4,7 @@
 
 use crate::engine::kernels::has_avx2_fma;
 use crate::engine::physics::damper::FELT_POINTS;
-use crate::engine::spec::MAX_STRINGS;
+use crate::engine::spec::{CHANNELS, MAX_STRINGS};
 use faer::c64;
 
 /// A complex vector per mode, real and imaginary parts apart (the kernels' layout).
@@ -81,9 +81,12 @@ impl Split {
 pub(crate) const LANES: usize = 8;
 
 /// Directions of the bridge's motion (T, L, P): a step's inputs, one per direction; and the rows
-/// read after a step (the volume velocity and the total contact force per direction).
+/// read after a step: the left channel's radiating source, the total contact force per
+/// direction, the right channel's source ([`SOUND_READS`]).
 pub(crate) const DIRECTIONS: usize = 3;
-pub(crate) const READS: usize = 4;
+pub(crate) const READS: usize = 5;
+/// The reads that are each channel's radiating source (left, right).
+pub(crate) const SOUND_READS: [usize; CHANNELS] = [0, 4];
 
 /// One pass over the first `e.len()` modes: `z <- e ⊙ z` (if `propagate`), then
 /// `z += sum_j g_j u_j` over the inputs, then `Re(r_i z)` for each row: 6 FLOP per mode to

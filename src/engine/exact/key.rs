@@ -15,11 +15,12 @@ use super::interface::SHARED_BELOW_HZ;
 pub(crate) use super::kernels::DAMPER_CHANNELS;
 use super::kernels::{
     BlockCoefficients, Split, Taps, BLOCK, DAMPED_INPUTS, DAMPED_READS, DIRECTIONS, READS,
+    SOUND_READS,
 };
 use crate::engine::modal::{input_weights, Modal};
 use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::physics::hammer::HammerParams;
-use crate::engine::spec::{BuildError, Direction, UnisonSpec, MAX_STRINGS};
+use crate::engine::spec::{BuildError, Direction, UnisonSpec, CHANNELS, MAX_STRINGS};
 use faer::c64;
 use std::ops::Range;
 
@@ -166,11 +167,11 @@ pub(crate) struct KeyModes {
     pub(crate) strike_row: Vec<Split>,
     pub(crate) strike_input: Vec<Split>,
     /// Per string and direction, the contact force's row (Eq. 6, relative to the key's board
-    /// modes); per direction, the key's board modes' velocity at the bridge point; the key's
-    /// board modes' net volume velocity.
+    /// modes); per direction, the key's board modes' velocity at the bridge point; per channel,
+    /// the key's board modes' radiating source.
     pub(crate) force_row: Vec<[Split; 3]>,
     pub(crate) bridge_velocity_row: [Split; 3],
-    pub(crate) volume_row: Split,
+    pub(crate) volume_rows: [Split; CHANNELS],
     /// Per direction, the inputs of the shared board's motion `D` at the bridge: every string's
     /// contact spring stretched by it (`k_d D`) and its damper (`c_d Ddot`).
     pub(crate) bridge_input: [[Split; 2]; 3],
@@ -220,15 +221,19 @@ impl KeyModes {
             }));
         }
         let board_row = |x: &[f64]| Split::new(&modal.row(&layout.board_vector(x), true));
-        // The radiating source: the board modes' velocities and displacements, weighted.
-        let [by_v, by_q] = spec.board.radiation_weights();
-        let mut radiation = modal.row(&layout.board_vector(&by_v), true);
-        for (r, q) in radiation
-            .iter_mut()
-            .zip(modal.row(&layout.board_vector(&by_q), false))
-        {
-            *r += q;
-        }
+        // Each channel's radiating source: the board modes' velocities and displacements,
+        // weighted.
+        let radiation = |c: usize| {
+            let [by_v, by_q] = spec.board.radiation_weights(c);
+            let mut row = modal.row(&layout.board_vector(&by_v), true);
+            for (r, q) in row
+                .iter_mut()
+                .zip(modal.row(&layout.board_vector(&by_q), false))
+            {
+                *r += q;
+            }
+            Split::new(&row)
+        };
         let bridge_input = std::array::from_fn(|d| {
             let mut w = vec![0.0; layout.n];
             for s in 0..ns {
@@ -265,7 +270,7 @@ impl KeyModes {
             strike_input,
             force_row,
             bridge_velocity_row: std::array::from_fn(|d| board_row(&point[d])),
-            volume_row: Split::new(&radiation),
+            volume_rows: std::array::from_fn(radiation),
             bridge_input,
             damper_row,
             damper_input,
@@ -300,7 +305,7 @@ pub(crate) struct DamperKey {
     pub(crate) settle: [[f64; DIRECTIONS]; DAMPER_CHANNELS],
     /// The damped key over a block: in the state `u = w - sum_j to_j f_j` the felt's force
     /// enters with the value known at the start of each step, `u' = e u + beta D^n + gamma f^n`,
-    /// `gamma = from + e to`; the block reads the four rows and the felt's velocity per channel,
+    /// `gamma = from + e to`; the block reads the key's five rows and the felt's velocity per channel,
     /// and folds in `D` and `f` (channels beyond the key's, zero).
     pub(crate) block: BlockCoefficients<DAMPED_READS, DAMPED_INPUTS>,
     pub(crate) markov: Box<Taps<DAMPED_READS, DAMPED_INPUTS>>,
@@ -405,11 +410,11 @@ struct Undamped<'a> {
 }
 
 /// How the reads after a step depend on `D^{n+1}`: `Z[i][d]` for the total contact force (N/m)
-/// and the volume velocity's `[d]`, with the damper lifted or down.
+/// and each channel's radiating source's `[d]`, with the damper lifted or down.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Settle {
     pub(crate) force: [[f64; DIRECTIONS]; DIRECTIONS],
-    pub(crate) volume: [f64; DIRECTIONS],
+    pub(crate) volume: [[f64; DIRECTIONS]; CHANNELS],
 }
 
 /// `Re(r_i e^k g_d)` for `k < BLOCK`, laid out for [`super::kernels::scatter`].
@@ -452,9 +457,9 @@ pub struct ExactKey {
     /// Per string, the felt force's input through ETDRK4's `Q`, `f1`, `f2`, `f3`.
     pub(crate) drive_q: Vec<Split>,
     pub(crate) drive_f: Vec<[Split; 3]>,
-    /// Read after every step: the key's board modes' net volume velocity, and the total contact
-    /// force per direction T, L, P relative to them (the force on the shared board is this less
-    /// `feed_k D + feed_c Ddot`).
+    /// Read after every step: the key's board modes' radiating source of the left channel, the
+    /// total contact force per direction T, L, P relative to them (the force on the shared board
+    /// is this less `feed_k D + feed_c Ddot`), the right channel's source ([`SOUND_READS`]).
     pub(crate) reads: [Split; READS],
     pub(crate) feed_k: [f64; 3],
     pub(crate) feed_c: [f64; 3],
@@ -522,10 +527,11 @@ impl ExactKey {
             t
         };
         let reads = [
-            modes.volume_row.clone(),
+            modes.volume_rows[0].clone(),
             total_force(0),
             total_force(1),
             total_force(2),
+            modes.volume_rows[1].clone(),
         ];
         // D enters as k D + c Ddot with D = D^n + s tau: value h phi1 gk, slope
         // h phi1 gc + h^2 phi2 gk.
@@ -568,7 +574,7 @@ impl ExactKey {
                     reads[1 + i].read(&settle[d]) - direct
                 })
             }),
-            volume: std::array::from_fn(|d| reads[0].read(&settle[d])),
+            volume: SOUND_READS.map(|r| std::array::from_fn(|d| reads[r].read(&settle[d]))),
         };
         let undamped = Undamped {
             weights: &weights,
@@ -591,7 +597,9 @@ impl ExactKey {
                 force: std::array::from_fn(|i| {
                     std::array::from_fn(|d| free.force[i][d] + through(1 + i, d))
                 }),
-                volume: std::array::from_fn(|d| free.volume[d] + through(0, d)),
+                volume: std::array::from_fn(|c| {
+                    std::array::from_fn(|d| free.volume[c][d] + through(SOUND_READS[c], d))
+                }),
             }
         });
         let reads_of =

@@ -10,7 +10,7 @@
 //! at four ETDRK4 stages per sample; per voice and step that is ~42 FLOP per string mode plus
 //! ~9.4 kFLOP of board reads and writes, and 32 voices already ask 28 GFLOP/s. Here a sounding
 //! voice costs 6 FLOP per complex mode to propagate and ~4 per mode for each row it is read at
-//! (its volume velocity and its force on the board in three directions), and 6 per shared board
+//! (its radiating source in each of two channels and its force on the board in three directions), and 6 per shared board
 //! mode to meet the board (its force onto the modes, their displacement at its bridge); the board
 //! costs `2 m^2` a step for the whole pool ([`interface`]). Only the felt hammer is nonlinear,
 //! and only for the few milliseconds it touches: then the step is ETDRK4 (Cox & Matthews 2002)
@@ -99,27 +99,33 @@ impl ExactUnison {
         self.pool.step();
     }
 
-    /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity (m^3/s)
-    /// after each (by whole blocks once the hammer has left, as the pool does).
-    pub fn run(&mut self, volume_velocity: &mut [f64]) {
-        self.pool.run(volume_velocity, None);
+    /// Advance `sound.len()` steps, writing the board's radiating source of each channel
+    /// (m^3/s) after each (by whole blocks once the hammer has left, as the pool does).
+    pub fn run(&mut self, sound: &mut [[f64; crate::engine::spec::CHANNELS]]) {
+        self.pool.run(sound, None);
     }
 
     /// Floating-point operations of one free step in a block: per complex mode of the key 6 to
-    /// propagate and 4 per row read (volume velocity, three forces) in the block's first pass, 6
-    /// and 4 per input (three directions) in its last; the Markov convolution (12 sums of
+    /// propagate and 4 per row read (two channels' sources, three forces) in the block's first
+    /// pass, 6 and 4 per input (three directions) in its last; the Markov convolution (15 sums of
     /// `BLOCK / 2` taps on average); per shared mode 12 for the key's part of the interface and
-    /// 20 for the board's step; and the solve, `2 m^2`.
+    /// 24 for the board's step (its two sources); and the solve, `2 m^2`.
     pub fn flops_per_step(&self) -> f64 {
         let shared = self.pool.shared_modes() as f64;
         let own = self.modes as f64 - shared;
-        let convolution = 2.0 * 12.0 * kernels::BLOCK as f64 / 2.0;
-        own * (6.0 + 4.0 * 4.0 + 6.0 + 3.0 * 4.0) + convolution + shared * (32.0 + 2.0 * shared)
+        let reads = kernels::READS as f64;
+        let convolution = 2.0 * reads * 3.0 * kernels::BLOCK as f64 / 2.0;
+        own * (6.0 + 4.0 * reads + 6.0 + 3.0 * 4.0) + convolution + shared * (36.0 + 2.0 * shared)
     }
 
     /// Net volume velocity of the board (m^3/s) after the last step.
     pub fn volume_velocity_m3_s(&self) -> f64 {
         self.pool.volume_velocity_m3_s()
+    }
+
+    /// The board's radiating source of each sound channel (m^3/s) after the last step.
+    pub fn radiated_m3_s(&self) -> [f64; crate::engine::spec::CHANNELS] {
+        self.pool.radiated_m3_s()
     }
 
     /// Forces and volume velocity now (Eq. 19).
@@ -178,14 +184,14 @@ mod tests {
             velocity_m_s: 2.5,
             una_corda: false,
         });
-        warm.run(&mut [0.0; 480]);
+        warm.run(&mut [[0.0; 2]; 480]);
         assert!(!warm.hammer_engaged());
         let render = |simd: kernels::Simd| {
             let mut u = warm.clone();
             u.pool.set_simd(simd);
-            let mut x = vec![0.0; 96_000];
+            let mut x = vec![[0.0; 2]; 96_000];
             u.run(&mut x);
-            x
+            x.concat()
         };
         let portable = render(kernels::Simd::Portable);
         let peak = portable.iter().fold(0f64, |m, x| m.max(x.abs()));

@@ -8,7 +8,9 @@ use super::kernels::{Simd, BLOCK};
 use super::key::ExactKey;
 use super::voice::Voice;
 use crate::engine::pool::{Policy, VoiceState};
-use crate::engine::spec::{BuildError, LinearState, Observation, UnisonSpec, STEAL_FADE_S};
+use crate::engine::spec::{
+    BuildError, LinearState, Observation, UnisonSpec, CHANNELS, STEAL_FADE_S,
+};
 use crate::engine::Pair;
 use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
 
@@ -29,8 +31,8 @@ pub struct ExactPool {
     h: f64,
     fade_steps: u32,
     simd: Simd,
-    /// The board's net volume velocity after the last step (m^3/s).
-    volume_velocity_m3_s: f64,
+    /// The board's radiating source of each channel after the last step (m^3/s).
+    radiated_m3_s: [f64; CHANNELS],
 }
 
 impl ExactPool {
@@ -64,7 +66,7 @@ impl ExactPool {
             h,
             fade_steps: ((STEAL_FADE_S / h).round() as u32).max(1),
             simd: Simd::detect(),
-            volume_velocity_m3_s: 0.0,
+            radiated_m3_s: [0.0; CHANNELS],
         })
     }
 
@@ -93,17 +95,17 @@ impl ExactPool {
             keep_energies: false,
         };
         run(&cx, [&mut self.voices, &mut []], &mut self.steps, 1);
-        self.volume_velocity_m3_s = self.steps.volume[0];
+        self.radiated_m3_s = self.steps.volume[0];
         self.finish_fades();
     }
 
-    /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity after each,
+    /// Advance `sound.len()` steps, writing the board's radiating source of each channel after each,
     /// in blocks of up to [`BLOCK`] steps ([`ExactPool::block`]) that end where a stolen voice's
     /// fade does (so that its next key starts between blocks); the voices split in two halves
     /// over two cores through `pair` (the same result bit for bit: [`ExactPool::block`]).
-    pub fn run(&mut self, volume_velocity: &mut [f64], pair: Option<&dyn Pair>) {
+    pub fn run(&mut self, sound: &mut [[f64; CHANNELS]], pair: Option<&dyn Pair>) {
         let mut done = 0;
-        while done < volume_velocity.len() {
+        while done < sound.len() {
             let fade = self
                 .voices
                 .iter()
@@ -111,9 +113,9 @@ impl ExactPool {
                 .map(|v| v.state.fade_left as usize)
                 .min()
                 .unwrap_or(BLOCK);
-            let n = (volume_velocity.len() - done).min(BLOCK).min(fade);
-            let last = done + n == volume_velocity.len();
-            self.block(&mut volume_velocity[done..done + n], pair, last);
+            let n = (sound.len() - done).min(BLOCK).min(fade);
+            let last = done + n == sound.len();
+            self.block(&mut sound[done..done + n], pair, last);
             self.finish_fades();
             done += n;
         }
@@ -167,7 +169,7 @@ impl ExactPool {
     /// the inputs folded in at the end. The others step one sample at a time, as in `step`.
     /// The last block of a run (`last`) keeps each voice's energies for the policy
     /// ([`Voice::energies`]).
-    fn block(&mut self, out: &mut [f64], pair: Option<&dyn Pair>, last: bool) {
+    fn block(&mut self, out: &mut [[f64; CHANNELS]], pair: Option<&dyn Pair>, last: bool) {
         self.sync_loads();
         let len = out.len();
         for v in self.voices.iter_mut() {
@@ -214,11 +216,17 @@ impl ExactPool {
         let (v0, v1) = self.voices.split_at_mut(passes);
         both(split, &mut || end(&cx, v1, len), &mut || end(&cx, v0, len));
         out.copy_from_slice(&self.steps.volume[..len]);
-        self.volume_velocity_m3_s = out[len - 1];
+        self.radiated_m3_s = out[len - 1];
     }
 
+    /// The board's radiating source of the left channel after the last step (m^3/s).
     pub fn volume_velocity_m3_s(&self) -> f64 {
-        self.volume_velocity_m3_s
+        self.radiated_m3_s[0]
+    }
+
+    /// The board's radiating source of each channel after the last step (m^3/s).
+    pub fn radiated_m3_s(&self) -> [f64; CHANNELS] {
+        self.radiated_m3_s
     }
 
     /// Voice `k`'s forces, the bridge's velocity under it and the volume velocity of its key's
@@ -568,7 +576,7 @@ mod tests {
             kept += k;
             checks += 1;
         };
-        let mut out = vec![0.0; 300];
+        let mut out = vec![[0.0; CHANNELS]; 300];
         for k in 0..3 {
             pool.assign(k, k);
             pool.set_active(k, true);
@@ -618,8 +626,13 @@ mod tests {
     fn a_block_advanced_mode_by_mode_equals_its_steps() {
         // C2 struck, C3 held (free after the first block), E3 struck with its damper down:
         // 0.5 s by blocks of 64 (single precision inside each, double from block to block)
-        // against 0.5 s of single steps in double precision.
-        let (specs, rate) = grand_keys(&["C2", "C3", "E3"]);
+        // against 0.5 s of single steps in double precision, heard in stereo.
+        let (mut specs, rate) = grand_keys(&["C2", "C3", "E3"]);
+        for s in &mut specs {
+            let board = &mut s.board;
+            board.heard = ["bass", "treble"].map(|l| board.listener(l));
+            assert!(board.is_stereo());
+        }
         let mut blocks = ExactPool::build_pool(&specs, 3, rate).unwrap();
         for k in 0..3 {
             blocks.assign(k, k);
@@ -634,20 +647,21 @@ mod tests {
         blocks.set_damper_voice(2, true);
         let mut steps = blocks.clone();
         let n = (0.5 * rate) as usize;
-        let mut a = vec![0.0; n];
+        let mut a = vec![[0.0; CHANNELS]; n];
         let mut ones = blocks.clone();
         blocks.run(&mut a, None);
+        let a = a.concat();
         let c: Vec<f64> = (0..n)
-            .map(|_| {
-                let mut x = [0.0];
+            .flat_map(|_| {
+                let mut x = [[0.0; CHANNELS]];
                 ones.run(&mut x, None);
                 x[0]
             })
             .collect();
         let b: Vec<f64> = (0..n)
-            .map(|_| {
+            .flat_map(|_| {
                 steps.step();
-                steps.volume_velocity_m3_s()
+                steps.radiated_m3_s()
             })
             .collect();
         let peak = b.iter().fold(0f64, |m, x| m.max(x.abs()));
@@ -661,7 +675,7 @@ mod tests {
             .zip(&b)
             .fold(0f64, |m, (x, y)| m.max((x - y).abs()))
             / peak;
-        println!("blocks of one step vs single steps, 0.5 s: volume velocity {ones_worst:.1e} of its peak (f32 rounding of each block's inputs, compounded over more blocks)");
+        println!("blocks of one step vs single steps, 0.5 s: both channels {ones_worst:.1e} of their peak (f32 rounding of each block's inputs, compounded over more blocks)");
         assert!(ones_worst < 1e-4, "{ones_worst:e}");
         let state = |p: &ExactPool| p.linear_state().x;
         let (sa, sb) = (state(&blocks), state(&steps));
@@ -672,7 +686,7 @@ mod tests {
             .fold(0f64, |m, (x, y)| m.max((x - y).abs()))
             / scale;
         println!(
-            "blocks of {BLOCK} mode by mode vs single steps, 0.5 s: volume velocity {worst:.1e} of its peak, state {state_worst:.1e}"
+            "blocks of {BLOCK} mode by mode vs single steps, 0.5 s: both channels {worst:.1e} of their peak, state {state_worst:.1e}"
         );
         // f32 inside a block: ~1e-7 per step, not compounded from block to block.
         assert!(

@@ -5,7 +5,7 @@
 
 use super::kernels::{
     self, advance, propagate, scatter, stage, Pending, Reversed, Simd, Split, BLOCK, DAMPED_INPUTS,
-    DAMPED_READS, DIRECTIONS, READS,
+    DAMPED_READS, DIRECTIONS, READS, SOUND_READS,
 };
 use super::key::{ExactKey, DAMPER_CHANNELS};
 use crate::engine::pool::VoiceState;
@@ -30,16 +30,17 @@ pub(crate) struct Voice {
     pub(crate) force_n: [f64; 3],
     /// The damper felt's force per channel at the end of the last step (N).
     pub(crate) damper_n: [f64; DAMPER_CHANNELS],
-    /// What the last step read: the volume velocity of the key's board modes (m^3/s) and the
-    /// total contact force T, L, P on the shared board (N).
+    /// What the last step read: the radiating source of the key's board modes (m^3/s, left
+    /// channel), the total contact force T, L, P on the shared board (N), the right channel's
+    /// source ([`SOUND_READS`]).
     pub(crate) read: [f64; READS],
     /// Within a step, before the interface's solve: the reads without `Z D^{n+1}`, and the
     /// damper's force without what `D^{n+1}` adds.
     pub(crate) known: [f64; READS],
     pub(crate) damper_known: [f64; DAMPER_CHANNELS],
     /// Over a block advanced mode by mode ([`super::block`]): whether this voice is, what its
-    /// modes read with no input (the four rows, and the damper felt's velocity per channel where
-    /// the damper is down), the inputs of each step (`D^t`, m, and the felt's `f^t`, N,
+    /// modes read with no input (the key's five rows, and the damper felt's velocity per
+    /// channel where the damper is down), the inputs of each step (`D^t`, m, and the felt's `f^t`, N,
     /// [`Reversed`]) and what they have added to the reads so far ([`Pending`]).
     pub(crate) in_block: bool,
     pub(crate) block_read: [[f64; BLOCK]; DAMPED_READS],
@@ -286,7 +287,7 @@ impl Voice {
             _ => {
                 let pending: &mut Pending<READS> = (&mut self.pending[..READS])
                     .try_into()
-                    .expect("the first reads are the four rows");
+                    .expect("the first reads are the undamped key's");
                 let x: [f32; DIRECTIONS] = std::array::from_fn(|d| x[d]);
                 scatter(simd, &key.markov, &x, t, pending);
                 for (i, r) in read.iter_mut().enumerate() {
@@ -329,7 +330,9 @@ impl Voice {
         }
         let mut read = self.known;
         for d in 0..DIRECTIONS {
-            read[0] += settle.volume[d] * next[d];
+            for (c, &r) in SOUND_READS.iter().enumerate() {
+                read[r] += settle.volume[c][d] * next[d];
+            }
             for i in 0..DIRECTIONS {
                 read[1 + i] += settle.force[i][d] * next[d];
             }

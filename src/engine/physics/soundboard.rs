@@ -7,6 +7,7 @@
 //! `Y_ij(omega) = sum_k i omega phi_i,k phi_j,k / (omega_k^2 - omega^2 + 2 i zeta_k omega_k omega)`.
 
 use super::Oscillator;
+use crate::engine::spec::CHANNELS;
 use std::f64::consts::PI;
 
 /// A reduced modal soundboard, structure-of-arrays.
@@ -20,9 +21,10 @@ pub struct SoundboardModes {
     pub points: Vec<BridgePoint>,
     /// Listeners over the board, each with every mode's Rayleigh integral there (may be none).
     pub listeners: Vec<Listener>,
-    /// The listener the engines radiate to ([`SoundboardModes::radiation_weights`]); `None`: the
-    /// monopole of the net volume velocity (the paper's board).
-    pub heard: Option<usize>,
+    /// The listener each output channel (left, right) hears
+    /// ([`SoundboardModes::radiation_weights`]); `None`: the monopole of the net volume velocity
+    /// (the paper's board). The same in both channels: a mono piano.
+    pub heard: [Option<usize>; CHANNELS],
 }
 
 /// How each mode radiates to one listener over the board as a baffled plate: its Rayleigh
@@ -64,14 +66,15 @@ impl SoundboardModes {
         self.freq_hz.is_empty()
     }
 
-    /// What the engines read as the board's radiating source `Y` (m^3/s): per mode, the weight
+    /// What the engines read as the board's radiating source `Y` (m^3/s) of output `channel`
+    /// (0 left, 1 right, [`SoundboardModes::heard`]): per mode, the weight
     /// of its modal velocity and of its modal displacement. Without a listener, the net volume
     /// velocity (weights `V_m`, 0), whose pressure at `r` is `rho0 / (4 pi r) dY/dt`. With one,
     /// the Rayleigh integral (`p = rho0 / (2 pi) sum_m D_m qdd_m`) as a monopole at
     /// [`LISTENER_REFERENCE_M`]: `2 r_ref (Re D_m qdot_m - omega_m Im D_m q_m)`, whose phasor at
     /// the mode's frequency is `2 r_ref D_m Qdot_m`.
-    pub fn radiation_weights(&self) -> [Vec<f64>; 2] {
-        match self.heard.and_then(|l| self.listeners.get(l)) {
+    pub fn radiation_weights(&self, channel: usize) -> [Vec<f64>; 2] {
+        match self.heard[channel].and_then(|l| self.listeners.get(l)) {
             None => [self.volume_m2_per_sqrt_kg.clone(), vec![0.0; self.len()]],
             Some(l) => {
                 let r2 = 2.0 * LISTENER_REFERENCE_M;
@@ -83,6 +86,11 @@ impl SoundboardModes {
                 ]
             }
         }
+    }
+
+    /// Whether the two channels hear different listeners.
+    pub fn is_stereo(&self) -> bool {
+        self.heard[0] != self.heard[1]
     }
 
     /// The index of the listener called `name`.
@@ -162,9 +170,9 @@ mod tests {
                 rayleigh_re: vec![re],
                 rayleigh_im: vec![im],
             }],
-            heard: Some(0),
+            heard: [Some(0), None],
         };
-        let [by_v, by_q] = board.radiation_weights();
+        let [by_v, by_q] = board.radiation_weights(0);
         let (w, rho) = (2.0 * PI * f_hz, 1.2);
         let mut worst: f64 = 0.0;
         for i in 0..100 {
@@ -178,11 +186,8 @@ mod tests {
         }
         println!("a mode heard through its weights vs rho0/(2 pi) Re(D qdd): worst {worst:.1e} of the amplitude");
         assert!(worst < 1e-12);
-        // Without a listener, the monopole of the net volume velocity.
-        let monopole = SoundboardModes {
-            heard: None,
-            ..board
-        };
-        assert_eq!(monopole.radiation_weights(), [vec![1e-2], vec![0.0]]);
+        // Without a listener (the right channel here), the monopole of the net volume velocity.
+        assert_eq!(board.radiation_weights(1), [vec![1e-2], vec![0.0]]);
+        assert!(board.is_stereo());
     }
 }

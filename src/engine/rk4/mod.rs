@@ -25,7 +25,7 @@ use rhs::{evaluate, stage};
 use crate::engine::kernels::{has_avx2_fma, Real};
 use crate::engine::pool::{fade_step, Policy, VoiceState};
 use crate::engine::spec::{
-    BuildError, Energy, Observation, Strike, UnisonSpec, MAX_STRINGS, STEAL_FADE_S,
+    BuildError, Energy, Observation, Strike, UnisonSpec, CHANNELS, MAX_STRINGS, STEAL_FADE_S,
 };
 use std::ops::Range;
 
@@ -52,9 +52,11 @@ struct Model<T> {
     bridge_shape: Vec<T>,
     /// The voices' keys' `static_shape`.
     static_shape: Vec<T>,
-    /// The board's radiating source per unit modal velocity and displacement
-    /// ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`]).
-    board_radiation: [Vec<T>; 2],
+    /// The board's radiating source of each channel per unit modal velocity and displacement
+    /// ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`]); whether the
+    /// two channels hear different listeners.
+    board_radiation: [[Vec<T>; 2]; CHANNELS],
+    stereo: bool,
     h: f64,
 }
 
@@ -188,7 +190,10 @@ impl<T: Real> Rk4Pool<T> {
             damp,
             bridge_shape,
             static_shape,
-            board_radiation: first.board.radiation_weights().map(|w| cast(&w)),
+            board_radiation: std::array::from_fn(|c| {
+                first.board.radiation_weights(c).map(|w| cast(&w))
+            }),
+            stereo: first.board.is_stereo(),
             h,
         };
         let max_rank = model.keys.iter().map(|k| k.duplex_rank).max().unwrap_or(0);
@@ -409,12 +414,13 @@ impl<T: Real> Rk4Pool<T> {
         self.states[0].damper_down
     }
 
-    /// Advance `volume_velocity.len()` steps, writing the board's net volume velocity (m^3/s)
-    /// after each (one core: RK4's many small stages are not worth splitting).
-    pub fn run(&mut self, volume_velocity: &mut [f64], _pair: Option<&dyn crate::engine::Pair>) {
-        for q in volume_velocity {
+    /// Advance `sound.len()` steps, writing the board's radiating source of each channel (m^3/s,
+    /// [`Rk4Pool::radiated_m3_s`]) after each (one core: RK4's many small stages are not worth
+    /// splitting).
+    pub fn run(&mut self, sound: &mut [[f64; CHANNELS]], _pair: Option<&dyn crate::engine::Pair>) {
+        for q in sound {
             self.step();
-            *q = self.volume_velocity_m3_s();
+            *q = self.radiated_m3_s();
         }
     }
 

@@ -52,10 +52,24 @@ impl<T: Real> Rk4Pool<T> {
         obs
     }
 
-    /// The board's radiating source (m^3/s): its net volume velocity, or its equivalent at a
-    /// listener ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`]).
+    /// The board's radiating source (m^3/s) of the left channel: its net volume velocity, or
+    /// its equivalent at a listener
+    /// ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`]).
     pub fn volume_velocity_m3_s(&self) -> f64 {
-        let [by_v, by_q] = &self.model.board_radiation;
+        self.radiated_by(0)
+    }
+
+    /// The board's radiating source (m^3/s) of each channel, left and right.
+    pub fn radiated_m3_s(&self) -> [f64; CHANNELS] {
+        let left = self.radiated_by(0);
+        match self.model.stereo {
+            true => [left, self.radiated_by(1)],
+            false => [left; CHANNELS],
+        }
+    }
+
+    fn radiated_by(&self, channel: usize) -> f64 {
+        let [by_v, by_q] = &self.model.board_radiation[channel];
         let board = self.model.board.clone();
         T::dot_wide::<false>(by_v, &self.v[board.clone()])
             + T::dot_wide::<false>(by_q, &self.q[board])
