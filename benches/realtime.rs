@@ -24,7 +24,7 @@ fn keyboard<E: VoicePool>(voices: usize) -> (Piano<E>, unacorda::config::output:
     let scaling = Scaling::resolve("paper").expect("built-in keyboard");
     let keys: Vec<usize> = (1..=KEYS).collect();
     let piano = Piano::<E>::build(&scaling, &keys, voices).expect("the keyboard builds");
-    (piano, scaling.base.output_settings())
+    (piano, scaling.output_settings())
 }
 
 fn callback(c: &mut Criterion) {

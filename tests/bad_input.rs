@@ -97,24 +97,23 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
         e.contains("`voicing.felt_stiffness_factor` = 1000000 (key 88)")
             && e.contains("[0.01, 10000]")
     );
-    // A listener the asset does not have is refused when the first key is made, naming them.
-    let e = refusal("bad_keyboard_listener.toml", |path| {
-        Scaling::resolve(path).and_then(|s| s.key_preset(40))
-    });
-    assert!(
-        e.contains("bad_keyboard_listener.toml")
-            && e.contains("`radiation.listener` = `balcony`")
-            && e.contains("above, treble, bass")
-    );
-    // So is a stereo pair naming one.
-    let e = refusal("bad_keyboard_stereo.toml", |path| {
-        Scaling::resolve(path).and_then(|s| s.key_preset(40))
-    });
-    assert!(
-        e.contains("bad_keyboard_stereo.toml")
-            && e.contains("`radiation.stereo (right)` = `gallery`")
-            && e.contains("above, treble, bass")
-    );
+    // A listener the asset does not have, alone or in a stereo pair, is refused when the first
+    // key is made, naming the asset's.
+    for (file, field) in [
+        (
+            "bad_keyboard_listener.toml",
+            "`radiation.listener` = `balcony`",
+        ),
+        (
+            "bad_keyboard_stereo.toml",
+            "`radiation.stereo (right)` = `gallery`",
+        ),
+    ] {
+        let e = refusal(file, |path| {
+            Scaling::resolve(path).and_then(|s| s.key_preset(40))
+        });
+        assert!(e.contains(file) && e.contains(field) && e.contains("above, treble, bass"));
+    }
     let e = keyboard_error("bad_keyboard_no_layout.toml");
     assert!(e.contains("`layout`") && e.contains("base_keyboard"));
     let e = keyboard_error("bad_keyboard_modes.toml");

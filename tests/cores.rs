@@ -29,7 +29,7 @@ fn piano<E: VoicePool>(voices: usize) -> (Piano<E>, OutputSettings) {
     let keys: Vec<usize> = names.iter().map(|n| parse_key(n).unwrap()).collect();
     (
         Piano::build(&scaling, &keys, voices).unwrap(),
-        scaling.base.output_settings(),
+        scaling.output_settings(),
     )
 }
 
@@ -80,7 +80,7 @@ fn chord() -> Case {
     Case {
         name: "exact pool, 40-key chord",
         piano: Piano::build(&scaling, &keys, keys.len()).unwrap(),
-        settings: scaling.base.output_settings(),
+        settings: scaling.output_settings(),
         script,
         blocks: 160,
     }

@@ -23,7 +23,7 @@ fn piano(
     let keys: Vec<usize> = names.iter().map(|n| parse_key(n).unwrap()).collect();
     (
         Piano::build(&scaling, &keys, voices).unwrap(),
-        scaling.base.output_settings(),
+        scaling.output_settings(),
     )
 }
 

@@ -96,7 +96,7 @@ fn soak<E: VoicePool>(seconds: f64, engine: &str, two_cores: bool, rise_toleranc
     let scaling = Scaling::resolve("paper").unwrap();
     let keys: Vec<usize> = (1..=KEYS).collect();
     let piano = Piano::<E>::build(&scaling, &keys, VOICES).unwrap();
-    let settings = scaling.base.output_settings();
+    let settings = scaling.output_settings();
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
     if two_cores {
         synth.use_second_core().unwrap();

@@ -340,7 +340,7 @@ fn energy_stress<E: VoicePool>(seconds: f64, tolerance: f64) -> (u64, u64, f64) 
     let scaling = Scaling::resolve("paper").unwrap();
     let keys: Vec<usize> = (1..=KEYS).step_by(4).chain([88]).take(24).collect();
     let piano = Piano::<E>::build(&scaling, &keys, keys.len()).unwrap();
-    let settings = scaling.base.output_settings();
+    let settings = scaling.output_settings();
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
     let frames = (seconds * settings.rate_hz) as u64;
     let mut rng = Rng(0x2545_F491_4F6C_DD1D);
@@ -426,7 +426,7 @@ fn growth_guard<E: VoicePool>(zeta: f64) -> (Option<f64>, f64) {
         player: unacorda::play::Player::new(&[key]),
         keys: vec![key],
     };
-    let settings = scaling.base.output_settings();
+    let settings = scaling.output_settings();
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
     let strike = Event::NoteOn {
         note: 36,

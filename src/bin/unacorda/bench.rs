@@ -123,7 +123,7 @@ pub fn bench(
         single_voice(seconds, &mut report)?;
     }
     let scaling = Scaling::resolve("paper")?;
-    let settings = scaling.base.output_settings();
+    let settings = scaling.output_settings();
     report.rate_hz = settings.rate_hz;
     report.deadline_s = BLOCK as f64 / settings.rate_hz;
     for (engine, cores, label) in [
@@ -209,7 +209,7 @@ fn callback<E: VoicePool>(
     {
         piano = build(report)?;
     }
-    let settings = scaling.base.output_settings();
+    let settings = scaling.output_settings();
     let deadline = BLOCK as f64 / settings.rate_hz;
     println!(
         "live callback ({label}), {BLOCK}-frame blocks at {:.0} kHz (deadline {:.2} ms), keys spread from A0 under the sustain pedal:",
@@ -319,7 +319,7 @@ fn damped(seconds: f64, voices: usize) -> Result<DampedFigure> {
     let keys: Vec<usize> = (1..=damped_keys).collect();
     let cache = unacorda::keycache::KeyCache::from_env();
     let piano = Piano::<ExactPool>::build_with(&scaling, &keys, voices, cache.as_ref())?;
-    let settings = scaling.base.output_settings();
+    let settings = scaling.output_settings();
     let deadline = BLOCK as f64 / settings.rate_hz;
     let mut medians = [0.0; 2];
     for (released, median) in medians.iter_mut().enumerate() {
