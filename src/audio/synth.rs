@@ -323,8 +323,8 @@ impl<E: VoicePool> Synth<E> {
                     };
                 }
                 if let Some(frame_out) = frames.next() {
-                    frame_out.fill(0.0);
                     frame_out[..width].copy_from_slice(y);
+                    frame_out[width..].fill(0.0);
                 }
                 tap(&self.piano.instrument, self.frame);
                 self.frame += 1;

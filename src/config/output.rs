@@ -1,6 +1,15 @@
 //! What the audio stage needs from a preset: the output rate, the listener and the full scale,
 //! and when a voice falls silent.
 
+/// How a sound of `channels` channels is called in messages: `mono` or `stereo`.
+pub fn channel_layout(channels: u16) -> &'static str {
+    if channels == 2 {
+        "stereo"
+    } else {
+        "mono"
+    }
+}
+
 /// Output stage settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OutputSettings {

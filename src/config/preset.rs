@@ -467,30 +467,13 @@ pub(crate) fn heard(
     path: &Path,
     asset: &str,
 ) -> Result<[Option<usize>; 2], PresetError> {
-    let mono = listener_index(
-        board,
-        &radiation.listener,
-        "radiation.listener",
-        path,
-        asset,
-    )?;
+    let index = |name: Option<&str>, field| listener_index(board, name, field, path, asset);
+    let mono = index(radiation.listener.as_deref(), "radiation.listener")?;
     match &radiation.stereo {
         None => Ok([mono; 2]),
         Some([left, right]) => Ok([
-            listener_index(
-                board,
-                &Some(left.clone()),
-                "radiation.stereo (left)",
-                path,
-                asset,
-            )?,
-            listener_index(
-                board,
-                &Some(right.clone()),
-                "radiation.stereo (right)",
-                path,
-                asset,
-            )?,
+            index(Some(left), "radiation.stereo (left)")?,
+            index(Some(right), "radiation.stereo (right)")?,
         ]),
     }
 }
@@ -499,7 +482,7 @@ pub(crate) fn heard(
 /// the field and the listeners the asset has.
 fn listener_index(
     board: &SoundboardModes,
-    name: &Option<String>,
+    name: Option<&str>,
     field: &'static str,
     path: &Path,
     asset: &str,

@@ -496,7 +496,7 @@ impl LoadedScaling {
     /// (a front end's `--mono`).
     pub fn make_mono(&mut self) {
         self.scaling.stereo = None;
-        self.base.preset.radiation.stereo = None;
+        self.base.make_mono();
     }
 
     /// Interpolate an anchor quantity at `key`: exact at anchors, log-linear between them.

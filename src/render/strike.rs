@@ -70,7 +70,7 @@ impl Frame {
 pub struct Renderer<E: Engine> {
     instrument: E,
     decimator: Decimator,
-    radiation: [Monopole; 2],
+    radiation: [Monopole; crate::engine::CHANNELS],
     output_rate_hz: f64,
     inputs: [f64; CHANNELS],
     outputs: [f64; CHANNELS],

@@ -194,11 +194,7 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         output.device,
         output.channels,
         output.rate_hz,
-        if settings.channels == 2 {
-            "stereo"
-        } else {
-            "mono"
-        },
+        unacorda::config::output::channel_layout(settings.channels),
         args.voices,
         if cores == 2 { "s" } else { "" }
     );

@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use unacorda::audio::wav::WavStream;
 use unacorda::board::generate_asset;
+use unacorda::config::output::channel_layout;
 use unacorda::config::preset::Preset;
 use unacorda::config::preset::GRAND_BOARD_TOML;
 use unacorda::config::scaling::Scaling;
@@ -287,7 +288,7 @@ fn render_midi_file<E: unacorda::engine::VoicePool>(
         r.keys.len(),
         r.voices,
         written_s,
-        if r.channels == 2 { "stereo" } else { "mono" },
+        channel_layout(r.channels),
         took_s,
         written_s / took_s,
         if cores == 1 { "" } else { "s" },
@@ -419,7 +420,7 @@ fn run(cli: Cli) -> Result<()> {
                 loaded.preset.name,
                 seconds,
                 rec.rate_hz,
-                if channels == 2 { "stereo" } else { "mono" },
+                channel_layout(channels),
                 peak_dbfs,
                 if una_corda { "una corda" } else { "normal" }
             );
