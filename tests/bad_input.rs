@@ -97,6 +97,13 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
         e.contains("`voicing.felt_stiffness_factor` = 1000000 (key 88)")
             && e.contains("[0.01, 10000]")
     );
+    let e = keyboard_error("bad_keyboard_hysteresis.toml");
+    assert!(
+        e.contains("`voicing.felt_hysteresis_s` = given at 1 of 2 points")
+            && e.contains("at every voicing point or at none")
+    );
+    let e = keyboard_error("bad_keyboard_hysteresis_range.toml");
+    assert!(e.contains("`voicing.felt_hysteresis_s` = 1 (key 88)") && e.contains("[0, 0.005]"));
     // A listener the asset does not have, alone or in a stereo pair, is refused when the first
     // key is made, naming the asset's.
     for (file, field) in [

@@ -346,3 +346,38 @@ fn keys_prepared_on_several_threads_land_in_order() {
     println!("{err}");
     assert_eq!(err, BuildError::PreparedKeys { specs: 2, keys: 1 });
 }
+
+#[test]
+fn a_keyboards_felt_hysteresis_runs_linearly_between_its_voicing_points() {
+    // Unset, every felt is the paper's elastic one; set at A0 and C8, key k has
+    // alpha = 100 + 200 (k - 1) / 87 us.
+    let concert = Scaling::resolve("concert").unwrap();
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/keyboard_hysteresis.toml"
+    );
+    let hysteretic = Scaling::resolve(path).unwrap();
+    for k in [1, 40, 88] {
+        let (elastic, felt) = (
+            concert.key_preset(k).unwrap().preset.hammer,
+            hysteretic.key_preset(k).unwrap().preset.hammer,
+        );
+        let expected_s = 1e-4 + 2e-4 * (k - 1) as f64 / 87.0;
+        println!(
+            "key {k}: felt hysteresis {:.1} us (expected {:.1})",
+            1e6 * felt.hysteresis_s,
+            1e6 * expected_s
+        );
+        assert_eq!(elastic.hysteresis_s, 0.0);
+        assert!((felt.hysteresis_s - expected_s).abs() < 1e-15);
+        assert_eq!(
+            hysteretic
+                .key_preset(k)
+                .unwrap()
+                .unison_spec()
+                .hammer
+                .hysteresis_s,
+            felt.hysteresis_s
+        );
+    }
+}

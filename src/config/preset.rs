@@ -31,6 +31,10 @@ pub const GRAND_BOARD_TOML: &str = include_str!("../../assets/soundboard_modes/g
 /// 20 kB; a larger file, or a device that never ends (`/dev/zero`), is refused, not read forever.
 pub const MAX_TEXT_BYTES: u64 = 1 << 20;
 
+/// The largest felt hysteresis a file may set (s): ten times the hundreds of microseconds fitted
+/// to real hammers (docs/realism-sources.md §4).
+pub const MAX_HYSTERESIS_S: f64 = 0.005;
+
 /// The text of the file at `path`, refused past [`MAX_TEXT_BYTES`].
 pub fn read_text(path: &Path) -> Result<String, PresetError> {
     use std::io::Read;
@@ -133,6 +137,9 @@ pub struct HammerSection {
     pub strike_ratio: f64,
     pub velocity_m_s: f64,
     pub release_gap_m: f64,
+    /// The felt's hysteresis `alpha` (s); 0 (the default) is the paper's elastic felt.
+    #[serde(default)]
+    pub hysteresis_s: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -366,6 +373,7 @@ impl Preset {
         range("hammer.strike_ratio", h.strike_ratio, 0.01, 0.5)?;
         range("hammer.velocity_m_s", h.velocity_m_s, 0.01, 10.0)?;
         range("hammer.release_gap_m", h.release_gap_m, 0.0, 0.05)?;
+        range("hammer.hysteresis_s", h.hysteresis_s, 0.0, MAX_HYSTERESIS_S)?;
         range(
             "damper.position_ratio",
             self.damper.position_ratio,
@@ -559,6 +567,7 @@ impl LoadedPreset {
                 exponent: h.exponent,
                 strike_ratio: h.strike_ratio,
                 release_gap_m: h.release_gap_m,
+                hysteresis_s: h.hysteresis_s,
             },
             damper: self.preset.damper.present.then_some(DamperParams {
                 position_ratio: self.preset.damper.position_ratio,

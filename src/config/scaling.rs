@@ -9,7 +9,7 @@
 
 use crate::config::preset::{
     bridge_point_index, heard, read_text, LoadedPreset, Preset, PresetError, RadiationSection,
-    StringsSection,
+    StringsSection, MAX_HYSTERESIS_S,
 };
 use crate::engine::physics::damper::DamperParams;
 use crate::engine::physics::string::StringParams;
@@ -145,6 +145,11 @@ pub struct VoicingAnchor {
     pub key: usize,
     /// Factor on the felt's stiffness `K` (Eq. 8) (-).
     pub felt_stiffness_factor: f64,
+    /// The felt's hysteresis `alpha` (s, [`HammerParams::hysteresis_s`]), interpolated linearly;
+    /// given at every voicing point or at none (then the base preset's).
+    ///
+    /// [`HammerParams::hysteresis_s`]: crate::engine::physics::hammer::HammerParams::hysteresis_s
+    pub felt_hysteresis_s: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -378,7 +383,31 @@ impl Scaling {
         optional("losses.key", self.losses.iter().map(|a| a.key).collect())?;
         optional("dampers.key", self.dampers.iter().map(|a| a.key).collect())?;
         optional("voicing.key", self.voicing.iter().map(|a| a.key).collect())?;
+        let with_hysteresis = self
+            .voicing
+            .iter()
+            .filter(|a| a.felt_hysteresis_s.is_some())
+            .count();
+        if with_hysteresis != 0 && with_hysteresis != self.voicing.len() {
+            return Err(bad(
+                "voicing.felt_hysteresis_s",
+                format!(
+                    "given at {with_hysteresis} of {} points",
+                    self.voicing.len()
+                ),
+                "at every voicing point or at none",
+            ));
+        }
         for a in &self.voicing {
+            if let Some(v) = a.felt_hysteresis_s {
+                if !(v.is_finite() && (0.0..=MAX_HYSTERESIS_S).contains(&v)) {
+                    return Err(bad(
+                        "voicing.felt_hysteresis_s",
+                        format!("{v} (key {})", a.key),
+                        &format!("a number in [0, {MAX_HYSTERESIS_S}]"),
+                    ));
+                }
+            }
             let v = a.felt_stiffness_factor;
             if !(v.is_finite() && (0.01..=1e4).contains(&v)) {
                 return Err(bad(
@@ -453,6 +482,12 @@ fn inherit_points<A: Clone>(own: Vec<A>, base: Option<&Vec<A>>) -> Vec<A> {
     }
 }
 
+/// `f` at `key` from points at increasing keys: exact at a point, linear between two, the end
+/// value beyond the ends.
+fn linear<A>(points: &[A], key_of: impl Fn(&A) -> usize, key: usize, f: impl Fn(&A) -> f64) -> f64 {
+    between(points, key_of, key, f, |a, b, t| a * (1.0 - t) + b * t)
+}
+
 /// `f` at `key` from points at increasing keys: exact at a point, linear in `ln f` between two,
 /// the end value beyond the ends.
 fn log_linear<A>(
@@ -460,6 +495,20 @@ fn log_linear<A>(
     key_of: impl Fn(&A) -> usize,
     key: usize,
     f: impl Fn(&A) -> f64,
+) -> f64 {
+    between(points, key_of, key, f, |a, b, t| {
+        (a.ln() * (1.0 - t) + b.ln() * t).exp()
+    })
+}
+
+/// `f` at `key` from points at increasing keys: exact at a point, `mix(f(a), f(b), t)` between
+/// two (`t` from 0 at `a` to 1 at `b`), the end value beyond the ends.
+fn between<A>(
+    points: &[A],
+    key_of: impl Fn(&A) -> usize,
+    key: usize,
+    f: impl Fn(&A) -> f64,
+    mix: impl Fn(f64, f64, f64) -> f64,
 ) -> f64 {
     let hi = points
         .partition_point(|a| key_of(a) < key)
@@ -470,7 +519,7 @@ fn log_linear<A>(
     }
     let a = &points[hi - 1];
     let t = (key - key_of(a)) as f64 / (key_of(b) - key_of(a)) as f64;
-    (f(a).ln() * (1.0 - t) + f(b).ln() * t).exp()
+    mix(f(a), f(b), t)
 }
 
 impl LoadedScaling {
@@ -675,6 +724,14 @@ impl LoadedScaling {
         let voicing = &self.scaling.voicing;
         if !voicing.is_empty() {
             h.stiffness_n_m_p *= log_linear(voicing, |a| a.key, key, |a| a.felt_stiffness_factor);
+        }
+        if voicing.iter().all(|a| a.felt_hysteresis_s.is_some()) && !voicing.is_empty() {
+            h.hysteresis_s = linear(
+                voicing,
+                |a| a.key,
+                key,
+                |a| a.felt_hysteresis_s.unwrap_or_default(),
+            );
         }
         h.exponent = self.interpolate(key, |a| a.hammer_exponent);
         h.strike_ratio = self.interpolate(key, |a| a.strike_ratio);

@@ -474,6 +474,11 @@ pub struct ExactKey {
     /// `Re(r a_d)` of each string's striking-point row, and of each force and bridge-velocity row
     /// (what `D` adds to them beside `w`).
     pub(crate) strike_settle: Vec<[f64; DIRECTIONS]>,
+    /// Per string, the striking point's velocity row (`r lambda` of its displacement row `r`:
+    /// the forces enter the accelerations only) and its `Re(r lambda a_d)`: what a hysteretic
+    /// felt reads.
+    pub(crate) strike_velocity_row: Vec<Split>,
+    pub(crate) strike_velocity_settle: Vec<[f64; DIRECTIONS]>,
     pub(crate) force_settle: Vec<[[f64; DIRECTIONS]; 3]>,
     pub(crate) velocity_settle: [[f64; DIRECTIONS]; 3],
     /// Per direction, the modes' static response to a unit `D` held (a key joining a moving
@@ -605,6 +610,12 @@ impl ExactKey {
         let reads_of =
             |row: &Split| -> [f64; DIRECTIONS] { std::array::from_fn(|d| row.read(&settle[d])) };
         let strike_settle = modes.strike_row.iter().map(reads_of).collect();
+        let strike_velocity_row: Vec<Split> = modes
+            .strike_row
+            .iter()
+            .map(|r| Split::weighted_by(r, |m| modes.lambda[m]))
+            .collect();
+        let strike_velocity_settle = strike_velocity_row.iter().map(reads_of).collect();
         let force_settle = modes
             .force_row
             .iter()
@@ -637,6 +648,8 @@ impl ExactKey {
             free,
             damped,
             strike_settle,
+            strike_velocity_row,
+            strike_velocity_settle,
             force_settle,
             velocity_settle,
             follow,

@@ -160,11 +160,19 @@ impl Voice {
         )
     }
 
-    /// The felt force on each string (Eq. 8) with the hammer at `y` and the modes at `z`.
-    fn felt(&self, key: &ExactKey, z: &Split, y: f64) -> [f64; MAX_STRINGS] {
+    /// The felt force on each string (Eq. 8) with the hammer at `y` moving at `v` and the modes
+    /// at `z` (the strings' velocity under the hammer read only for a hysteretic felt).
+    fn felt(&self, key: &ExactKey, z: &Split, y: f64, v: f64) -> [f64; MAX_STRINGS] {
+        let hysteretic = key.hammer.hysteresis_s != 0.0;
         std::array::from_fn(|s| {
             if s < key.n_strings && self.state.struck[s] {
-                key.hammer.felt_force_n(y - key.modes.strike_row[s].read(z))
+                let ve = if hysteretic {
+                    key.strike_velocity_row[s].read(z)
+                } else {
+                    0.0
+                };
+                key.hammer
+                    .felt_force_n(y - key.modes.strike_row[s].read(z), v - ve)
             } else {
                 0.0
             }
@@ -176,11 +184,15 @@ impl Voice {
         self.read_z(&key.modes.strike_row[s], &key.strike_settle[s])
     }
 
+    /// The felt force on each struck string now (N).
     pub(crate) fn hammer_force_n(&self, key: &ExactKey) -> [f64; MAX_STRINGS] {
         std::array::from_fn(|s| {
             if self.state.hammer_on && s < key.n_strings && self.state.struck[s] {
-                key.hammer
-                    .felt_force_n(self.hammer_y - self.strike_point_m(key, s))
+                let ve = self.read_z(&key.strike_velocity_row[s], &key.strike_velocity_settle[s]);
+                key.hammer.felt_force_n(
+                    self.hammer_y - self.strike_point_m(key, s),
+                    self.hammer_v - ve,
+                )
             } else {
                 0.0
             }
@@ -360,20 +372,20 @@ impl Voice {
         let (y, v) = (self.hammer_y, self.hammer_v);
         let accel = |f: &[f64; MAX_STRINGS]| -> f64 { -f.iter().sum::<f64>() / m_h };
         let [za, zb, zc] = scratch;
-        let fu = self.felt(key, &self.w, y);
+        let fu = self.felt(key, &self.w, y, v);
         stage(za, &key.eh, &self.w, &key.drive_q, &fu);
         let (ya, va) = (y + 0.5 * h * v, v + 0.5 * h * accel(&fu));
-        let fa = self.felt(key, za, ya);
+        let fa = self.felt(key, za, ya, va);
         stage(zb, &key.eh, &self.w, &key.drive_q, &fa);
         let (yb, vb) = (y + 0.5 * h * va, v + 0.5 * h * accel(&fa));
-        let fb = self.felt(key, zb, yb);
+        let fb = self.felt(key, zb, yb, vb);
         let mixed: [f64; MAX_STRINGS] = std::array::from_fn(|s| 2.0 * fb[s] - fu[s]);
         stage(zc, &key.eh, za, &key.drive_q, &mixed);
         let (yc, vc) = (
             ya + 0.5 * h * (2.0 * vb - v),
             va + 0.5 * h * (2.0 * accel(&fb) - accel(&fu)),
         );
-        let fc = self.felt(key, zc, yc);
+        let fc = self.felt(key, zc, yc, vc);
         propagate(&key.ef, &mut self.w);
         for s in (0..key.n_strings).filter(|&s| self.state.struck[s]) {
             let [g1, g2, g3] = &key.drive_f[s];

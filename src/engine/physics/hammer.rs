@@ -3,6 +3,12 @@
 //! A point mass `m_H` moving along T. On each struck string `i` the felt is compressed by
 //! `xi_i = max(y_H - y_e,i, 0)` and pushes with `F_e,i = K_H xi_i^p` (Eq. 8); the hammer obeys
 //! `m_H ydd_H = -sum_i F_e,i` (Eq. 9 for several strings, Eq. 14).
+//!
+//! Beyond the paper, the felt may be hysteretic (Stulov 1995, in the form of Smith, *Physical Audio
+//! Signal Processing*, Eq. 9.21): `F_e,i = K_H [xi^p + alpha d(xi^p)/dt]`, never pulling. A felt
+//! compressed fast is then stiffer than one compressed slowly, and it loses energy over each
+//! compression and release: a fortissimo blow is shorter and brighter than a pianissimo one.
+//! `alpha = 0` is the paper's elastic felt, bit for bit.
 
 /// Hammer parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -17,17 +23,27 @@ pub struct HammerParams {
     pub strike_ratio: f64,
     /// Distance from every string beyond which a receding hammer is released (m).
     pub release_gap_m: f64,
+    /// The felt's hysteresis `alpha` (s): Stulov's `F = K [xi^p + alpha d(xi^p)/dt]`; 0 for the
+    /// paper's elastic felt (Eq. 8).
+    pub hysteresis_s: f64,
 }
 
 impl HammerParams {
-    /// Felt force for a compression `xi_m` (m); zero when the felt is not compressed (Eq. 8).
+    /// Felt force for a compression `xi_m` (m) growing at `rate_m_s` (the hammer's velocity less
+    /// the string's at the striking point): `K xi^p` (Eq. 8), and with hysteresis
+    /// `K [xi^p + alpha p xi^(p-1) dxi/dt]`, at least 0 (a felt pushes, never pulls); zero when
+    /// the felt is not compressed.
     #[inline(always)]
-    pub fn felt_force_n(&self, xi_m: f64) -> f64 {
-        if xi_m > 0.0 {
-            self.stiffness_n_m_p * xi_m.powf(self.exponent)
-        } else {
-            0.0
+    pub fn felt_force_n(&self, xi_m: f64, rate_m_s: f64) -> f64 {
+        if xi_m <= 0.0 {
+            return 0.0;
         }
+        let elastic = xi_m.powf(self.exponent);
+        if self.hysteresis_s == 0.0 {
+            return self.stiffness_n_m_p * elastic;
+        }
+        let rate = self.hysteresis_s * self.exponent * elastic / xi_m * rate_m_s;
+        (self.stiffness_n_m_p * (elastic + rate)).max(0.0)
     }
 
     /// The release rule: the hammer leaves the system once it recedes (`velocity_m_s < 0`) and is
@@ -50,5 +66,82 @@ impl HammerParams {
         } else {
             0.0
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Chaigne & Askenfelt's C4 hammer (the paper keyboard's), elastic or hysteretic.
+    fn c4(hysteresis_s: f64) -> HammerParams {
+        HammerParams {
+            mass_kg: 2.97e-3,
+            stiffness_n_m_p: 4.5e9,
+            exponent: 2.5,
+            strike_ratio: 0.12,
+            release_gap_m: 0.0,
+            hysteresis_s,
+        }
+    }
+
+    /// The hammer thrown at `v0_m_s` against a rigid wall, `m xdd = -F(x, xd)`, by RK4 in steps
+    /// of 10 ns until it leaves: its speed then, and `int K alpha p x^(p-1) xd^2 dt` along the way.
+    fn rebound(h: &HammerParams, v0_m_s: f64) -> (f64, f64) {
+        let dt = 1e-8;
+        let a = |x: f64, v: f64| -h.felt_force_n(x, v) / h.mass_kg;
+        let (mut x, mut v, mut loss_j) = (0.0f64, v0_m_s, 0.0);
+        loop {
+            let (k1x, k1v) = (v, a(x, v));
+            let (k2x, k2v) = (
+                v + 0.5 * dt * k1v,
+                a(x + 0.5 * dt * k1x, v + 0.5 * dt * k1v),
+            );
+            let (k3x, k3v) = (
+                v + 0.5 * dt * k2v,
+                a(x + 0.5 * dt * k2x, v + 0.5 * dt * k2v),
+            );
+            let (k4x, k4v) = (v + dt * k3v, a(x + dt * k3x, v + dt * k3v));
+            x += dt / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x);
+            v += dt / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+            if x > 0.0 {
+                let p = h.exponent;
+                loss_j += h.stiffness_n_m_p * p * x.powf(p - 1.0) * v * v * dt;
+            }
+            if x <= 0.0 && v < 0.0 {
+                return (-v, loss_j);
+            }
+        }
+    }
+
+    #[test]
+    fn the_paper_felt_is_elastic_and_the_hysteretic_one_loses_what_its_loop_encloses() {
+        let elastic = c4(0.0);
+        for xi in [1e-5, 3e-4, 1e-3] {
+            assert_eq!(elastic.felt_force_n(xi, 3.0), 4.5e9 * xi.powf(2.5));
+            assert_eq!(
+                elastic.felt_force_n(xi, -3.0),
+                elastic.felt_force_n(xi, 3.0)
+            );
+        }
+        assert_eq!(elastic.felt_force_n(-1e-4, 3.0), 0.0);
+        let (out, _) = rebound(&elastic, 2.5);
+        println!("elastic felt: thrown at 2.5 m/s, leaves at {out:.6} m/s");
+        assert!((out / 2.5 - 1.0).abs() < 1e-6);
+        // Stulov's felt pushes harder compressed than released, never pulls.
+        let felt = c4(1e-6);
+        let xi = 3e-4;
+        assert!(felt.felt_force_n(xi, 1.0) > elastic.felt_force_n(xi, 1.0));
+        assert!(felt.felt_force_n(xi, -1.0) < elastic.felt_force_n(xi, -1.0));
+        assert_eq!(felt.felt_force_n(xi, -1e3), 0.0);
+        // The energy it loses is the work of its rate term, K alpha int p xi^(p-1) xid^2 dt along
+        // its path: the elastic part gives back all it takes.
+        let (out, loss_j) = rebound(&felt, 2.5);
+        let lost_j = 0.5 * felt.mass_kg * (2.5f64.powi(2) - out * out);
+        let predicted_j = felt.hysteresis_s * loss_j;
+        println!(
+            "hysteretic felt (alpha 1 us): leaves at {out:.4} m/s, loses {lost_j:.4e} J; its rate term's work {predicted_j:.4e} J"
+        );
+        assert!((lost_j / predicted_j - 1.0).abs() < 0.01);
     }
 }

@@ -41,7 +41,7 @@ pub struct DenseUnison {
 }
 
 /// Rows of the output `y = C x`: bridge displacement and velocity of each string and direction,
-/// of the board at the bridge, and each string's displacement under the hammer.
+/// of the board at the bridge, and each string's displacement and velocity under the hammer.
 fn out_rs(s: usize, d: usize) -> usize {
     3 * s + d
 }
@@ -57,7 +57,10 @@ fn out_vb(d: usize) -> usize {
 fn out_ye(s: usize) -> usize {
     6 * MAX_STRINGS + 6 + s
 }
-const OUTPUTS: usize = 7 * MAX_STRINGS + 6;
+fn out_ve(s: usize) -> usize {
+    7 * MAX_STRINGS + 6 + s
+}
+const OUTPUTS: usize = 8 * MAX_STRINGS + 6;
 
 /// `dst = a x` (`Replace`) or `dst += a x` (`Add`): faer's product, on one core.
 fn gemv(dst: &mut Mat<f64>, accum: Accum, a: &Mat<f64>, x: &Mat<f64>) {
@@ -130,6 +133,7 @@ impl DenseUnison {
                 let phi = string.mode_shape(k + 1, xe);
                 b[(nq + i, s)] = phi;
                 c[(out_ye(s), i)] = phi;
+                c[(out_ve(s), nq + i)] = phi;
             }
             b[(2 * nq + 1, s)] = -1.0 / spec.hammer.mass_kg;
         }
@@ -243,8 +247,10 @@ impl DenseUnison {
         // Hammer forces (Eq. 8) on the struck strings.
         for s in 0..ns {
             self.u[(s, 0)] = if self.hammer_on && self.struck[s] {
-                let yh = self.xs[(2 * nq, 0)];
-                self.spec.hammer.felt_force_n(yh - self.y[(out_ye(s), 0)])
+                let (yh, vh) = (self.xs[(2 * nq, 0)], self.xs[(2 * nq + 1, 0)]);
+                self.spec
+                    .hammer
+                    .felt_force_n(yh - self.y[(out_ye(s), 0)], vh - self.y[(out_ve(s), 0)])
             } else {
                 0.0
             };

@@ -472,7 +472,7 @@ impl<T: Real> Rk4Pool<T> {
         let hammers = 0..hy0.len();
         let ch = |c: f64| T::from_f64(c * h);
         // Stage 1 at the current state.
-        evaluate::<T, SIMD>(m, states, live, q0, v0, hy0, acc, ah, z);
+        evaluate::<T, SIMD>(m, states, live, q0, v0, hy0, hv0, acc, ah, z);
         for r in live {
             stage::<T, true>(ch(0.5), r.clone(), q0, v0, acc, qs, vs, sum_q, sum_v);
         }
@@ -489,7 +489,7 @@ impl<T: Real> Rk4Pool<T> {
         );
         // Stages 2 and 3: weights 2, next stage at h/2 then h.
         for c in [0.5, 1.0] {
-            evaluate::<T, SIMD>(m, states, live, qs, vs, hy_s, acc, ah, z);
+            evaluate::<T, SIMD>(m, states, live, qs, vs, hy_s, hv_s, acc, ah, z);
             for r in live {
                 stage::<T, false>(ch(c), r.clone(), q0, v0, acc, qs, vs, sum_q, sum_v);
             }
@@ -506,7 +506,7 @@ impl<T: Real> Rk4Pool<T> {
             );
         }
         // Stage 4 and the combination.
-        evaluate::<T, SIMD>(m, states, live, qs, vs, hy_s, acc, ah, z);
+        evaluate::<T, SIMD>(m, states, live, qs, vs, hy_s, hv_s, acc, ah, z);
         let w = T::from_f64(h / 6.0);
         let (q, v) = (&mut self.q, &mut self.v);
         for r in live {

@@ -45,8 +45,12 @@ impl<T: Real> Rk4Pool<T> {
                 obs.total_force_n[d] += f;
             }
             if self.states[k].hammer_on && self.states[k].struck[s] {
-                let ye = T::dot_wide::<false>(&km.hammer_shape, &q[voice.ranges[s][0].clone()]);
-                obs.hammer_force_n[s] = km.hammer.felt_force_n(self.hammer_y[k] - ye);
+                let r = voice.ranges[s][0].clone();
+                let ye = T::dot_wide::<false>(&km.hammer_shape, &q[r.clone()]);
+                let ve = T::dot_wide::<false>(&km.hammer_shape, &v[r]);
+                obs.hammer_force_n[s] = km
+                    .hammer
+                    .felt_force_n(self.hammer_y[k] - ye, self.hammer_v[k] - ve);
             }
         }
         obs

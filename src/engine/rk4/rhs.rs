@@ -50,6 +50,7 @@ pub(super) fn evaluate<T: Real, const SIMD: bool>(
     q: &[T],
     v: &[T],
     hammer_y: &[f64],
+    hammer_v: &[f64],
     acc: &mut [T],
     ah: &mut [f64],
     duplex_z: &mut [T],
@@ -125,7 +126,12 @@ pub(super) fn evaluate<T: Real, const SIMD: bool>(
                 if states[k].struck[s] {
                     let r = voice.ranges[s][0].clone();
                     let ye = T::dot::<SIMD>(&km.hammer_shape, &q[r.clone()]).to_f64();
-                    let f = km.hammer.felt_force_n(hammer_y[k] - ye);
+                    let ve = if km.hammer.hysteresis_s == 0.0 {
+                        0.0
+                    } else {
+                        T::dot::<SIMD>(&km.hammer_shape, &v[r.clone()]).to_f64()
+                    };
+                    let f = km.hammer.felt_force_n(hammer_y[k] - ye, hammer_v[k] - ve);
                     felt_total += f;
                     T::axpy::<SIMD>(&mut acc[r], &km.hammer_shape, T::from_f64(f));
                 }
