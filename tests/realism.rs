@@ -356,3 +356,47 @@ fn the_concert_treble_carries_as_the_recorded_grands_does() {
     println!("worst difference from the recording, A6–C8: {worst:.1} dB (limit 8)");
     assert!(worst <= 8.0);
 }
+
+#[test]
+fn the_concert_keyboard_grows_louder_and_brighter_with_velocity_as_the_recorded_grand() {
+    // C2, F#3, C4, A4 and C6 struck at MIDI velocity 30 and 127 (the exact engine, 0.5 s), beside
+    // the recorded grand's layers for the same velocities (`docs/data/recorded_dynamics.csv`).
+    // What is held: the A-weighted level's rise within 5 dB of the recording's at every key
+    // (recorded: +14.5 … +18.0 dB); ff brighter than pp at every key (the 2–4 kHz band re the
+    // whole rises by at least 3 dB: a guard, A4 rises 3.7). What is not yet met is printed: that
+    // rise is 6–15 dB short of the recording's (+17.6 … +37.5), pp being too bright
+    // (docs/realism.md#dynamics).
+    use unacorda::analysis::recorded::recorded_layer;
+    use unacorda::analysis::struck::{pressure, Touch, FF_VELOCITY, PP_VELOCITY, TOUCH_KEYS};
+    let keyboard = Scaling::resolve("concert").unwrap();
+    let touches = unacorda::cores::map_on_cores(&TOUCH_KEYS, |&k| {
+        let preset = keyboard.key_preset(k)?;
+        let at = |v: u8| -> anyhow::Result<Touch> {
+            let speed = unacorda::midi::hammer_speed_m_s(v).unwrap();
+            let (fs, x) = pressure(&preset, speed, 0.5, None)?;
+            Ok(Touch::measure(&x, fs))
+        };
+        Ok::<_, anyhow::Error>([at(PP_VELOCITY)?, at(FF_VELOCITY)?])
+    })
+    .unwrap();
+    for (&k, [pp, ff]) in TOUCH_KEYS.iter().zip(&touches) {
+        let (rp, rf) = (
+            recorded_layer(k, PP_VELOCITY).unwrap(),
+            recorded_layer(k, FF_VELOCITY).unwrap(),
+        );
+        let rise_db = ff.a_level_db - pp.a_level_db;
+        let recorded_rise_db = rf.a_level_db - rp.a_level_db;
+        let brighter_db = ff.octave_shape_db[5] - pp.octave_shape_db[5];
+        let recorded_brighter_db = rf.octave_shape_db[5] - rp.octave_shape_db[5];
+        println!(
+            "{}: level {rise_db:+.1} dB (recorded {recorded_rise_db:+.1}); 2–4 kHz re all {:+.1} → {:+.1} dB, {brighter_db:+.1} (recorded {:+.1} → {:+.1}, {recorded_brighter_db:+.1})",
+            unacorda::board::key_name(k),
+            pp.octave_shape_db[5],
+            ff.octave_shape_db[5],
+            rp.octave_shape_db[5],
+            rf.octave_shape_db[5],
+        );
+        assert!((rise_db - recorded_rise_db).abs() <= 5.0, "key {k}");
+        assert!(brighter_db >= 3.0, "key {k}");
+    }
+}

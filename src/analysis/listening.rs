@@ -147,6 +147,26 @@ pub fn peaks(
         .collect()
 }
 
+/// Edges of the octave bands that describe a spectrum's shape (Hz): 0–125, 125–250, …, 4–8 kHz.
+pub const OCTAVE_EDGES_HZ: [f64; 8] = [0.0, 125.0, 250.0, 500.0, 1e3, 2e3, 4e3, 8e3];
+
+/// The power of `x` over a stretch (one Hann window) in each octave band of [`OCTAVE_EDGES_HZ`],
+/// re the sum of the seven (dB): its spectrum's shape, whatever its level
+/// (`scripts/recorded_dynamics.py` measures the recorded grand so).
+pub fn octave_shape_db(x: &[f64], fs: f64, (from_s, to_s): (f64, f64)) -> [f64; 7] {
+    let (df, p) = power_spectrum(x, fs, from_s, to_s);
+    let bands: [f64; 7] = std::array::from_fn(|b| {
+        let (lo, hi) = (OCTAVE_EDGES_HZ[b], OCTAVE_EDGES_HZ[b + 1]);
+        p.iter()
+            .enumerate()
+            .filter(|(k, _)| (lo..hi).contains(&(*k as f64 * df)))
+            .map(|(_, v)| v)
+            .sum()
+    });
+    let total: f64 = bands.iter().sum();
+    bands.map(|b| power_db(b / total.max(f64::MIN_POSITIVE)))
+}
+
 /// The power-weighted mean frequency of `x` over a stretch (Hz): its brightness.
 pub fn spectral_centroid_hz(x: &[f64], fs: f64, (from_s, to_s): (f64, f64)) -> f64 {
     let (df, p) = power_spectrum(x, fs, from_s, to_s);

@@ -1,11 +1,14 @@
 //! A recorded concert grand to hold the keyboard against: the Salamander Grand Piano V3 (a Yamaha
 //! C5, A. Holm, CC BY 3.0), MIDI velocity layer 10 (velocities 73–80), 30 keys, measured by
-//! `scripts/recorded_grand.py` into `docs/data/recorded_grand.csv` (its docstring defines every
-//! column; docs/realism-sources.md names the source).
+//! `scripts/recorded_grand.py` into `docs/data/recorded_grand.csv`; and all 16 of its velocity
+//! layers of the same keys, measured by `scripts/recorded_dynamics.py` into
+//! `docs/data/recorded_dynamics.csv` (the scripts' docstrings define every column;
+//! docs/realism-sources.md names the source).
 
 use std::collections::HashMap;
 
 const CSV: &str = include_str!("../../docs/data/recorded_grand.csv");
+const DYNAMICS_CSV: &str = include_str!("../../docs/data/recorded_dynamics.csv");
 
 /// One recorded key's figures; `None` where the recording did not allow the measurement.
 #[derive(Debug, Clone, PartialEq)]
@@ -27,24 +30,68 @@ pub struct RecordedKey {
     pub partials_in_range: Option<usize>,
 }
 
+/// One recorded key at one velocity layer: its first 0.5 s.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordedLayer {
+    pub key: usize,
+    /// The MIDI velocities the upstream SFZ plays this layer for.
+    pub velocities: std::ops::RangeInclusive<u8>,
+    /// A-weighted level (dB re the file's full scale; one gain per key, so compare layers of one
+    /// key, not keys).
+    pub a_level_db: f64,
+    /// The power-weighted mean frequency (Hz).
+    pub centroid_hz: f64,
+    /// Octave bands 0–125 Hz … 4–8 kHz re their sum (dB, [`super::listening::octave_shape_db`]).
+    pub octave_shape_db: [f64; 7],
+}
+
+/// The layer of recorded key `key` that MIDI velocity `velocity` plays, if the key was recorded.
+pub fn recorded_layer(key: usize, velocity: u8) -> Option<RecordedLayer> {
+    rows(DYNAMICS_CSV)
+        .filter_map(|row| {
+            let get = |name: &str| row.get(name).copied();
+            let velocities = get("velocity_min")? as u8..=get("velocity_max")? as u8;
+            let band = |lo: &str, hi: &str| get(&format!("band_{lo}_{hi}_db"));
+            Some(RecordedLayer {
+                key: get("key_number")? as usize,
+                velocities,
+                a_level_db: get("la_db")?,
+                centroid_hz: get("centroid_hz")?,
+                octave_shape_db: [
+                    band("0", "125")?,
+                    band("125", "250")?,
+                    band("250", "500")?,
+                    band("500", "1000")?,
+                    band("1000", "2000")?,
+                    band("2000", "4000")?,
+                    band("4000", "8000")?,
+                ],
+            })
+        })
+        .find(|l| l.key == key && l.velocities.contains(&velocity))
+}
+
+/// Each data line of a CSV: its finite numbers by column name.
+fn rows(csv: &str) -> impl Iterator<Item = HashMap<&str, f64>> {
+    let mut lines = csv.lines();
+    let names: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    lines.filter(|l| !l.trim().is_empty()).map(move |line| {
+        names
+            .iter()
+            .zip(line.split(','))
+            .filter_map(|(&name, cell)| {
+                let v: f64 = cell.trim().parse().ok()?;
+                v.is_finite().then_some((name, v))
+            })
+            .collect()
+    })
+}
+
 /// The recorded keys, by key number.
 pub fn recorded_grand() -> Vec<RecordedKey> {
-    let mut lines = CSV.lines();
-    let header: HashMap<&str, usize> = lines
-        .next()
-        .unwrap_or_default()
-        .split(',')
-        .enumerate()
-        .map(|(i, name)| (name, i))
-        .collect();
-    lines
-        .filter(|l| !l.trim().is_empty())
-        .filter_map(|line| {
-            let cells: Vec<&str> = line.split(',').collect();
-            let get = |name: &str| -> Option<f64> {
-                let v: f64 = cells.get(*header.get(name)?)?.trim().parse().ok()?;
-                v.is_finite().then_some(v)
-            };
+    rows(CSV)
+        .filter_map(|row| {
+            let get = |name: &str| row.get(name).copied();
             Some(RecordedKey {
                 key: get("key_number")? as usize,
                 cents: get("cents_vs_et"),
@@ -78,5 +125,22 @@ mod tests {
         assert_eq!(keys[29].key, 88);
         assert_eq!(c4.partials_in_range, Some(16));
         assert!(c4.upper_bands_db.iter().all(Option::is_some));
+    }
+
+    #[test]
+    fn every_recorded_key_has_its_sixteen_layers() {
+        for key in [1, 40, 88] {
+            let layers: Vec<RecordedLayer> =
+                (1..=127).filter_map(|v| recorded_layer(key, v)).collect();
+            assert_eq!(layers.len(), 127, "key {key}");
+            assert!(layers.iter().all(|l| l.key == key));
+        }
+        let (pp, ff) = (
+            recorded_layer(40, 30).unwrap(),
+            recorded_layer(40, 127).unwrap(),
+        );
+        println!("C4 at velocity 30: {pp:?}\nC4 at 127: {ff:?}");
+        assert_eq!((pp.velocities, ff.velocities), (27..=34, 121..=127));
+        assert!(recorded_layer(41, 30).is_none());
     }
 }

@@ -3,7 +3,10 @@
 //! `scripts/recorded_grand.py`): its A-weighted level, how its upper bands fade, how many partials
 //! it sounds, its fundamental against its second partial, and the board's low boom.
 
-use super::listening::{a_weighted_level_db, band_change_db, band_power, peaks, power_db};
+use super::listening::{
+    a_weighted_level_db, band_change_db, band_power, octave_shape_db, peaks, power_db,
+    spectral_centroid_hz,
+};
 use crate::config::preset::LoadedPreset;
 use crate::engine::tuning::stiff_string_hz;
 use crate::engine::{BuildError, Integrator, Strike};
@@ -22,6 +25,12 @@ pub const BOOM_HZ: (f64, f64) = (40.0, 90.0);
 /// counted).
 pub const PARTIAL_RANGE_DB: f64 = 60.0;
 pub const PARTIAL_MARGIN_DB: f64 = 6.0;
+
+/// The keys whose touch the dynamics rows measure (C2, F#3, C4, A4, C6: recorded at every
+/// velocity layer), and the velocities of pp and ff.
+pub const TOUCH_KEYS: [usize; 5] = [16, 34, 40, 49, 64];
+pub const PP_VELOCITY: u8 = 30;
+pub const FF_VELOCITY: u8 = 127;
 
 /// The sound pressure (Pa) at the listener of `preset`'s key struck at `velocity_m_s` on the exact
 /// engine at the output rate, for `seconds`, the key released after `release_s` (`None`: held).
@@ -92,6 +101,28 @@ impl StruckKey {
                 _ => f64::NAN,
             },
             boom_db: power_db(band_power(x, fs, ONSET_S, BOOM_HZ) / whole),
+        }
+    }
+}
+
+/// A struck key's first 0.5 s as the dynamics rows measure it, rendered or recorded
+/// (`scripts/recorded_dynamics.py`): how loud, how bright, and its spectrum's shape.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Touch {
+    /// A-weighted level (dB re 1 Pa²).
+    pub a_level_db: f64,
+    /// The power-weighted mean frequency (Hz).
+    pub centroid_hz: f64,
+    /// Octave bands 0–125 Hz … 4–8 kHz re their sum (dB).
+    pub octave_shape_db: [f64; 7],
+}
+
+impl Touch {
+    pub fn measure(x: &[f64], fs: f64) -> Touch {
+        Touch {
+            a_level_db: a_weighted_level_db(x, fs, ONSET_S.0, ONSET_S.1),
+            centroid_hz: spectral_centroid_hz(x, fs, ONSET_S),
+            octave_shape_db: octave_shape_db(x, fs, ONSET_S),
         }
     }
 }

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use unacorda::analysis::duplex::felt_effect;
 use unacorda::analysis::modes::LinearMode;
 use unacorda::analysis::partials::{cents, KeyPartials, Partial};
-use unacorda::analysis::struck::{self, StruckKey};
+use unacorda::analysis::struck::{self, StruckKey, Touch};
 use unacorda::analysis::{listening, recorded};
 use unacorda::board::key_name;
 use unacorda::config::preset::LoadedPreset;
@@ -412,21 +412,52 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
         levels.len(),
         if outside.is_empty() { "none".to_string() } else { outside.join(", ") }
     );
-    // C4's dynamics: pp (velocity 30) to ff (127).
-    let c4 = scaling.key_preset(40)?;
-    let at = |v: u8| -> Result<(f64, f64)> {
-        let (fs, x) = strike_preset(&c4, v, struck::ONSET_S.1, None)?;
-        Ok((
-            listening::a_weighted_level_db(&x, fs, struck::ONSET_S.0, struck::ONSET_S.1),
-            listening::spectral_centroid_hz(&x, fs, struck::ONSET_S),
-        ))
-    };
-    let ((pp_db, pp_hz), (ff_db, ff_hz)) = (at(30)?, at(127)?);
+    // The touch: pp (velocity 30) to ff (127) on the keys recorded at every layer.
+    let touches = unacorda::cores::map_on_cores(&struck::TOUCH_KEYS, |&k| -> Result<[Touch; 2]> {
+        let preset = scaling.key_preset(k)?;
+        let at = |v: u8| -> Result<Touch> {
+            let (fs, x) = strike_preset(&preset, v, struck::ONSET_S.1, None)?;
+            Ok(Touch::measure(&x, fs))
+        };
+        Ok([at(struck::PP_VELOCITY)?, at(struck::FF_VELOCITY)?])
+    })?;
     let _ = writeln!(
         out,
-        "dynamics, C4 velocity 30 → 127: {:+.1} dB A-weighted (first 0.5 s), spectral centroid {pp_hz:.0} → {ff_hz:.0} Hz",
-        ff_db - pp_db
+        "dynamics, velocity {} → {} (first 0.5 s; in brackets the recorded grand's layers for velocities {} and {}):",
+        struck::PP_VELOCITY,
+        struck::FF_VELOCITY,
+        struck::PP_VELOCITY,
+        struck::FF_VELOCITY
     );
+    let _ = writeln!(
+        out,
+        "  key   A-weighted level   centroid (Hz)             1–2 kHz re all, pp / ff (dB)   2–4 kHz re all, pp / ff (dB)"
+    );
+    for (&k, [pp, ff]) in struck::TOUCH_KEYS.iter().zip(&touches) {
+        let recorded = recorded::recorded_layer(k, struck::PP_VELOCITY)
+            .zip(recorded::recorded_layer(k, struck::FF_VELOCITY));
+        let theirs = |f: &dyn Fn(&recorded::RecordedLayer, &recorded::RecordedLayer) -> String| {
+            recorded
+                .as_ref()
+                .map_or(String::new(), |(p, f_)| format!(" ({})", f(p, f_)))
+        };
+        let _ = writeln!(
+            out,
+            "  {:<4} {:>+5.1} dB{:<10} {:>4.0} → {:>4.0}{:<14} {:>+6.1} / {:>+6.1}{:<18} {:>+6.1} / {:>+6.1}{}",
+            key_name(k),
+            ff.a_level_db - pp.a_level_db,
+            theirs(&|p, f| format!("{:+.1}", f.a_level_db - p.a_level_db)),
+            pp.centroid_hz,
+            ff.centroid_hz,
+            theirs(&|p, f| format!("{:.0} → {:.0}", p.centroid_hz, f.centroid_hz)),
+            pp.octave_shape_db[4],
+            ff.octave_shape_db[4],
+            theirs(&|p, f| format!("{:+.1} / {:+.1}", p.octave_shape_db[4], f.octave_shape_db[4])),
+            pp.octave_shape_db[5],
+            ff.octave_shape_db[5],
+            theirs(&|p, f| format!("{:+.1} / {:+.1}", p.octave_shape_db[5], f.octave_shape_db[5])),
+        );
+    }
     // C6's release: the damper lands 1 s after the strike.
     let (fs, x) = strike(scaling, 64, VELOCITY, 1.2, Some(1.0))?;
     let _ = writeln!(
