@@ -82,20 +82,37 @@ fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
                 cs.modes_t, ps.modes_t
             );
         }
-        // The same hammers but for the voicing of the top: the felt's K times 1 up to F#7, 4 at
-        // A7, 64 at C8, log-linear in key number between (docs/parameters.md).
-        let voiced = match k {
-            ..=82 => 1.0,
-            83..=85 => 4f64.powf((k - 82) as f64 / 3.0),
-            _ => 4.0 * 16f64.powf((k - 85) as f64 / 3.0),
+        // The same hammers but for the voicing: every felt's exponent 4.5, its force at 1 mm of
+        // compression the paper's felt's times 0.5 at A0 and C4, 2 at C6, 0.7 at C7, 0.5 at F#7,
+        // 4 at A7, 300 at C8, log-linear in key number between (docs/parameters.md).
+        let points: [(usize, f64); 7] = [
+            (1, 0.5),
+            (40, 0.5),
+            (64, 2.0),
+            (76, 0.7),
+            (82, 0.5),
+            (85, 4.0),
+            (88, 300.0),
+        ];
+        let (a, b) = points
+            .windows(2)
+            .map(|w| (w[0], w[1]))
+            .find(|(a, b)| (a.0..=b.0).contains(&k))
+            .unwrap();
+        let t = (k - a.0) as f64 / (b.0 - a.0) as f64;
+        let voiced = (a.1.ln() * (1.0 - t) + b.1.ln() * t).exp();
+        let force_at_mm_n = |h: &unacorda::config::preset::HammerSection| {
+            h.stiffness_n_m_p * 1e-3f64.powf(h.exponent)
         };
-        let ratio = c.hammer.stiffness_n_m_p / p.hammer.stiffness_n_m_p;
+        let ratio = force_at_mm_n(&c.hammer) / force_at_mm_n(&p.hammer);
+        assert_eq!(c.hammer.exponent, 4.5, "key {k}");
         assert!(
             (ratio / voiced - 1.0).abs() < 1e-9,
             "key {k}: voiced {ratio}"
         );
         let unvoiced = unacorda::config::preset::HammerSection {
             stiffness_n_m_p: p.hammer.stiffness_n_m_p,
+            exponent: p.hammer.exponent,
             ..c.hammer.clone()
         };
         assert_eq!(p.hammer, unvoiced, "key {k}");

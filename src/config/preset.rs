@@ -31,6 +31,10 @@ pub const GRAND_BOARD_TOML: &str = include_str!("../../assets/soundboard_modes/g
 /// 20 kB; a larger file, or a device that never ends (`/dev/zero`), is refused, not read forever.
 pub const MAX_TEXT_BYTES: u64 = 1 << 20;
 
+/// The felt's exponent `p` a file may set (Eq. 8; measured hammers: 2.1–5).
+pub const MIN_EXPONENT: f64 = 1.0;
+pub const MAX_EXPONENT: f64 = 6.0;
+
 /// The largest felt hysteresis a file may set (s): ten times the hundreds of microseconds fitted
 /// to real hammers (docs/realism-sources.md §4).
 pub const MAX_HYSTERESIS_S: f64 = 0.005;
@@ -368,8 +372,19 @@ impl Preset {
         )?;
         let h = &self.hammer;
         range("hammer.mass_kg", h.mass_kg, 1e-4, 0.1)?;
-        range("hammer.stiffness_n_m_p", h.stiffness_n_m_p, 1e3, 1e14)?;
-        range("hammer.exponent", h.exponent, 1.0, 5.0)?;
+        range("hammer.exponent", h.exponent, MIN_EXPONENT, MAX_EXPONENT)?;
+        // K's unit depends on p: what is bounded is the force at 1 mm of compression.
+        let force_at_mm_n = h.stiffness_n_m_p * 1e-3f64.powf(h.exponent);
+        if !(force_at_mm_n.is_finite() && (1e-3..=1e5).contains(&force_at_mm_n)) {
+            return Err(PresetError::Range {
+                path: path.to_owned(),
+                field: "hammer.stiffness_n_m_p",
+                value: format!("{:e}", h.stiffness_n_m_p),
+                allowed: format!(
+                    "a felt pushing 1e-3 to 1e5 N at 1 mm of compression (this one: {force_at_mm_n:.3e} N)"
+                ),
+            });
+        }
         range("hammer.strike_ratio", h.strike_ratio, 0.01, 0.5)?;
         range("hammer.velocity_m_s", h.velocity_m_s, 0.01, 10.0)?;
         range("hammer.release_gap_m", h.release_gap_m, 0.0, 0.05)?;

@@ -9,7 +9,7 @@
 
 use crate::config::preset::{
     bridge_point_index, heard, read_text, LoadedPreset, Preset, PresetError, RadiationSection,
-    StringsSection, MAX_HYSTERESIS_S,
+    StringsSection, MAX_EXPONENT, MAX_HYSTERESIS_S, MIN_EXPONENT,
 };
 use crate::engine::physics::damper::DamperParams;
 use crate::engine::physics::string::StringParams;
@@ -150,7 +150,18 @@ pub struct VoicingAnchor {
     ///
     /// [`HammerParams::hysteresis_s`]: crate::engine::physics::hammer::HammerParams::hysteresis_s
     pub felt_hysteresis_s: Option<f64>,
+    /// The felt's exponent `p` (Eq. 8, -), interpolated linearly; its `K` is then set so that the
+    /// force at [`VOICING_COMPRESSION_M`] is the anchors' felt's times `felt_stiffness_factor`.
+    /// Given at every voicing point or at none (then the anchors').
+    pub felt_exponent: Option<f64>,
 }
+
+/// An optional field of a voicing point.
+type OptionalField = fn(&VoicingAnchor) -> Option<f64>;
+
+/// The compression at which a voicing that changes a felt's exponent keeps its force (m): about
+/// a mezzoforte blow's (C4 struck at 2.4 m/s compresses the paper's felt 0.97 mm).
+pub const VOICING_COMPRESSION_M: f64 = 1e-3;
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -383,31 +394,43 @@ impl Scaling {
         optional("losses.key", self.losses.iter().map(|a| a.key).collect())?;
         optional("dampers.key", self.dampers.iter().map(|a| a.key).collect())?;
         optional("voicing.key", self.voicing.iter().map(|a| a.key).collect())?;
-        let with_hysteresis = self
-            .voicing
-            .iter()
-            .filter(|a| a.felt_hysteresis_s.is_some())
-            .count();
-        if with_hysteresis != 0 && with_hysteresis != self.voicing.len() {
-            return Err(bad(
+        // The voicing's optional fields are given at every point or at none.
+        let optional_fields: [(&str, OptionalField, f64, f64); 2] = [
+            (
                 "voicing.felt_hysteresis_s",
-                format!(
-                    "given at {with_hysteresis} of {} points",
-                    self.voicing.len()
-                ),
-                "at every voicing point or at none",
-            ));
-        }
-        for a in &self.voicing {
-            if let Some(v) = a.felt_hysteresis_s {
-                if !(v.is_finite() && (0.0..=MAX_HYSTERESIS_S).contains(&v)) {
-                    return Err(bad(
-                        "voicing.felt_hysteresis_s",
-                        format!("{v} (key {})", a.key),
-                        &format!("a number in [0, {MAX_HYSTERESIS_S}]"),
-                    ));
+                |a| a.felt_hysteresis_s,
+                0.0,
+                MAX_HYSTERESIS_S,
+            ),
+            (
+                "voicing.felt_exponent",
+                |a| a.felt_exponent,
+                MIN_EXPONENT,
+                MAX_EXPONENT,
+            ),
+        ];
+        for (field, get, lo, hi) in optional_fields {
+            let given = self.voicing.iter().filter(|a| get(a).is_some()).count();
+            if given != 0 && given != self.voicing.len() {
+                return Err(bad(
+                    field,
+                    format!("given at {given} of {} points", self.voicing.len()),
+                    "at every voicing point or at none",
+                ));
+            }
+            for a in &self.voicing {
+                if let Some(v) = get(a) {
+                    if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                        return Err(bad(
+                            field,
+                            format!("{v} (key {})", a.key),
+                            &format!("a number in [{lo}, {hi}]"),
+                        ));
+                    }
                 }
             }
+        }
+        for a in &self.voicing {
             let v = a.felt_stiffness_factor;
             if !(v.is_finite() && (0.01..=1e4).contains(&v)) {
                 return Err(bad(
@@ -485,7 +508,7 @@ fn inherit_points<A: Clone>(own: Vec<A>, base: Option<&Vec<A>>) -> Vec<A> {
 /// `f` at `key` from points at increasing keys: exact at a point, linear between two, the end
 /// value beyond the ends.
 fn linear<A>(points: &[A], key_of: impl Fn(&A) -> usize, key: usize, f: impl Fn(&A) -> f64) -> f64 {
-    between(points, key_of, key, f, |a, b, t| a * (1.0 - t) + b * t)
+    between(points, key_of, key, f, |a, b, t| a + (b - a) * t)
 }
 
 /// `f` at `key` from points at increasing keys: exact at a point, linear in `ln f` between two,
@@ -721,19 +744,25 @@ impl LoadedScaling {
         let h = &mut preset.hammer;
         h.mass_kg = self.interpolate(key, |a| a.hammer_mass_kg);
         h.stiffness_n_m_p = self.interpolate(key, |a| a.hammer_stiffness_n_m_p);
+        h.exponent = self.interpolate(key, |a| a.hammer_exponent);
         let voicing = &self.scaling.voicing;
         if !voicing.is_empty() {
             h.stiffness_n_m_p *= log_linear(voicing, |a| a.key, key, |a| a.felt_stiffness_factor);
+            let given = |f: OptionalField| {
+                voicing
+                    .iter()
+                    .all(|a| f(a).is_some())
+                    .then(|| linear(voicing, |a| a.key, key, |a| f(a).unwrap_or_default()))
+            };
+            if let Some(alpha_s) = given(|a| a.felt_hysteresis_s) {
+                h.hysteresis_s = alpha_s;
+            }
+            // A new exponent keeps the felt's force at the reference compression.
+            if let Some(p) = given(|a| a.felt_exponent) {
+                h.stiffness_n_m_p *= VOICING_COMPRESSION_M.powf(h.exponent - p);
+                h.exponent = p;
+            }
         }
-        if voicing.iter().all(|a| a.felt_hysteresis_s.is_some()) && !voicing.is_empty() {
-            h.hysteresis_s = linear(
-                voicing,
-                |a| a.key,
-                key,
-                |a| a.felt_hysteresis_s.unwrap_or_default(),
-            );
-        }
-        h.exponent = self.interpolate(key, |a| a.hammer_exponent);
         h.strike_ratio = self.interpolate(key, |a| a.strike_ratio);
         preset.soundboard.bridge_point = crate::board::key_name(key);
         preset.radiation = self.radiation();
