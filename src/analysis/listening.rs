@@ -11,6 +11,18 @@ use std::f64::consts::PI;
 /// that its bins add up to the stretch's mean square (Parseval with the window's power): `(bin
 /// width Hz, one value per bin from 0 Hz)`.
 pub fn power_spectrum(x: &[f64], fs: f64, from_s: f64, to_s: f64) -> (f64, Vec<f64>) {
+    power_spectrum_with(&mut RealFftPlanner::new(), x, fs, from_s, to_s)
+}
+
+/// [`power_spectrum`] with the FFT from `planner`, which keeps each length's plan for the next
+/// stretch of that length.
+fn power_spectrum_with(
+    planner: &mut RealFftPlanner<f64>,
+    x: &[f64],
+    fs: f64,
+    from_s: f64,
+    to_s: f64,
+) -> (f64, Vec<f64>) {
     let a = ((from_s * fs).round() as usize).min(x.len());
     let b = ((to_s * fs).round() as usize).clamp(a, x.len());
     let n = b - a;
@@ -20,7 +32,7 @@ pub fn power_spectrum(x: &[f64], fs: f64, from_s: f64, to_s: f64) -> (f64, Vec<f
     let window: Vec<f64> = (0..n)
         .map(|k| 0.5 - 0.5 * (2.0 * PI * k as f64 / n as f64).cos())
         .collect();
-    let fft = RealFftPlanner::<f64>::new().plan_fft_forward(n);
+    let fft = planner.plan_fft_forward(n);
     let mut input: Vec<f64> = x[a..b].iter().zip(&window).map(|(v, w)| v * w).collect();
     let mut output = fft.make_output_vec();
     fft.process(&mut input, &mut output)
@@ -53,10 +65,12 @@ pub fn band_power(
 ) -> f64 {
     let frames = (((to_s - from_s) / FRAME_S * 2.0).round() as usize).max(2) - 1;
     let hop = (to_s - from_s - FRAME_S) / (frames.max(2) - 1) as f64;
+    let mut planner = RealFftPlanner::new();
     let total: f64 = (0..frames)
         .map(|i| {
             let a = from_s + i as f64 * hop.max(0.0);
-            let (df, p) = power_spectrum(x, fs, a, a + FRAME_S.min(to_s - from_s));
+            let (df, p) =
+                power_spectrum_with(&mut planner, x, fs, a, a + FRAME_S.min(to_s - from_s));
             p.iter()
                 .enumerate()
                 .filter(|(k, _)| (lo_hz..hi_hz).contains(&(*k as f64 * df)))

@@ -47,6 +47,16 @@ pub struct RecordedLayer {
 
 /// The layer of recorded key `key` that MIDI velocity `velocity` plays, if the key was recorded.
 pub fn recorded_layer(key: usize, velocity: u8) -> Option<RecordedLayer> {
+    static LAYERS: std::sync::OnceLock<Vec<RecordedLayer>> = std::sync::OnceLock::new();
+    LAYERS
+        .get_or_init(recorded_layers)
+        .iter()
+        .find(|l| l.key == key && l.velocities.contains(&velocity))
+        .cloned()
+}
+
+/// Every recorded layer of every key.
+fn recorded_layers() -> Vec<RecordedLayer> {
     rows(DYNAMICS_CSV)
         .filter_map(|row| {
             let get = |name: &str| row.get(name).copied();
@@ -68,7 +78,7 @@ pub fn recorded_layer(key: usize, velocity: u8) -> Option<RecordedLayer> {
                 ],
             })
         })
-        .find(|l| l.key == key && l.velocities.contains(&velocity))
+        .collect()
 }
 
 /// Each data line of a CSV: its finite numbers by column name.
@@ -129,7 +139,7 @@ mod tests {
 
     #[test]
     fn every_recorded_key_has_its_sixteen_layers() {
-        for key in [1, 40, 88] {
+        for key in recorded_grand().iter().map(|k| k.key) {
             let layers: Vec<RecordedLayer> =
                 (1..=127).filter_map(|v| recorded_layer(key, v)).collect();
             assert_eq!(layers.len(), 127, "key {key}");
