@@ -70,6 +70,13 @@ fn malformed_presets_are_rejected_with_field_and_range() {
     assert!(e.contains("missing field `mass_kg`"));
     let e = preset_error("bad_preset_range.toml");
     assert!(e.contains("`strings.tension_n` = -747.8") && e.contains("[1e1, 5e3]"));
+    // The felt's stiffness is bounded by its force at 1 mm (K's unit depends on p).
+    let e = preset_error("bad_preset_felt.toml");
+    assert!(
+        e.contains("`hammer.stiffness_n_m_p` = 4e14")
+            && e.contains("1e-3 to 1e5 N at 1 mm")
+            && e.contains("5.036e7 N")
+    );
     let e = preset_error("bad_preset_asset.toml");
     assert!(e.contains("bad_asset_nan.txt:7:"));
     let e = preset_error("bad_preset_point.toml");

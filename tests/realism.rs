@@ -366,16 +366,10 @@ fn the_concert_keyboard_grows_louder_and_brighter_with_velocity_as_the_recorded_
     // whole — within 10 dB of the recording's (+17.6 … +37.5 dB). With the paper's felts
     // (p = 2.2–3.2) pp was too bright and that rise 13–15 dB short at C2, F#3 and C4.
     use unacorda::analysis::recorded::recorded_layer;
-    use unacorda::analysis::struck::{pressure, Touch, FF_VELOCITY, PP_VELOCITY, TOUCH_KEYS};
+    use unacorda::analysis::struck::{Touch, FF_VELOCITY, PP_VELOCITY, TOUCH_KEYS};
     let keyboard = Scaling::resolve("concert").unwrap();
     let touches = unacorda::cores::map_on_cores(&TOUCH_KEYS, |&k| {
-        let preset = keyboard.key_preset(k)?;
-        let at = |v: u8| -> anyhow::Result<Touch> {
-            let speed = unacorda::midi::hammer_speed_m_s(v).unwrap();
-            let (fs, x) = pressure(&preset, speed, 0.5, None)?;
-            Ok(Touch::measure(&x, fs))
-        };
-        Ok::<_, anyhow::Error>([at(PP_VELOCITY)?, at(FF_VELOCITY)?])
+        Ok::<_, anyhow::Error>(Touch::pp_and_ff(&keyboard.key_preset(k)?)?)
     })
     .unwrap();
     for (&k, [pp, ff]) in TOUCH_KEYS.iter().zip(&touches) {

@@ -10,6 +10,7 @@ use super::listening::{
 use crate::config::preset::LoadedPreset;
 use crate::engine::tuning::stiff_string_hz;
 use crate::engine::{BuildError, Integrator, Strike};
+use crate::midi::hammer_speed_m_s;
 use crate::render::simulate_with;
 
 /// The two upper bands whose fade issue 17 measures (Hz), at [`LATE_S`] re [`ATTACK_S`].
@@ -124,5 +125,16 @@ impl Touch {
             centroid_hz: spectral_centroid_hz(x, fs, ONSET_S),
             octave_shape_db: octave_shape_db(x, fs, ONSET_S),
         }
+    }
+
+    /// `preset`'s key struck at [`PP_VELOCITY`] and at [`FF_VELOCITY`] (the MIDI velocity
+    /// curve's hammer speeds), each heard as [`pressure`] hears it and measured.
+    pub fn pp_and_ff(preset: &LoadedPreset) -> Result<[Touch; 2], BuildError> {
+        let at = |velocity: u8| -> Result<Touch, BuildError> {
+            let speed = hammer_speed_m_s(velocity).expect("a MIDI velocity 1–127");
+            let (fs, x) = pressure(preset, speed, ONSET_S.1, None)?;
+            Ok(Touch::measure(&x, fs))
+        };
+        Ok([at(PP_VELOCITY)?, at(FF_VELOCITY)?])
     }
 }

@@ -414,12 +414,7 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
     );
     // The touch: pp (velocity 30) to ff (127) on the keys recorded at every layer.
     let touches = unacorda::cores::map_on_cores(&struck::TOUCH_KEYS, |&k| -> Result<[Touch; 2]> {
-        let preset = scaling.key_preset(k)?;
-        let at = |v: u8| -> Result<Touch> {
-            let (fs, x) = strike_preset(&preset, v, struck::ONSET_S.1, None)?;
-            Ok(Touch::measure(&x, fs))
-        };
-        Ok([at(struck::PP_VELOCITY)?, at(struck::FF_VELOCITY)?])
+        Ok(Touch::pp_and_ff(&scaling.key_preset(k)?)?)
     })?;
     let _ = writeln!(
         out,

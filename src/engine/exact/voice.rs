@@ -163,7 +163,7 @@ impl Voice {
     /// The felt force on each string (Eq. 8) with the hammer at `y` moving at `v` and the modes
     /// at `z` (the strings' velocity under the hammer read only for a hysteretic felt).
     fn felt(&self, key: &ExactKey, z: &Split, y: f64, v: f64) -> [f64; MAX_STRINGS] {
-        let hysteretic = key.hammer.hysteresis_s != 0.0;
+        let hysteretic = key.hammer.is_hysteretic();
         std::array::from_fn(|s| {
             if s < key.n_strings && self.state.struck[s] {
                 let ve = if hysteretic {
@@ -188,7 +188,11 @@ impl Voice {
     pub(crate) fn hammer_force_n(&self, key: &ExactKey) -> [f64; MAX_STRINGS] {
         std::array::from_fn(|s| {
             if self.state.hammer_on && s < key.n_strings && self.state.struck[s] {
-                let ve = self.read_z(&key.strike_velocity_row[s], &key.strike_velocity_settle[s]);
+                let ve = if key.hammer.is_hysteretic() {
+                    self.read_z(&key.strike_velocity_row[s], &key.strike_velocity_settle[s])
+                } else {
+                    0.0
+                };
                 key.hammer.felt_force_n(
                     self.hammer_y - self.strike_point_m(key, s),
                     self.hammer_v - ve,

@@ -39,11 +39,18 @@ impl HammerParams {
             return 0.0;
         }
         let elastic = xi_m.powf(self.exponent);
-        if self.hysteresis_s == 0.0 {
+        if !self.is_hysteretic() {
             return self.stiffness_n_m_p * elastic;
         }
         let rate = self.hysteresis_s * self.exponent * elastic / xi_m * rate_m_s;
         (self.stiffness_n_m_p * (elastic + rate)).max(0.0)
+    }
+
+    /// Whether the felt's force depends on its rate of compression (then its callers read the
+    /// strings' velocity under the hammer).
+    #[inline(always)]
+    pub fn is_hysteretic(&self) -> bool {
+        self.hysteresis_s != 0.0
     }
 
     /// The release rule: the hammer leaves the system once it recedes (`velocity_m_s < 0`) and is

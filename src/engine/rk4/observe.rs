@@ -47,7 +47,11 @@ impl<T: Real> Rk4Pool<T> {
             if self.states[k].hammer_on && self.states[k].struck[s] {
                 let r = voice.ranges[s][0].clone();
                 let ye = T::dot_wide::<false>(&km.hammer_shape, &q[r.clone()]);
-                let ve = T::dot_wide::<false>(&km.hammer_shape, &v[r]);
+                let ve = if km.hammer.is_hysteretic() {
+                    T::dot_wide::<false>(&km.hammer_shape, &v[r])
+                } else {
+                    0.0
+                };
                 obs.hammer_force_n[s] = km
                     .hammer
                     .felt_force_n(self.hammer_y[k] - ye, self.hammer_v[k] - ve);

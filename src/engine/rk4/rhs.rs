@@ -126,10 +126,10 @@ pub(super) fn evaluate<T: Real, const SIMD: bool>(
                 if states[k].struck[s] {
                     let r = voice.ranges[s][0].clone();
                     let ye = T::dot::<SIMD>(&km.hammer_shape, &q[r.clone()]).to_f64();
-                    let ve = if km.hammer.hysteresis_s == 0.0 {
-                        0.0
-                    } else {
+                    let ve = if km.hammer.is_hysteretic() {
                         T::dot::<SIMD>(&km.hammer_shape, &v[r.clone()]).to_f64()
+                    } else {
+                        0.0
                     };
                     let f = km.hammer.felt_force_n(hammer_y[k] - ye, hammer_v[k] - ve);
                     felt_total += f;
