@@ -46,7 +46,7 @@ fn c4s_partials_are_its_strings_and_the_tuner_finds_their_stiffness() {
     let worst = off.iter().fold(0f64, |m, x| m.max(x.abs()));
     let spread =
         off.iter().fold(f64::MIN, |m, &x| m.max(x)) - off.iter().fold(f64::MAX, |m, &x| m.min(x));
-    let pitch = tuner_pitch(&found, b).unwrap();
+    let pitch = tuner_pitch(&found, law(1), b).unwrap();
     println!(
         "C4: {} partials of 8, within {worst:.2} cents of Eq. 2 (the strings' mean), spread {spread:.2} cents (modes per partial {:?}); the tuner's B {:.3e} against the strings' {b:.3e}",
         found.len(),
@@ -95,12 +95,15 @@ fn the_keyboard_is_tuned_as_a_tuner_hears_it() {
     // Every key's pitch on partials 2–8 of its linearised system (the damped, three-direction
     // coupled system, not the undamped one the tuner works on) against its target: equal
     // temperament on the paper keyboard, the stretched tuning on the concert one. Issue 17 asks
-    // all 88 within ±3 cents; the tuner on partials 2–8 holds 87 (B7 and C8, with no partial 2
-    // among their modes, on their first; with every key's first partial on pitch instead, 51, and
-    // the top octave up to 341 cents off; fitting the law with a partial a board mode pulls 15–27
-    // cents weighing as much as the others, 79: E1 +15, A0 +9, Bb0 -9, C2 +7); Bb0 remains. The top octave, where the first partial was pulled hundreds of cents, must be on
-    // pitch; on the concert keyboard two of its keys (E7, Bb7) keep a mode fewer than the paper's
-    // at their higher tension, and are tuned with it.
+    // all 88 within ±3 cents. The pitch is how far partials 2–8 lie, balanced, from the target's
+    // series with the string's own B (`series_offset_cents`): the concert keyboard holds 88, Bb0
+    // at -2.7 (its partials 2 and 3 split by board modes); the paper keyboard 87, Bb0 at -3.0.
+    // Measured otherwise: extrapolating the first partial from a law fitted with B free, 87 (Bb0
+    // -3.9: a tilt of a few cents across the pulled partials); with every key's first partial on
+    // pitch, 51, and the top octave up to 341 cents off; fitting with a partial a board mode
+    // pulls 15–27 cents weighing as much as the others, 79 (E1 +15, A0 +9, Bb0 -9, C2 +7). On
+    // the concert keyboard two of the top keys (E7, Bb7) keep a mode fewer than the paper's at
+    // their higher tension, and are tuned with it.
     for keyboard in ["paper", "concert"] {
         let scaling = Scaling::resolve(keyboard).unwrap();
         let keys: Vec<usize> = (1..=88).collect();
@@ -125,8 +128,9 @@ fn the_keyboard_is_tuned_as_a_tuner_hears_it() {
                 .map(|k| format!("{k} {:+.1}", pitch[k - 1]))
                 .collect::<Vec<_>>()
         );
+        let needed = if keyboard == "concert" { 88 } else { 87 };
         assert!(
-            within.len() >= 87,
+            within.len() >= needed,
             "{keyboard}: {} keys within ±3 cents",
             within.len()
         );

@@ -3,12 +3,14 @@
 //! stiff string's `n`-th frequency (Eq. 2) — one per string and polarisation, split by the
 //! strings' mistuning and their coupling at the bridge — with its frequency and the decay of its
 //! fastest and slowest mode (the early and late decay of a coupled unison: Weinreich 1977). The
-//! key's pitch is what a tuner listening to partials 2–8 hears: the first partial of the
-//! stiff-string law `f_n = n f0 sqrt(1 + B n^2)` fitted to them, so that a board mode pulling
-//! the first partial alone does not move it.
+//! key's pitch is what a tuner listening to partials 2–8 hears: how far they lie, balanced, from
+//! the series `f_n = n f0 sqrt(1 + B n^2)` the key should sound, so that a board mode pulling the
+//! first partial alone does not move it.
 
 use super::modes::{linear_modes, LinearMode, ModesError};
-use crate::engine::tuning::{stiff_string_fit, stiff_string_hz, PARTIAL_WINDOW, STRING_SHARE};
+use crate::engine::tuning::{
+    series_offset_cents, stiff_string_fit, stiff_string_hz, PARTIAL_WINDOW, STRING_SHARE,
+};
 use crate::engine::UnisonSpec;
 
 /// Partial `n` of a key.
@@ -60,24 +62,26 @@ pub fn partials(
 /// The pitch a tuner hears from partials 2–8.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TunerPitch {
-    /// The fitted law's first partial `f0 sqrt(1 + B)` (Hz).
+    /// The first partial of the series partials 2–8 sound on: the target moved by their balanced
+    /// offset from its series ([`series_offset_cents`]) (Hz).
     pub first_partial_hz: f64,
-    /// The fitted (or, from fewer than three partials, the given) inharmonicity `B`.
+    /// The inharmonicity `B` of the stiff-string law fitted to them ([`stiff_string_fit`]; from
+    /// fewer than three partials, the given one).
     pub inharmonicity: f64,
-    /// How many of partials 2–8 it was fitted to.
+    /// How many of partials 2–8 the pitch rests on.
     pub partials: usize,
 }
 
-/// The stiff-string law fitted to partials 2–8 of `partials` ([`stiff_string_fit`]; from one or
-/// two of them `B` is `nominal_b`). `None` without any of partials 2–8.
-pub fn tuner_pitch(partials: &[Partial], nominal_b: f64) -> Option<TunerPitch> {
+/// The pitch of `partials` against the series of `target_hz` with the string's `nominal_b`
+/// ([`series_offset_cents`]), and the `B` they show. `None` without any of partials 2–8.
+pub fn tuner_pitch(partials: &[Partial], target_hz: f64, nominal_b: f64) -> Option<TunerPitch> {
     let found: Vec<(usize, f64)> = partials.iter().map(|p| (p.n, p.freq_hz)).collect();
-    stiff_string_fit(&found, nominal_b).map(|(first_partial_hz, inharmonicity, partials)| {
-        TunerPitch {
-            first_partial_hz,
-            inharmonicity,
-            partials,
-        }
+    let (offset_cents, counted) = series_offset_cents(&found, target_hz, nominal_b)?;
+    let inharmonicity = stiff_string_fit(&found, nominal_b).map_or(nominal_b, |f| f.1);
+    Some(TunerPitch {
+        first_partial_hz: target_hz * 2f64.powf(offset_cents / 1200.0),
+        inharmonicity,
+        partials: counted,
     })
 }
 
@@ -111,7 +115,7 @@ impl KeyPartials {
     ) -> KeyPartials {
         let b = spec.strings[0].speaking_inharmonicity();
         let partials = partials(modes, stiff_string_hz(target_hz, b), count);
-        let pitch = tuner_pitch(&partials, b);
+        let pitch = tuner_pitch(&partials, target_hz, b);
         KeyPartials {
             target_hz,
             partials,
@@ -177,7 +181,7 @@ mod tests {
         let expected_t60 = |sigma: f64| 3.0 * std::f64::consts::LN_10 / sigma;
         assert!((p2.t60_max_s - expected_t60(0.2)).abs() < 1e-9);
         assert!((p2.t60_min_s - expected_t60(4.0)).abs() < 1e-9);
-        let pitch = tuner_pitch(&found, 0.0).unwrap();
+        let pitch = tuner_pitch(&found, law(1), b).unwrap();
         let heard = cents(pitch.first_partial_hz, law(1));
         let first = cents(found[0].freq_hz, law(1));
         println!(
@@ -189,8 +193,11 @@ mod tests {
         assert!((pitch.inharmonicity / b - 1.0).abs() < 0.01);
         assert!((first - 30.0).abs() < 0.5);
         // From two partials the string's own B is used.
-        let two = tuner_pitch(&found[..3], b).unwrap();
+        let two = tuner_pitch(&found[..3], law(1), b).unwrap();
         assert_eq!(two.partials, 2);
         assert!(cents(two.first_partial_hz, law(1)).abs() < 0.05);
+        // Against a target 5 cents sharp the key sounds 5 cents flat of it.
+        let flat = tuner_pitch(&found, law(1) * 2f64.powf(5.0 / 1200.0), b).unwrap();
+        assert!((cents(flat.first_partial_hz, law(1)) - 0.0).abs() < 0.05);
     }
 }

@@ -87,14 +87,12 @@ pub fn bridged_partials_hz(
 
 /// Eq. 2's law fitted to partials 2–8 of `partials` (`(n, Hz)`): `f_n^2 = a n^2 + b n^4` with
 /// `a = f0^2`, `b = f0^2 B`, each equation divided by `f_n^2` so that every partial weighs by its
-/// error in cents. A partial that a board mode pulls off the law counts little, as a tuner's ear
-/// discounts it: the fit is reweighted ([`OUTLIER_CENTS`], Cauchy weights `1 / (1 + (r/c)^2)` of
-/// each partial's distance `r` from the law, until they settle), which is continuous in the
-/// partials, so that a small change of tension never jumps the pitch. Returns the law's first
-/// partial `f0 sqrt(1 + B)` (Hz), its `B`, and how many partials it rests on (weight at least
-/// one half); from one or two, `B` is `nominal_b` and only `f0` is fitted. `None` without any of
-/// partials 2–8. What a tuner hears: a board mode that pulls the first partial alone does not
-/// move it.
+/// error in cents. A partial that a board mode pulls off the law counts little: the fit is
+/// reweighted ([`OUTLIER_CENTS`], Cauchy weights `1 / (1 + (r/c)^2)` of each partial's distance
+/// `r` from the law, until they settle). Returns the law's first partial `f0 sqrt(1 + B)` (Hz),
+/// its `B`, and how many partials it rests on (weight at least one half); from one or two, `B` is
+/// `nominal_b` and only `f0` is fitted. `None` without any of partials 2–8. The inharmonicity the
+/// coupled key shows (`analyze`'s "fit B"); its pitch is [`series_offset_cents`]'s.
 pub fn stiff_string_fit(partials: &[(usize, f64)], nominal_b: f64) -> Option<(f64, f64, usize)> {
     let used: Vec<(f64, f64)> = partials
         .iter()
@@ -150,7 +148,59 @@ pub fn stiff_string_fit(partials: &[(usize, f64)], nominal_b: f64) -> Option<(f6
     (a > 0.0 && a.is_finite() && b.is_finite()).then(|| ((a + b).sqrt(), b / a, counted))
 }
 
-/// The scale of a tuner's fit's weights (cents): a partial this far from the law weighs one half,
+/// How far partials 2–8 of `partials` (`(n, Hz)`) lie from the series `stiff_string_hz(target_hz,
+/// b)` that the key should sound (cents), as a tuner balances them: the mean of their offsets,
+/// each partial weighing `1 / (1 + (r/c)^2)` of its distance `r` from that mean
+/// ([`OUTLIER_CENTS`]), iterated from the median until the weights settle — so that a partial a
+/// board mode pulls off the series counts little, and the result is continuous in the partials (a
+/// small change of tension never jumps it). With `b` the string's own, a partial's offset is what
+/// a tuning device shows for it; fitting `B` as well ([`stiff_string_fit`]) would extrapolate the
+/// first partial from 2–8 and turn a tilt of a few cents across them (the board's pulls on Bb0)
+/// into several cents of pitch. Returns the offset and how many partials it rests on (weight at
+/// least one half); `None` without any of partials 2–8.
+pub fn series_offset_cents(
+    partials: &[(usize, f64)],
+    target_hz: f64,
+    b: f64,
+) -> Option<(f64, usize)> {
+    let series = stiff_string_hz(target_hz, b);
+    let mut offsets: Vec<f64> = partials
+        .iter()
+        .filter(|p| (2..=8).contains(&p.0))
+        .map(|&(n, f)| 1200.0 * (f / series(n)).log2())
+        .filter(|c| c.is_finite())
+        .collect();
+    if offsets.is_empty() {
+        return None;
+    }
+    offsets.sort_by(f64::total_cmp);
+    let half = offsets.len() / 2;
+    let mut centre = if offsets.len() % 2 == 1 {
+        offsets[half]
+    } else {
+        0.5 * (offsets[half - 1] + offsets[half])
+    };
+    let weight = |c: f64, centre: f64| 1.0 / (1.0 + ((c - centre) / OUTLIER_CENTS).powi(2));
+    for _ in 0..200 {
+        let (w, wx) = offsets.iter().fold((0.0, 0.0), |(w, wx), &c| {
+            let k = weight(c, centre);
+            (w + k, wx + k * c)
+        });
+        let next = wx / w;
+        let moved = (next - centre).abs();
+        centre = next;
+        if moved < 1e-12 {
+            break;
+        }
+    }
+    let counted = offsets
+        .iter()
+        .filter(|&&c| weight(c, centre) >= 0.5)
+        .count();
+    Some((centre, counted))
+}
+
+/// The scale of a tuner's weights (cents): a partial this far from the others weighs one half,
 /// one pulled 15 cents by a board mode 1/26.
 pub const OUTLIER_CENTS: f64 = 3.0;
 
@@ -162,9 +212,9 @@ pub fn stiff_string_hz(target_hz: f64, b: f64) -> impl Fn(usize) -> f64 {
     }
 }
 
-/// The pitch a tuner hears from `string` on its bridge and board (Hz): Eq. 2's law fitted to its
-/// coupled partials 2–8 ([`stiff_string_fit`]), or its first partial where none of them is below
-/// the modes kept (the top keys).
+/// The pitch a tuner hears from `string` on its bridge and board (Hz): `target_hz` moved by the
+/// offset of its coupled partials 2–8 from the target's series ([`series_offset_cents`], `B` the
+/// string's own), or its first partial where none of them is below the modes kept (the top keys).
 pub fn bridged_pitch_hz(
     string: &StringParams,
     modes: usize,
@@ -181,33 +231,33 @@ pub fn bridged_pitch_hz(
         stiff_string_hz(target_hz, b),
         8.min(modes),
     );
-    stiff_string_fit(&found, b)
-        .map(|(f1, _, _)| f1)
+    series_offset_cents(&found, target_hz, b)
+        .map(|(cents, _)| target_hz * 2f64.powf(cents / 1200.0))
         .or_else(|| found.iter().find(|p| p.0 == 1).map(|p| p.1))
         .unwrap_or(target_hz)
 }
 
 #[cfg(test)]
 mod tests {
-    use super::{stiff_string_fit, stiff_string_hz};
+    use super::{series_offset_cents, stiff_string_fit, stiff_string_hz};
 
     /// Partials 2–8 of a stiff string (E1-like: 41.1 Hz, B = 1.5e-4), one of them pulled by a
-    /// board mode: the fit's pitch stays on the string's as the pull grows from 0 to 30 cents,
-    /// and moves with it continuously (no jump as a partial loses its weight).
+    /// board mode: the tuner's pitch stays on the string's as the pull grows from 0 to 30 cents,
+    /// and moves with it continuously (no jump as a partial loses its weight); the law's fit finds
+    /// the string's `B`.
     #[test]
     fn a_pulled_partial_does_not_pull_the_pitch() {
         let (f1, b) = (41.1, 1.5e-4);
         let law = stiff_string_hz(f1, b);
-        let pitch = |pull_cents: f64| {
-            let partials: Vec<(usize, f64)> = (2..=8)
+        let partials = |pull_cents: f64| -> Vec<(usize, f64)> {
+            (2..=8)
                 .map(|n| {
                     let pull = if n == 2 { pull_cents } else { 0.0 };
                     (n, law(n) * 2f64.powf(pull / 1200.0))
                 })
-                .collect();
-            let (f, _, counted) = stiff_string_fit(&partials, b).unwrap();
-            (1200.0 * (f / f1).log2(), counted)
+                .collect()
         };
+        let pitch = |pull_cents: f64| series_offset_cents(&partials(pull_cents), f1, b).unwrap();
         let (mut worst, mut jump, mut last): (f64, f64, f64) = (0.0, 0.0, 0.0);
         for i in 0..=300 {
             let (cents, _) = pitch(i as f64 * 0.1);
@@ -216,7 +266,9 @@ mod tests {
             last = cents;
         }
         let (at_pull, counted) = pitch(26.7);
-        println!("partial 2 pulled 0–30 cents: pitch at most {worst:.2} cents off, steps of 0.1 cent move it at most {jump:.3}; pulled 26.7 (E1's): {at_pull:+.2} cents on {counted} partials");
-        assert!(worst < 2.0 && jump < 0.1 && at_pull.abs() < 0.5 && counted == 6);
+        let (_, fitted_b, _) = stiff_string_fit(&partials(0.0), 0.0).unwrap();
+        println!("partial 2 pulled 0–30 cents: pitch at most {worst:.2} cents off, steps of 0.1 cent move it at most {jump:.3}; pulled 26.7 (E1's): {at_pull:+.2} cents on {counted} partials; the law's B {fitted_b:.4e}");
+        assert!(worst < 1.0 && jump < 0.1 && at_pull.abs() < 0.2 && counted == 6);
+        assert!((fitted_b / b - 1.0).abs() < 1e-6);
     }
 }
