@@ -113,6 +113,8 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
     assert!(e.contains("`voicing.felt_hysteresis_s` = 1 (key 88)") && e.contains("[0, 0.005]"));
     let e = keyboard_error("bad_keyboard_exponent.toml");
     assert!(e.contains("`voicing.felt_exponent` = 9 (key 1)") && e.contains("[1, 6]"));
+    let e = keyboard_error("bad_keyboard_full_scale.toml");
+    assert!(e.contains("`full_scale_pa` = 1000000000") && e.contains("[1e-6, 1e4] Pa"));
     // A listener the asset does not have, alone or in a stereo pair, is refused when the first
     // key is made, naming the asset's.
     for (file, field) in [

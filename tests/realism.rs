@@ -363,17 +363,25 @@ fn the_concert_treble_carries_as_the_recorded_grands_does() {
 
 #[test]
 fn the_concert_keyboard_grows_louder_and_brighter_with_velocity_as_the_recorded_grand() {
-    // C2, F#3, C4, A4 and C6 struck at MIDI velocity 30 and 127 (the exact engine, 0.5 s), beside
-    // the recorded grand's layers for the same velocities (`docs/data/recorded_dynamics.csv`).
-    // Held: the A-weighted level's rise within 5 dB of the recording's at every key (recorded
-    // +14.5 … +18.0 dB), and how much brighter ff is than pp — the rise of the 2–4 kHz band re the
-    // whole — within 10 dB of the recording's (+17.6 … +37.5 dB). With the paper's felts
-    // (p = 2.2–3.2) pp was too bright and that rise 13–15 dB short at C2, F#3 and C4.
+    // C2, F#3, C4, A4 and C6 struck at MIDI velocity 30 and 127 (the exact engine, 0.5 s), heard
+    // by the stereo pair mixed to mono as the recorded grand's pair is measured, beside its layers
+    // for the same velocities (`docs/data/recorded_dynamics.csv`). Held: the A-weighted level's
+    // rise no less than the recording's less 5 dB (recorded +14.5 … +18.0 dB) and no more than
+    // 25 dB, or the recording's and 5 if more (issue 17: +20 … +25 dB at C4; Goncalves 2014, one
+    // key: 23 dB; the recording's layers are one sampler's choice of touch); how much
+    // brighter ff is than pp — the rise of the 2–4 kHz band re the whole — within 10 dB of the
+    // recording's (+17.6 … +37.5 dB); and ff's 2–4 kHz band re the whole within 8 dB of the
+    // recording's. With the paper's felts (p = 2.2–3.2) pp was too bright and that rise 13–15 dB
+    // short at C2, F#3 and C4; heard at the listener 1 m above, C6's ff is 11.5 dB darker than
+    // the recording's.
     use unacorda::analysis::recorded::recorded_layer;
-    use unacorda::analysis::struck::{Touch, FF_VELOCITY, PP_VELOCITY, TOUCH_KEYS};
+    use unacorda::analysis::struck::{Hearing, Touch, FF_VELOCITY, PP_VELOCITY, TOUCH_KEYS};
     let keyboard = Scaling::resolve("concert").unwrap();
     let touches = unacorda::cores::map_on_cores(&TOUCH_KEYS, |&k| {
-        Ok::<_, anyhow::Error>(Touch::pp_and_ff(&keyboard.key_preset(k)?)?)
+        Ok::<_, anyhow::Error>(Touch::pp_and_ff(
+            &keyboard.key_preset(k)?,
+            Hearing::PairMix,
+        )?)
     })
     .unwrap();
     for (&k, [pp, ff]) in TOUCH_KEYS.iter().zip(&touches) {
@@ -393,10 +401,17 @@ fn the_concert_keyboard_grows_louder_and_brighter_with_velocity_as_the_recorded_
             rp.octave_shape_db[5],
             rf.octave_shape_db[5],
         );
-        assert!((rise_db - recorded_rise_db).abs() <= 5.0, "key {k}");
+        assert!(
+            rise_db >= recorded_rise_db - 5.0 && rise_db <= (recorded_rise_db + 5.0).max(25.0),
+            "key {k}: level rise"
+        );
         assert!(
             (brighter_db - recorded_brighter_db).abs() <= 10.0,
             "key {k}"
+        );
+        assert!(
+            (ff.octave_shape_db[5] - rf.octave_shape_db[5]).abs() <= 8.0,
+            "key {k}: ff's 2–4 kHz band"
         );
     }
 }

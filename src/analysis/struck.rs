@@ -33,21 +33,44 @@ pub const TOUCH_KEYS: [usize; 5] = [16, 34, 40, 49, 64];
 pub const PP_VELOCITY: u8 = 30;
 pub const FF_VELOCITY: u8 = 127;
 
+/// Where a struck key is heard.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Hearing {
+    /// In mono, at `radiation.listener` (a measuring microphone), the stereo pair set aside.
+    Listener,
+    /// By the stereo pair, its two channels mixed to mono (their mean), as the recorded grand's
+    /// files are measured (`scripts/recorded_dynamics.py`); the listener where there is no pair.
+    PairMix,
+}
+
 /// The sound pressure (Pa) at the listener of `preset`'s key struck at `velocity_m_s` on the exact
-/// engine at the output rate, for `seconds`, the key released after `release_s` (`None`: held).
-/// Heard in mono, at `radiation.listener` (a measuring microphone), the stereo pair set aside.
+/// engine at the output rate, for `seconds`, the key released after `release_s` (`None`: held),
+/// heard in mono at `radiation.listener` ([`Hearing::Listener`]).
 pub fn pressure(
     preset: &LoadedPreset,
     velocity_m_s: f64,
     seconds: f64,
     release_s: Option<f64>,
 ) -> Result<(f64, Vec<f64>), BuildError> {
+    pressure_heard(preset, velocity_m_s, seconds, release_s, Hearing::Listener)
+}
+
+/// [`pressure`] heard as `hearing` says.
+pub fn pressure_heard(
+    preset: &LoadedPreset,
+    velocity_m_s: f64,
+    seconds: f64,
+    release_s: Option<f64>,
+    hearing: Hearing,
+) -> Result<(f64, Vec<f64>), BuildError> {
     let strike = Strike {
         velocity_m_s,
         una_corda: false,
     };
     let mut preset = preset.clone();
-    preset.make_mono();
+    if hearing == Hearing::Listener {
+        preset.make_mono();
+    }
     let rec = simulate_with(
         &preset,
         Integrator::Exact,
@@ -56,7 +79,11 @@ pub fn pressure(
         seconds,
         |_| {},
     )?;
-    Ok((rec.rate_hz, rec.channel(|f| f.pressure_pa)))
+    let mix = |f: &crate::render::strike::Frame| match hearing {
+        Hearing::Listener => f.pressure_pa,
+        Hearing::PairMix => 0.5 * (f.pressure_pa + f.pressure_right_pa),
+    };
+    Ok((rec.rate_hz, rec.channel(mix)))
 }
 
 /// One struck key's figures.
@@ -128,11 +155,11 @@ impl Touch {
     }
 
     /// `preset`'s key struck at [`PP_VELOCITY`] and at [`FF_VELOCITY`] (the MIDI velocity
-    /// curve's hammer speeds), each heard as [`pressure`] hears it and measured.
-    pub fn pp_and_ff(preset: &LoadedPreset) -> Result<[Touch; 2], BuildError> {
+    /// curve's hammer speeds), each heard as `hearing` says and measured.
+    pub fn pp_and_ff(preset: &LoadedPreset, hearing: Hearing) -> Result<[Touch; 2], BuildError> {
         let at = |velocity: u8| -> Result<Touch, BuildError> {
             let speed = hammer_speed_m_s(velocity).expect("a MIDI velocity 1–127");
-            let (fs, x) = pressure(preset, speed, ONSET_S.1, None)?;
+            let (fs, x) = pressure_heard(preset, speed, ONSET_S.1, None, hearing)?;
             Ok(Touch::measure(&x, fs))
         };
         Ok([at(PP_VELOCITY)?, at(FF_VELOCITY)?])

@@ -27,6 +27,10 @@ const BUILTIN_ASSETS: &[(&str, &str)] = &[(
 /// The built-in board description that `grand.txt` is generated from.
 pub const GRAND_BOARD_TOML: &str = include_str!("../../assets/soundboard_modes/grand.toml");
 
+/// The sound pressures a preset or keyboard may hear as full scale (Pa).
+pub const MIN_FULL_SCALE_PA: f64 = 1e-6;
+pub const MAX_FULL_SCALE_PA: f64 = 1e4;
+
 /// The largest preset, keyboard or board description read (bytes): the built-in ones are under
 /// 20 kB; a larger file, or a device that never ends (`/dev/zero`), is refused, not read forever.
 pub const MAX_TEXT_BYTES: u64 = 1 << 20;
@@ -451,7 +455,12 @@ impl Preset {
             0.1,
             10.0,
         )?;
-        range("radiation.full_scale_pa", r.full_scale_pa, 1e-6, 1e4)?;
+        range(
+            "radiation.full_scale_pa",
+            r.full_scale_pa,
+            MIN_FULL_SCALE_PA,
+            MAX_FULL_SCALE_PA,
+        )?;
         Ok(())
     }
 }

@@ -9,7 +9,8 @@
 
 use crate::config::preset::{
     bridge_point_index, heard, read_text, LoadedPreset, Preset, PresetError, RadiationSection,
-    StringsSection, MAX_EXPONENT, MAX_HYSTERESIS_S, MIN_EXPONENT,
+    StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA, MAX_HYSTERESIS_S, MIN_EXPONENT,
+    MIN_FULL_SCALE_PA,
 };
 use crate::engine::physics::damper::DamperParams;
 use crate::engine::physics::string::StringParams;
@@ -59,6 +60,9 @@ pub struct Scaling {
     /// The listeners of the left and right channels (`radiation.stereo`); `None`: the base
     /// preset's.
     pub stereo: Option<[String; 2]>,
+    /// The sound pressure heard as full scale, 0 dBFS (`radiation.full_scale_pa`, Pa); `None`:
+    /// the base preset's.
+    pub full_scale_pa: Option<f64>,
 }
 
 /// What a keyboard is tuned to.
@@ -93,6 +97,7 @@ struct ScalingFile {
     losses: Vec<LossAnchor>,
     listener: Option<String>,
     stereo: Option<[String; 2]>,
+    full_scale_pa: Option<f64>,
     #[serde(default)]
     dampers: Vec<DamperAnchor>,
     #[serde(default)]
@@ -316,6 +321,9 @@ impl Scaling {
             stereo: file
                 .stereo
                 .or_else(|| base.as_ref().and_then(|b| b.stereo.clone())),
+            full_scale_pa: file
+                .full_scale_pa
+                .or_else(|| base.as_ref().and_then(|b| b.full_scale_pa)),
             losses: inherit_points(file.losses, base.as_ref().map(|b| &b.losses)),
             dampers: inherit_points(file.dampers, base.as_ref().map(|b| &b.dampers)),
             voicing: inherit_points(file.voicing, base.as_ref().map(|b| &b.voicing)),
@@ -343,6 +351,17 @@ impl Scaling {
             value,
             allowed: allowed.to_owned(),
         };
+        if let Some(pa) = self.full_scale_pa {
+            if !(pa.is_finite() && (MIN_FULL_SCALE_PA..=MAX_FULL_SCALE_PA).contains(&pa)) {
+                return Err(bad(
+                    "full_scale_pa",
+                    pa.to_string(),
+                    &format!(
+                        "a sound pressure in [{MIN_FULL_SCALE_PA:e}, {MAX_FULL_SCALE_PA:e}] Pa"
+                    ),
+                ));
+            }
+        }
         // Points along the keyboard (anchors, losses, dampers, voicing) run in increasing keys
         // from A0 to C8.
         let spans_keyboard = |keys: &[usize]| {
@@ -546,8 +565,8 @@ fn between<A>(
 }
 
 impl LoadedScaling {
-    /// The radiation every key has: the base preset's, with the keyboard's listener and stereo
-    /// pair where it sets them.
+    /// The radiation every key has: the base preset's, with the keyboard's listener, stereo pair
+    /// and full scale where it sets them.
     pub fn radiation(&self) -> RadiationSection {
         let mut r = self.base.preset.radiation.clone();
         if let Some(listener) = &self.scaling.listener {
@@ -555,6 +574,9 @@ impl LoadedScaling {
         }
         if let Some(stereo) = &self.scaling.stereo {
             r.stereo = Some(stereo.clone());
+        }
+        if let Some(full_scale_pa) = self.scaling.full_scale_pa {
+            r.full_scale_pa = full_scale_pa;
         }
         r
     }

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use unacorda::analysis::duplex::felt_effect;
 use unacorda::analysis::modes::LinearMode;
 use unacorda::analysis::partials::{cents, KeyPartials, Partial};
-use unacorda::analysis::struck::{self, StruckKey, Touch};
+use unacorda::analysis::struck::{self, Hearing, StruckKey, Touch};
 use unacorda::analysis::{listening, recorded};
 use unacorda::board::key_name;
 use unacorda::config::preset::LoadedPreset;
@@ -414,11 +414,11 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
     );
     // The touch: pp (velocity 30) to ff (127) on the keys recorded at every layer.
     let touches = unacorda::cores::map_on_cores(&struck::TOUCH_KEYS, |&k| -> Result<[Touch; 2]> {
-        Ok(Touch::pp_and_ff(&scaling.key_preset(k)?)?)
+        Ok(Touch::pp_and_ff(&scaling.key_preset(k)?, Hearing::PairMix)?)
     })?;
     let _ = writeln!(
         out,
-        "dynamics, velocity {} → {} (first 0.5 s; in brackets the recorded grand's layers for velocities {} and {}):",
+        "dynamics, velocity {} → {} (first 0.5 s, heard by the stereo pair mixed to mono as the recording's pair is; in brackets the recorded grand's layers for velocities {} and {}):",
         struck::PP_VELOCITY,
         struck::FF_VELOCITY,
         struck::PP_VELOCITY,
