@@ -35,8 +35,8 @@ pub struct PlayArgs {
     /// Keyboard: built-in name (concert, the default; paper, the paper's model) or path to a .toml file.
     #[arg(long, default_value = "concert")]
     pub keyboard: String,
-    /// One channel, heard at the keyboard's listener, instead of its stereo pair (concert: `bass`
-    /// left, `treble` right; heard from `above` in mono). A mono piano plays the same sound on
+    /// One channel, heard at the keyboard's listener, instead of its stereo pair (concert:
+    /// `bass_close` left, `treble_close` right; heard from `above` in mono). A mono piano plays the same sound on
     /// both channels of a stereo device.
     #[arg(long)]
     pub mono: bool,

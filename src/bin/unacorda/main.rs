@@ -101,7 +101,8 @@ enum Command {
         #[arg(long, value_name = "S", allow_negative_numbers = true)]
         release_at: Option<f64>,
         /// One channel, heard at the keyboard's (or preset's) listener, instead of its stereo
-        /// pair of listeners (concert: `bass` left, `treble` right; heard from `above` in mono).
+        /// pair of listeners (concert: `bass_close` left, `treble_close` right; heard from `above`
+        /// in mono).
         #[arg(long)]
         mono: bool,
         /// Output WAV file (32-bit float; two channels for a stereo keyboard).
