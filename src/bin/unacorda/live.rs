@@ -36,8 +36,8 @@ pub struct PlayArgs {
     #[arg(long, default_value = "concert")]
     pub keyboard: String,
     /// One channel, heard at the keyboard's listener, instead of its stereo pair (concert:
-    /// `bass_close` left, `treble_close` right; heard from `above` in mono). A mono piano plays the same sound on
-    /// both channels of a stereo device.
+    /// `bass_close` left, `treble_close` right; heard from `above` in mono). A mono piano plays
+    /// the same sound on both channels of a stereo device.
     #[arg(long)]
     pub mono: bool,
     /// Stop after this many seconds (default: at the end of --midi plus 2 s, else at Ctrl-C).
