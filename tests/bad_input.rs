@@ -136,6 +136,12 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
     assert!(e.contains("`layout`") && e.contains("base_keyboard"));
     let e = keyboard_error("bad_keyboard_modes.toml");
     assert!(e.contains("`layout.max_modes_t` = 100000") && e.contains("1 to 400"));
+    let e = keyboard_error("bad_keyboard_band_edge.toml");
+    assert!(
+        e.contains("bad_keyboard_band_edge.toml")
+            && e.contains("`layout.max_mode_freq_hz` = 30000")
+            && e.contains("24000 Hz")
+    );
     // A device that never ends is refused after 1 MiB, not read forever.
     let e = Scaling::resolve("/dev/zero").unwrap_err().to_string();
     println!("/dev/zero: {e}");

@@ -254,6 +254,20 @@ impl Scaling {
     /// This keyboard read from `source`, with its base preset.
     fn with_base(self, source: PathBuf) -> Result<LoadedScaling, PresetError> {
         let base = Preset::resolve(&self.base_preset)?;
+        // The exact engine advances every mode at the output rate: a string mode above the
+        // output's band edge would fold back into the audible band (tests/aliasing.rs).
+        let edge_hz = 0.5 * base.output_rate_hz();
+        let max_hz = self.layout.max_mode_freq_hz;
+        if max_hz > edge_hz {
+            return Err(PresetError::Range {
+                path: source,
+                field: "layout.max_mode_freq_hz",
+                value: max_hz.to_string(),
+                allowed: format!(
+                    "a frequency above 100 Hz and at most half the output rate ({edge_hz} Hz), where a mode would fold back"
+                ),
+            });
+        }
         Ok(LoadedScaling {
             scaling: self,
             source,

@@ -107,6 +107,7 @@ pub fn bench(
     max_voices: usize,
     json: Option<&Path>,
     only: Option<&str>,
+    keyboard: &str,
 ) -> Result<()> {
     if !(0.1..=60.0).contains(&seconds) {
         bail!("--seconds {seconds}: expected 0.1 to 60 s per measurement");
@@ -122,7 +123,7 @@ pub fn bench(
     if only.is_none() {
         single_voice(seconds, &mut report)?;
     }
-    let scaling = Scaling::resolve("paper")?;
+    let scaling = Scaling::resolve(keyboard)?;
     let settings = scaling.output_settings();
     report.rate_hz = settings.rate_hz;
     report.deadline_s = BLOCK as f64 / settings.rate_hz;
@@ -157,7 +158,12 @@ pub fn bench(
         )?;
     }
     if only.is_none_or(|only| only == "exact") {
-        report.damped = Some(damped(seconds, max_voices.min(32))?);
+        let damped_keyboard = if keyboard == "paper" {
+            "concert"
+        } else {
+            keyboard
+        };
+        report.damped = Some(damped(damped_keyboard, seconds, max_voices.min(32))?);
     }
     if let Some(path) = json {
         let text = serde_json::to_string_pretty(&report).expect("plain data serialises");
@@ -304,14 +310,14 @@ fn callback<E: VoicePool>(
 }
 
 /// Voices whose dampers are down cost more than held ones (the felt's channels enter each step):
-/// `voices` keys of the concert keyboard spread over those with dampers (A0–F6), struck and held,
+/// `voices` keys of `keyboard` spread over those with dampers (A0–F6), struck and held,
 /// then struck and released, their felts set to a T60 of 60 s so that they keep sounding while
 /// timed.
-fn damped(seconds: f64, voices: usize) -> Result<DampedFigure> {
+fn damped(keyboard: &str, seconds: f64, voices: usize) -> Result<DampedFigure> {
     use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
     use unacorda::midi::Event;
-    // The concert keyboard's felts (place, width), their decay lengthened.
-    let mut scaling = Scaling::resolve("concert")?;
+    // The keyboard's felts (place, width), their decay lengthened.
+    let mut scaling = Scaling::resolve(keyboard)?;
     for felt in &mut scaling.scaling.dampers {
         felt.t60_s = 60.0;
     }
@@ -347,7 +353,8 @@ fn damped(seconds: f64, voices: usize) -> Result<DampedFigure> {
         *median = percentile(&t, 0.5) / deadline;
     }
     println!(
-        "dampers down (exact, one core, {voices} voices of the concert keyboard, {BLOCK}-frame blocks): median {:.3} × deadline held, {:.3} × released (the felt on every string): {:.2} ×",
+        "dampers down (exact, one core, {voices} voices of the {} keyboard, {BLOCK}-frame blocks): median {:.3} × deadline held, {:.3} × released (the felt on every string): {:.2} ×",
+        scaling.scaling.name,
         medians[0],
         medians[1],
         medians[1] / medians[0]

@@ -137,6 +137,11 @@ enum Command {
         /// Time the callback of this engine only (default: every engine).
         #[arg(long, value_parser = ["rk4", "exact"])]
         engine: Option<String>,
+        /// Keyboard whose keys the callbacks play: built-in name (paper, the default: the figures
+        /// in docs/performance.md; concert) or path to a .toml file. The damped figure plays the
+        /// concert keyboard's dampers unless this names another keyboard.
+        #[arg(long, default_value = "paper")]
+        keyboard: String,
     },
     /// Regenerate the paper's Figures 2–6 (PNG + CSV): the board's mobility, full vs reduced, and
     /// a preset struck una corda vs normal.
@@ -495,7 +500,14 @@ fn run(cli: Cli) -> Result<()> {
             voices,
             json,
             engine,
-        } => bench::bench(seconds, voices, json.as_deref(), engine.as_deref())?,
+            keyboard,
+        } => bench::bench(
+            seconds,
+            voices,
+            json.as_deref(),
+            engine.as_deref(),
+            &keyboard,
+        )?,
         Command::Soundboard { input, out } => {
             let spec = unacorda::config::preset::load_board_spec(&input)?;
             let command = format!(
