@@ -175,6 +175,8 @@ fn assert_refused(cases: &[(&[&str], &str)], out: Option<&str>) {
             "must fail with status 1 (the README's promise)"
         );
         assert!(stderr.contains(needle), "message names `{needle}`");
+        // Each cause once: the message does not repeat what it wraps.
+        assert!(stderr.matches("(os error").count() <= 1, "a cause repeated");
         if let Some(out) = out {
             assert!(!Path::new(out).exists(), "nothing written");
         }
@@ -374,6 +376,35 @@ fn midi_renders_refuse_bad_limits_and_hour_long_files() {
                 wav,
             ],
             "--tail -1",
+        ),
+    ];
+    assert_refused(&cases, Some(wav));
+}
+
+#[test]
+fn missing_files_are_named_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let wav = dir.path().join("out.wav");
+    let wav = wav.to_str().unwrap();
+    let cases: [(&[&str], &str); 3] = [
+        (
+            &["render", "--offline", "--midi", "nosuch.mid", "--out", wav],
+            "nosuch.mid: cannot read MIDI file: No such file",
+        ),
+        (
+            &["analyze", "--keyboard", "nosuch.toml"],
+            "nosuch.toml: cannot read: No such file",
+        ),
+        (
+            &[
+                "render",
+                "--offline",
+                "--preset",
+                "nosuch.toml",
+                "--out",
+                wav,
+            ],
+            "nosuch.toml: cannot read: No such file",
         ),
     ];
     assert_refused(&cases, Some(wav));

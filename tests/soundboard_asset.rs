@@ -362,3 +362,16 @@ fn a_simply_supported_modes_radiation_is_the_closed_form_far_field() {
     println!("  worst of {matched} modes: {worst:.1e} of the closed form (limit 1e-2)");
     assert!(matched == 40 && worst < 1e-2);
 }
+
+/// A reduction point that is not a key would keep nothing there, silently (and an empty list
+/// nothing at all): both are refused, naming the field, before the board is solved.
+#[test]
+fn a_reduction_point_must_be_a_key() {
+    for (points, value) in [(vec!["C2", "C9"], "C9"), (vec![], "[]")] {
+        let mut spec = grand();
+        spec.reduction.points = points.into_iter().map(String::from).collect();
+        let e = spec.solve().map(|_| ()).unwrap_err().to_string();
+        println!("{e}");
+        assert!(e.contains("`reduction.points`") && e.contains(value));
+    }
+}

@@ -19,10 +19,10 @@ use std::sync::OnceLock;
 /// What can go wrong while writing figures.
 #[derive(Debug, thiserror::Error)]
 pub enum FigureError {
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{path}: drawing failed: {message}")]
     Plot { path: PathBuf, message: String },
@@ -235,9 +235,9 @@ pub fn partial_decay(
 }
 
 fn write_text(path: PathBuf, text: &str) -> Result<PathBuf, FigureError> {
-    std::fs::write(&path, text).map_err(|source| FigureError::Io {
+    std::fs::write(&path, text).map_err(|error| FigureError::Io {
         path: path.clone(),
-        source,
+        error,
     })?;
     Ok(path)
 }

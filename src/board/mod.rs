@@ -380,6 +380,22 @@ impl BoardSpec {
             self.reduction.f_min_hz,
             2e4,
         )?;
+        // A point the reduction does not know would keep nothing there, silently.
+        let named = |p: &String| (1..=88).any(|k| key_name(k) == *p);
+        if self.reduction.points.is_empty() {
+            return Err(BoardError::Range {
+                field: "reduction.points".to_owned(),
+                value: "[]".to_owned(),
+                allowed: "at least one key name".to_owned(),
+            });
+        }
+        if let Some(p) = self.reduction.points.iter().find(|p| !named(p)) {
+            return Err(BoardError::Range {
+                field: "reduction.points".to_owned(),
+                value: p.clone(),
+                allowed: "key names A0 … C8 (flats: Bb0, Db1 …)".to_owned(),
+            });
+        }
         if let Some(r) = &self.ribs {
             check("ribs.count", r.count as f64, 0.0, 100.0)?;
             check("ribs.first_x_m", r.first_x_m, 0.0, p.width_m)?;

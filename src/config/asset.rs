@@ -24,10 +24,10 @@ pub const FORMAT_TAG: &str = "unacorda-soundboard-modes 1";
 /// What can be wrong with an asset file.
 #[derive(Debug, thiserror::Error)]
 pub enum AssetError {
-    #[error("{path}: cannot read soundboard asset: {source}")]
+    #[error("{path}: cannot read soundboard asset: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{path}:{line}: {message}")]
     Syntax {
@@ -41,9 +41,9 @@ pub enum AssetError {
 
 /// Read an asset file (at build time, never from the audio path).
 pub fn load_file(path: &Path) -> Result<SoundboardModes, AssetError> {
-    let text = std::fs::read_to_string(path).map_err(|source| AssetError::Io {
+    let text = std::fs::read_to_string(path).map_err(|error| AssetError::Io {
         path: path.to_owned(),
-        source,
+        error,
     })?;
     parse(&text, path)
 }

@@ -46,9 +46,9 @@ pub const MAX_HYSTERESIS_S: f64 = 0.005;
 /// The text of the file at `path`, refused past [`MAX_TEXT_BYTES`].
 pub fn read_text(path: &Path) -> Result<String, PresetError> {
     use std::io::Read;
-    let io = |source| PresetError::Io {
+    let io = |error| PresetError::Io {
         path: path.to_owned(),
-        source,
+        error,
     };
     let mut text = String::new();
     std::fs::File::open(path)
@@ -228,10 +228,10 @@ impl RadiationSection {
 pub enum PresetError {
     #[error("unknown preset `{0}`: built-in presets are {1}; or give a path to a .toml file")]
     Unknown(String, String),
-    #[error("{path}: cannot read preset: {source}")]
+    #[error("{path}: cannot read: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{path}: {message}")]
     Parse { path: PathBuf, message: String },

@@ -16,10 +16,10 @@ pub struct TimedEvent {
 /// A MIDI file that cannot be played.
 #[derive(Debug, thiserror::Error)]
 pub enum MidiFileError {
-    #[error("{path}: cannot read MIDI file: {source}")]
+    #[error("{path}: cannot read MIDI file: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{path}: not a valid standard MIDI file: {message}")]
     Parse { path: PathBuf, message: String },
@@ -67,9 +67,9 @@ fn check_chunks(bytes: &[u8]) -> Result<(), String> {
 
 /// Read a MIDI file from disk.
 pub fn read_file(path: &Path) -> Result<Vec<TimedEvent>, MidiFileError> {
-    let bytes = std::fs::read(path).map_err(|source| MidiFileError::Io {
+    let bytes = std::fs::read(path).map_err(|error| MidiFileError::Io {
         path: path.to_owned(),
-        source,
+        error,
     })?;
     parse(&bytes, path)
 }

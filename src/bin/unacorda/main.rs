@@ -164,6 +164,10 @@ enum Command {
         input: PathBuf,
         #[arg(long, default_value = "assets/soundboard_modes/grand.txt")]
         out: PathBuf,
+        /// Keys whose dominant modes are kept, instead of the description's `reduction.points`
+        /// (comma-separated names: C2,C8).
+        #[arg(long, value_delimiter = ',')]
+        points: Option<Vec<String>>,
     },
 }
 
@@ -508,13 +512,17 @@ fn run(cli: Cli) -> Result<()> {
             engine.as_deref(),
             &keyboard,
         )?,
-        Command::Soundboard { input, out } => {
-            let spec = unacorda::config::preset::load_board_spec(&input)?;
-            let command = format!(
+        Command::Soundboard { input, out, points } => {
+            let mut spec = unacorda::config::preset::load_board_spec(&input)?;
+            let mut command = format!(
                 "cargo run --release -- soundboard --input {} --out {}",
                 input.display(),
                 out.display()
             );
+            if let Some(points) = points {
+                command += &format!(" --points {}", points.join(","));
+                spec.reduction.points = points;
+            }
             let (solved, reduced, header) =
                 generate_asset(&spec, &command).with_context(|| format!("{}", input.display()))?;
             let text = unacorda::config::asset::to_text(&reduced, &header);
