@@ -255,7 +255,8 @@ impl Scaling {
     fn with_base(self, source: PathBuf) -> Result<LoadedScaling, PresetError> {
         let base = Preset::resolve(&self.base_preset)?;
         // The exact engine advances every mode at the output rate: a string mode above the
-        // output's band edge would fold back into the audible band (tests/aliasing.rs).
+        // output's band edge would fold back into the audible band (tests/bad_input.rs). The
+        // lower bound is `validate`'s; this one needs the base preset's output rate.
         let edge_hz = 0.5 * base.output_rate_hz();
         let max_hz = self.layout.max_mode_freq_hz;
         if max_hz > edge_hz {

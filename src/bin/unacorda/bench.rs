@@ -158,7 +158,9 @@ pub fn bench(
         )?;
     }
     if only.is_none_or(|only| only == "exact") {
-        let damped_keyboard = if keyboard == "paper" {
+        // Felts whose decay it can lengthen: the keyboard's own, or the concert keyboard's where
+        // it has none (paper, also called grand: the c2 preset's one point felt).
+        let damped_keyboard = if scaling.scaling.dampers.is_empty() {
             "concert"
         } else {
             keyboard

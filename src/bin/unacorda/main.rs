@@ -138,8 +138,8 @@ enum Command {
         #[arg(long, value_parser = ["rk4", "exact"])]
         engine: Option<String>,
         /// Keyboard whose keys the callbacks play: built-in name (paper, the default: the figures
-        /// in docs/performance.md; concert) or path to a .toml file. The damped figure plays the
-        /// concert keyboard's dampers unless this names another keyboard.
+        /// in docs/performance.md; concert) or path to a .toml file. The damped figure plays this
+        /// keyboard's damper felts, or the concert keyboard's where it has none (paper).
         #[arg(long, default_value = "paper")]
         keyboard: String,
     },
