@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Fuzz every parser that reads outside input, with cargo-fuzz (libFuzzer, nightly): MIDI files
 # (smf), live MIDI bytes (live_midi), presets (preset), soundboard assets (asset), keyboard
-# files (keyboard).
+# files (keyboard), the CLAP plugin's saved state (clap_state).
 #   bash scripts/fuzz.sh            10 000 runs per target: the smoke run CI does
 #   bash scripts/fuzz.sh 1000000    the full run quoted in docs/robustness.md
 # The random seed is fixed (FUZZ_SEED, default 1) so that CI is reproducible; set another seed
@@ -19,10 +19,13 @@ fi
 command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --version 0.13.2 --locked
 cd fuzz
 mkdir -p logs
-for t in smf live_midi preset asset keyboard; do
+for t in smf live_midi preset asset keyboard clap_state; do
   mkdir -p "corpus/$t"
   log="logs/$t.log"
-  if ! cargo +nightly fuzz run "$t" "corpus/$t" "seeds/$t" -- -runs="$runs" -max_len=8192 -seed="${FUZZ_SEED:-1}" >"$log" 2>&1; then
+  # The plugin's state loader must not blow up on memory either: 64 MB for any one input.
+  limit=()
+  [ "$t" = clap_state ] && limit=(-malloc_limit_mb=64 -rss_limit_mb=512)
+  if ! cargo +nightly fuzz run "$t" "corpus/$t" "seeds/$t" -- -runs="$runs" -max_len=8192 -seed="${FUZZ_SEED:-1}" "${limit[@]}" >"$log" 2>&1; then
     tail -n 60 "$log" >&2
     echo "fuzz: target $t failed (full log: fuzz/$log)" >&2
     exit 1

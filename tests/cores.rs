@@ -6,6 +6,7 @@
 
 use assert_no_alloc::{assert_no_alloc, reset_violation_count, violation_count, AllocDisabler};
 use std::sync::atomic::{AtomicU64, Ordering};
+use unacorda::audio::aligned::{Aligned, LATENCY_FRAMES};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::output::OutputSettings;
 use unacorda::config::scaling::{parse_key, Scaling};
@@ -223,6 +224,86 @@ fn the_reference_runs_alike_from_event_to_event() {
         &runs[0],
         &runs[1],
     );
+}
+
+/// `script` on `synth` handed out in host blocks of the given lengths (cycled) through
+/// [`Aligned`], each event scheduled at its frame of the host's timeline; the output advanced by
+/// the latency, so that it lines up with [`play`]'s.
+fn play_aligned<E: VoicePool>(
+    synth: Synth<E>,
+    handle: unacorda::audio::SynthHandle<E>,
+    script: &[(u64, Event)],
+    frames: usize,
+    blocks: &[usize],
+) -> Vec<f32> {
+    let latency = LATENCY_FRAMES as usize;
+    let mut aligned = Aligned::new(synth, handle.events, handle.stats.clone(), 1);
+    let mut out = vec![0f32; frames + latency];
+    let (mut next, mut at) = (0, 0);
+    for &len in blocks.iter().cycle() {
+        if at == out.len() {
+            break;
+        }
+        let end = (at + len).min(out.len());
+        // A host's block carries its events at offsets inside it: the block is handed out in
+        // pieces from event to event, as the plugin does.
+        while at < end {
+            while next < script.len() && script[next].0 as usize == at {
+                assert!(aligned.schedule(script[next].1));
+                next += 1;
+            }
+            let until = script
+                .get(next)
+                .map_or(end, |e| (e.0 as usize).clamp(at + 1, end));
+            aligned.process(&mut out[at..until]);
+            at = until;
+        }
+    }
+    assert!(
+        out[..latency].iter().all(|&s| s == 0.0),
+        "the latency is silent"
+    );
+    out.split_off(latency)
+}
+
+/// Host blocks of any length, the synth realigned to its grid ([`Aligned`]), sound exactly as the
+/// offline render's blocks of 256, once the reported latency is taken off; callbacks of 64 (a
+/// multiple of the grid) sound the same without realignment.
+#[test]
+fn any_host_blocks_sound_exactly_like_the_offline_render() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    for case in [few(), chord()] {
+        let Case {
+            name,
+            ref piano,
+            settings,
+            ref script,
+            blocks,
+        } = case;
+        let frames = blocks * 64;
+        let offline = {
+            let (synth, handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
+            play(synth, handle, script, frames / 256, 256, false)
+        };
+        let by_64 = {
+            let (synth, handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
+            play(synth, handle, script, frames / 64, 64, false)
+        };
+        compare(
+            &format!("{name}, callbacks of 64 vs 256"),
+            &offline,
+            &by_64[..offline.len()],
+        );
+        // Lengths from 1 to 4096 frames, none a multiple of the grid but 4096.
+        let host_blocks = [1, 4096, 17, 333, 2, 1000, 95, 31, 33, 3];
+        let (synth, handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
+        let hosted = play_aligned(synth, handle, script, offline.len(), &host_blocks);
+        compare(
+            &format!("{name}, host blocks of {host_blocks:?} realigned vs the offline render"),
+            &offline,
+            &hosted,
+        );
+    }
 }
 
 /// Allocations counted on the helper thread (the checker's counts are per thread), and its jobs.

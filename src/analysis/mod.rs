@@ -1,6 +1,7 @@
 //! Signal analysis for tests and figures: spectra, partial tracking, envelopes.
 
 pub mod duplex;
+#[cfg(feature = "figures")]
 pub mod figures;
 pub mod listening;
 pub mod mobility;

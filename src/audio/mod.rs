@@ -1,9 +1,12 @@
-//! The sound shell: decimation to the output rate, the audio thread's engine ([`synth`]), the
-//! audio device ([`device`]), the helper thread that lends the callback a second core ([`helper`]),
-//! real-time priority for both ([`priority`]) and WAV files.
+//! The sound shell: decimation to the output rate, the audio thread's engine ([`synth`]), a
+//! host's blocks of any length realigned to the synth's grid ([`aligned`]), the audio device
+//! (`device`, feature `device`), the helper thread that lends the callback a second core
+//! ([`helper`]), real-time priority for both ([`priority`]) and WAV files.
 
+pub mod aligned;
 pub mod clock;
 pub mod decimate;
+#[cfg(feature = "device")]
 pub mod device;
 pub mod helper;
 pub mod priority;
@@ -11,5 +14,6 @@ pub mod radiate;
 pub mod synth;
 pub mod wav;
 
+pub use aligned::Aligned;
 pub use decimate::Decimator;
 pub use synth::{Scheduled, Synth, SynthHandle};

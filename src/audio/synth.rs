@@ -46,15 +46,31 @@ pub const RUNAWAY_J: f64 = 50.0;
 
 /// The growth guard: when the pool's mechanical energy (strings, contact springs, board) has stood
 /// above what it held when nothing last began to drive it — by more than [`GROWTH_TOLERANCE`] —
-/// at the end of this many blocks in a row, while nothing drove it (no hammer in play, no voice
-/// fading, none joining or leaving), every sounding voice and the board are reset. A physical
+/// at the end of this many housekeeping periods ([`HOUSEKEEPING_FRAMES`]) in a row, while nothing
+/// drove it (no hammer in play, no voice fading, none joining or leaving), every sounding voice
+/// and the board are reset. A physical
 /// piano's energy only falls between strikes, and the engines' stays within rounding of that
 /// (`tests/stability.rs`), so this is a safety net for a numerical runaway too slow for
 /// [`RUNAWAY_J`] (steady or oscillating), not something music can trigger.
-pub const GROWTH_BLOCKS: u32 = 8;
+pub const GROWTH_PERIODS: u32 = 8;
 /// Relative rise over its reference that the growth guard counts (rounding moves the energy by
-/// ~1e-12 of itself; the slowest physical decay, A0's first partial, loses 2e-5 per block).
+/// ~1e-12 of itself; the slowest physical decay, A0's first partial, loses 2e-5 per period).
 pub const GROWTH_TOLERANCE: f64 = 1e-6;
+
+/// The engine's runs end on this grid of output frames (counted from the synth's first frame) as
+/// well as at events: the exact engine advances a run in blocks of 32 steps from its start, in
+/// single precision inside a block, so a run cut elsewhere would round otherwise. Whatever
+/// lengths the callbacks have, as long as each ends on this grid (or the host's blocks are
+/// realigned to it: [`super::Aligned`]), every sample is the same.
+pub const ALIGN_FRAMES: u64 = 32;
+
+/// Runaways are reset and the growth guard checked on this grid of output frames, not at the
+/// callbacks' ends, for the same reason: a voice reset a frame earlier would change what follows.
+pub const HOUSEKEEPING_FRAMES: u64 = 64;
+
+/// Silent voices are retired on this coarser grid (a multiple of [`HOUSEKEEPING_FRAMES`]): the
+/// offline render's blocks, so that its tails are as they were before the grid.
+pub const RETIRE_FRAMES: u64 = 256;
 
 /// Counters the audio thread publishes (relaxed atomics: readable from any thread at any time).
 #[derive(Debug, Default)]
@@ -67,7 +83,7 @@ pub struct Stats {
     pub peak_voices: AtomicU64,
     /// Voices (or the board) reset because a value became non-finite or the energy ran away.
     pub resets: AtomicU64,
-    /// Times the growth guard ([`GROWTH_BLOCKS`]) reset the pool.
+    /// Times the growth guard ([`GROWTH_PERIODS`]) reset the pool.
     pub growth_resets: AtomicU64,
     /// Output samples the soft clipper bent (above [`KNEE`] in magnitude), and the largest
     /// magnitude before it (`f32` bits; non-negative floats order as their bits).
@@ -95,18 +111,18 @@ pub struct Synth<E: VoicePool> {
     silence_j: f64,
     frame: u64,
     running: bool,
-    /// The board's radiating source of each channel after each step of the current run of steps.
+    /// The board's radiating source of each channel after each step of the current run of steps
+    /// (a run is at most [`ALIGN_FRAMES`] long).
     volume: Vec<[f64; CHANNELS]>,
     helper: Option<Helper>,
     /// The growth guard: the pool's energy when nothing last began to drive it, which voices were
-    /// sounding then (a hash), and the blocks in a row its energy has stood above that.
+    /// sounding then (a hash), the periods in a row its energy has stood above that, and whether
+    /// something drove the pool when this period began.
     reference_j: f64,
     sounding: u64,
-    rising_blocks: u32,
+    rising_periods: u32,
+    driven_at_start: bool,
 }
-
-/// Most output frames advanced in one run of the engine (longer blocks take several).
-const RUN_FRAMES: usize = 1024;
 
 /// The other threads' side: schedule events, send commands, read the clock and the counters.
 pub struct SynthHandle<E: VoicePool> {
@@ -165,11 +181,12 @@ impl<E: VoicePool> Synth<E> {
             silence_j: out.silence_j,
             frame: 0,
             running: true,
-            volume: vec![[0.0; CHANNELS]; RUN_FRAMES * ratio as usize],
+            volume: vec![[0.0; CHANNELS]; ALIGN_FRAMES as usize * ratio as usize],
             helper: None,
             reference_j: 0.0,
             sounding: 0,
-            rising_blocks: 0,
+            rising_periods: 0,
+            driven_at_start: false,
         };
         let handle = SynthHandle {
             events: prod,
@@ -219,6 +236,34 @@ impl<E: VoicePool> Synth<E> {
         unsafe { no_denormals::no_denormals(|| self.render(out, channels.max(1), &mut tap, true)) }
     }
 
+    /// The decimation filter's delay, in output frames (0 when the engine runs at the output
+    /// rate).
+    pub fn decimation_delay_frames(&self) -> f64 {
+        self.decimator.delay_out_samples()
+    }
+
+    /// Whether nothing sounds or is about to: no event queued, no hammer in play or voice
+    /// fading, and the strings and board holding less than the silence threshold (strings a pedal
+    /// holds up may still be simulated, at rest).
+    pub fn is_quiet(&self) -> bool {
+        let inst = &self.piano.instrument;
+        self.events.is_empty() && !inst.is_driven() && inst.mechanical_energy_j() < self.silence_j
+    }
+
+    /// Silence everything at once (a host's reset): the queued events dropped, every key and
+    /// pedal up, every voice's strings and the board at rest, the output stage's memory cleared.
+    /// Never allocates.
+    pub fn silence(&mut self) {
+        while self.events.try_pop().is_some() {}
+        self.piano.apply(Event::ResetControllers);
+        self.piano.apply(Event::AllSoundOff);
+        self.piano.instrument.silence();
+        // Strings and board at rest radiate nothing.
+        self.radiation.iter_mut().for_each(|r| r.restart(0.0));
+        self.decimator.reset();
+        (self.reference_j, self.sounding, self.rising_periods) = (0.0, 0, 0);
+    }
+
     /// Give the engine a second core from now on: a helper thread that takes half of each of
     /// the exact pool's block passes while the callback does the other half (engines that cannot
     /// split ignore it).
@@ -258,7 +303,7 @@ impl<E: VoicePool> Synth<E> {
                 Control::Replace(new) => {
                     let old = std::mem::replace(&mut self.piano, new);
                     self.radiation.iter_mut().for_each(|r| r.restart(0.0));
-                    (self.reference_j, self.sounding, self.rising_blocks) = (0.0, 0, 0);
+                    (self.reference_j, self.sounding, self.rising_periods) = (0.0, 0, 0);
                     if let Err(TrySendError::Full(old) | TrySendError::Disconnected(old)) =
                         self.returned.try_send(old)
                     {
@@ -269,7 +314,6 @@ impl<E: VoicePool> Synth<E> {
             }
         }
         let block_start = self.frame;
-        let driven_at_start = self.piano.instrument.is_driven();
         let ratio = self.decimator.ratio();
         // The output channels that carry sound: the left and right, or their mean in one.
         let width = channels.min(CHANNELS);
@@ -291,9 +335,9 @@ impl<E: VoicePool> Synth<E> {
                 break;
             }
             let next = self.events.try_peek().map_or(u64::MAX, |e| e.frame);
-            let until = usize::try_from(next - self.frame).unwrap_or(usize::MAX);
+            let grid = (self.frame / ALIGN_FRAMES + 1) * ALIGN_FRAMES;
+            let until = usize::try_from(next.min(grid) - self.frame).unwrap_or(usize::MAX);
             let n = if frame_by_frame { 1 } else { left.min(until) };
-            let n = n.min(RUN_FRAMES);
             if self.running {
                 let helper = self.helper.as_ref().map(|h| h as &dyn Pair);
                 let inst = &mut self.piano.instrument;
@@ -336,13 +380,10 @@ impl<E: VoicePool> Synth<E> {
             if blown {
                 self.reset_runaways();
             }
+            if self.frame.is_multiple_of(HOUSEKEEPING_FRAMES) {
+                self.housekeep();
+            }
         }
-        self.reset_runaways();
-        self.guard_growth(driven_at_start);
-        let inst = &mut self.piano.instrument;
-        inst.retire_silent(self.silence_j);
-        let active = (0..inst.n_voices()).filter(|&v| inst.is_active(v)).count() as u64;
-        self.stats.peak_voices.fetch_max(active, Ordering::Relaxed);
         self.stats
             .frames
             .fetch_add(self.frame - block_start, Ordering::Relaxed);
@@ -359,6 +400,21 @@ impl<E: VoicePool> Synth<E> {
         }
     }
 
+    /// At the end of a housekeeping period ([`HOUSEKEEPING_FRAMES`]): reset what has blown up or
+    /// grown, retire the silent voices (every [`RETIRE_FRAMES`]), count the voices, and note
+    /// whether something drives the pool as the next period begins.
+    fn housekeep(&mut self) {
+        self.reset_runaways();
+        self.guard_growth(self.driven_at_start);
+        let inst = &mut self.piano.instrument;
+        if self.frame.is_multiple_of(RETIRE_FRAMES) {
+            inst.retire_silent(self.silence_j);
+        }
+        let active = (0..inst.n_voices()).filter(|&v| inst.is_active(v)).count() as u64;
+        self.stats.peak_voices.fetch_max(active, Ordering::Relaxed);
+        self.driven_at_start = self.piano.instrument.is_driven();
+    }
+
     /// Reset whatever has blown up, and the output stage's memory with it if anything did.
     fn reset_runaways(&mut self) {
         let n = self.piano.instrument.reset_runaways(RUNAWAY_J);
@@ -369,8 +425,8 @@ impl<E: VoicePool> Synth<E> {
         }
     }
 
-    /// The growth guard ([`GROWTH_BLOCKS`]), at a block's end; `driven`: something drove the pool
-    /// at the block's start.
+    /// The growth guard ([`GROWTH_PERIODS`]), at a period's end; `driven`: something drove the pool
+    /// at the period's start.
     fn guard_growth(&mut self, driven: bool) {
         let inst = &mut self.piano.instrument;
         let e = inst.mechanical_energy_j();
@@ -382,19 +438,19 @@ impl<E: VoicePool> Synth<E> {
                 (h ^ k as u64).wrapping_mul(0x100_0000_01b3)
             });
         if driven || inst.is_driven() || sounding != self.sounding {
-            (self.reference_j, self.sounding, self.rising_blocks) = (e, sounding, 0);
+            (self.reference_j, self.sounding, self.rising_periods) = (e, sounding, 0);
             return;
         }
         let above = e > self.reference_j * (1.0 + GROWTH_TOLERANCE) && e > self.silence_j;
-        self.rising_blocks = if above { self.rising_blocks + 1 } else { 0 };
-        if self.rising_blocks >= GROWTH_BLOCKS {
+        self.rising_periods = if above { self.rising_periods + 1 } else { 0 };
+        if self.rising_periods >= GROWTH_PERIODS {
             // Every voice holding energy, and the board.
             let n = inst.reset_runaways(0.0);
             self.restart_radiation();
             self.decimator.reset();
             self.stats.resets.fetch_add(n as u64, Ordering::Relaxed);
             self.stats.growth_resets.fetch_add(1, Ordering::Relaxed);
-            (self.reference_j, self.rising_blocks) = (0.0, 0);
+            (self.reference_j, self.rising_periods) = (0.0, 0);
         }
     }
 

@@ -289,4 +289,17 @@ pub trait Policy {
         }
         reset
     }
+
+    /// Everything at rest at once (a host's reset): every voice's strings and hammer still, out
+    /// of the simulation and its fade dropped (its key kept), and the board still.
+    fn silence(&mut self) {
+        for k in 0..self.n_voices() {
+            self.rest_strings(k);
+            self.set_hammer(k, 0.0, 0.0);
+            let s = self.state_mut(k);
+            (s.active, s.hammer_on, s.fade_left, s.pending) = (false, false, 0, None);
+            s.coupling = 1.0;
+        }
+        self.rest_board();
+    }
 }

@@ -1,0 +1,66 @@
+//! What the plugin costs a host: `process()` timed in blocks of 64 frames at 48 kHz (1.33 ms),
+//! paced as a device runs them, with 16 and 64 keys sounding under the sustain pedal (spread from
+//! A0, struck at velocity 80, as `unacorda bench` loads its callbacks), loaded in process through
+//! clack-host. Prints the median and the 99.9th percentile as fractions of the block's duration.
+//!   cargo bench -p unacorda-clap --bench process
+
+#[path = "../tests/host/mod.rs"]
+mod host;
+
+use clack_host::prelude::PluginEntry;
+use clack_plugin::entry::SinglePluginEntry;
+use host::Play;
+use std::time::{Duration, Instant};
+
+const RATE_HZ: f64 = 48_000.0;
+const BLOCK: usize = 64;
+
+fn main() {
+    let seconds: f64 = std::env::var("UNACORDA_BENCH_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(4.0);
+    let entry =
+        PluginEntry::load_from_clack::<SinglePluginEntry<unacorda_clap::Unacorda>>(c"").unwrap();
+    let mut plugin = host::instantiate(&entry);
+    let deadline_s = BLOCK as f64 / RATE_HZ;
+    for voices in [16, 64] {
+        let mut active = host::activate(&mut plugin, RATE_HZ);
+        let mut script = vec![(0, Play::Param(1, 1.0))];
+        for v in 0..voices {
+            let note = 21 + (v * 88 / voices) as u16;
+            script.push((v as u64 * 48, Play::On(note, 80.0 / 127.0)));
+        }
+        // Every hammer off its strings before the timing starts.
+        let warm = voices * 48 + (0.05 * RATE_HZ) as usize;
+        active.run(warm, &[BLOCK], &script, |f| {
+            f();
+            0
+        });
+        let blocks = (seconds / deadline_s) as usize;
+        let mut times = Vec::with_capacity(blocks);
+        let period = Duration::from_secs_f64(deadline_s);
+        let start = Instant::now();
+        for b in 1..=blocks as u32 {
+            active.run(BLOCK, &[BLOCK], &[], |f| {
+                let t = Instant::now();
+                f();
+                times.push(t.elapsed().as_secs_f64());
+                0
+            });
+            let next = start + period * b;
+            let now = Instant::now();
+            if next > now {
+                std::thread::sleep(next - now);
+            }
+        }
+        times.sort_by(f64::total_cmp);
+        let at = |p: f64| times[((times.len() - 1) as f64 * p).round() as usize] / deadline_s;
+        println!(
+            "plugin process(), {voices} voices under the pedal, {blocks} blocks of {BLOCK} frames at 48 kHz: median {:.2} x the block's duration, p99.9 {:.2} x",
+            at(0.5),
+            at(0.999)
+        );
+        host::deactivate(&mut plugin, active);
+    }
+}

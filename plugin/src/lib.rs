@@ -1,0 +1,301 @@
+//! unacorda as a CLAP instrument: the command line's engine (the exact engine on the keyboard's
+//! 88 keys and one soundboard, [`unacorda::audio::Synth`]) driven by a host. Notes arrive in
+//! CLAP's and MIDI's dialects (the pedals as MIDI CC64/66/67 or as parameters) and are played at
+//! their frame; the synth renders on its grid one cell behind the host
+//! ([`unacorda::audio::Aligned`], reported as latency), so every sample is the one
+//! `unacorda render --offline --midi` gives for the same events, whatever the host's blocks.
+//!
+//! - [`params`]: the parameters and their shared values,
+//! - [`state`]: the saved state (versioned text, refused when foreign or newer),
+//! - [`prepare`]: the 88 keys prepared once per process, shared by instances and activations,
+//! - [`processor`]: the audio thread's side.
+
+use clack_extensions::audio_ports::{
+    AudioPortFlags, AudioPortInfo, AudioPortInfoWriter, AudioPortType, PluginAudioPorts,
+    PluginAudioPortsImpl,
+};
+use clack_extensions::latency::{PluginLatency, PluginLatencyImpl};
+use clack_extensions::log::{HostLog, LogSeverity};
+use clack_extensions::note_ports::{
+    NoteDialect, NoteDialects, NotePortInfo, NotePortInfoWriter, PluginNotePorts,
+    PluginNotePortsImpl,
+};
+use clack_extensions::params::{
+    HostParams, ParamDisplayWriter, ParamInfo, ParamInfoFlags, ParamInfoWriter, ParamRescanFlags,
+    PluginAudioProcessorParams, PluginMainThreadParams, PluginParams,
+};
+use clack_extensions::state::{PluginState, PluginStateImpl};
+use clack_plugin::events::spaces::CoreEventSpace;
+use clack_plugin::prelude::*;
+use clack_plugin::stream::{InputStream, OutputStream};
+use std::ffi::CStr;
+use std::fmt::Write as _;
+use std::io::{Read, Write as _};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::Mutex;
+
+pub mod params;
+pub mod prepare;
+pub mod processor;
+pub mod state;
+
+use params::{Values, KEYBOARD, KEYBOARDS, PARAMS};
+
+/// The plugin's id in hosts.
+pub const PLUGIN_ID: &str = "org.unacorda.piano";
+
+/// The plugin type clack builds instances of.
+pub struct Unacorda;
+
+/// What the main thread and the audio thread share.
+pub struct Shared {
+    /// The parameters' values (both threads).
+    pub values: Values,
+    /// The latency the active processor reports, in host frames (written by the main thread at
+    /// activation, read by the host through the main thread).
+    pub latency_frames: AtomicU32,
+    /// Why the last activation plays silent, if it does (main thread).
+    pub silent_because: Mutex<Option<String>>,
+}
+
+impl PluginShared<'_> for Shared {}
+
+/// The main thread's side.
+pub struct MainThread<'a> {
+    shared: &'a Shared,
+    host: HostMainThreadHandle<'a>,
+}
+
+impl<'a> PluginMainThread<'a, Shared> for MainThread<'a> {}
+
+impl Plugin for Unacorda {
+    type AudioProcessor<'a> = processor::Processor<'a>;
+    type Shared<'a> = Shared;
+    type MainThread<'a> = MainThread<'a>;
+
+    fn declare_extensions(builder: &mut PluginExtensions<Self>, _shared: Option<&Shared>) {
+        builder
+            .register::<PluginAudioPorts>()
+            .register::<PluginNotePorts>()
+            .register::<PluginParams>()
+            .register::<PluginState>()
+            .register::<PluginLatency>();
+    }
+}
+
+impl DefaultPluginFactory for Unacorda {
+    fn get_descriptor() -> PluginDescriptor {
+        use clack_plugin::plugin::features::*;
+        PluginDescriptor::new(PLUGIN_ID, "unacorda")
+            .with_vendor("unacorda")
+            .with_version(env!("CARGO_PKG_VERSION"))
+            .with_description(
+                "Physical-modelling grand piano: coupled stiff strings, felt hammers, a modal soundboard and a real una corda",
+            )
+            .with_features([INSTRUMENT, SYNTHESIZER, STEREO])
+    }
+
+    fn new_shared(_host: HostSharedHandle) -> Result<Shared, PluginError> {
+        Ok(Shared {
+            values: Values::default(),
+            latency_frames: AtomicU32::new(0),
+            silent_because: Mutex::new(None),
+        })
+    }
+
+    fn new_main_thread<'a>(
+        host: HostMainThreadHandle<'a>,
+        shared: &'a Shared,
+    ) -> Result<MainThread<'a>, PluginError> {
+        Ok(MainThread { shared, host })
+    }
+}
+
+impl MainThread<'_> {
+    /// Tell the host (its log, else standard error) something the user should know.
+    fn warn(&self, message: &str) {
+        match self.host.get_extension::<HostLog>() {
+            Some(log) => {
+                let text = std::ffi::CString::new(message.replace('\0', " ")).unwrap_or_default();
+                log.log(&self.host.shared(), LogSeverity::Warning, &text);
+            }
+            None => eprintln!("{message}"),
+        }
+    }
+
+    /// A change of a parameter that rebuilds the piano: ask the host to restart the plugin
+    /// (deactivate and activate: the new piano is built there).
+    fn rebuild(&self) {
+        self.host.shared().request_restart();
+    }
+}
+
+impl PluginAudioPortsImpl for MainThread<'_> {
+    fn count(&self, is_input: bool) -> u32 {
+        if is_input {
+            0
+        } else {
+            1
+        }
+    }
+
+    fn get(&self, index: u32, is_input: bool, writer: &mut AudioPortInfoWriter) {
+        if !is_input && index == 0 {
+            writer.set(&AudioPortInfo {
+                id: ClapId::new(0),
+                name: b"main",
+                channel_count: 2,
+                flags: AudioPortFlags::IS_MAIN,
+                port_type: Some(AudioPortType::STEREO),
+                in_place_pair: None,
+            });
+        }
+    }
+}
+
+impl PluginNotePortsImpl for MainThread<'_> {
+    fn count(&self, is_input: bool) -> u32 {
+        u32::from(is_input)
+    }
+
+    fn get(&self, index: u32, is_input: bool, writer: &mut NotePortInfoWriter) {
+        if is_input && index == 0 {
+            writer.set(&NotePortInfo {
+                id: ClapId::new(0),
+                name: b"keys and pedals",
+                preferred_dialect: Some(NoteDialect::Clap),
+                // MIDI too: hosts send the pedals (CC64, 66, 67) only as MIDI.
+                supported_dialects: NoteDialects::CLAP | NoteDialects::MIDI,
+            });
+        }
+    }
+}
+
+impl PluginLatencyImpl for MainThread<'_> {
+    fn get(&self) -> u32 {
+        self.shared.latency_frames.load(Ordering::Relaxed)
+    }
+}
+
+impl PluginMainThreadParams for MainThread<'_> {
+    fn count(&self) -> u32 {
+        PARAMS.len() as u32
+    }
+
+    fn get_info(&self, param_index: u32, info: &mut ParamInfoWriter) {
+        let Some(p) = PARAMS.get(param_index as usize) else {
+            return;
+        };
+        let mut flags = ParamInfoFlags::empty();
+        if p.stepped {
+            flags |= ParamInfoFlags::IS_STEPPED;
+        }
+        if p.automatable {
+            flags |= ParamInfoFlags::IS_AUTOMATABLE;
+        } else {
+            flags |= ParamInfoFlags::REQUIRES_PROCESS;
+        }
+        if param_index as usize == KEYBOARD {
+            flags |= ParamInfoFlags::IS_ENUM;
+        }
+        info.set(&ParamInfo {
+            id: ClapId::new(p.id),
+            flags,
+            cookie: Default::default(),
+            name: p.name.as_bytes(),
+            module: b"",
+            min_value: p.min,
+            max_value: p.max,
+            default_value: p.default,
+        });
+    }
+
+    fn get_value(&self, param_id: ClapId) -> Option<f64> {
+        params::index_of(param_id.get()).map(|i| self.shared.values.get(i))
+    }
+
+    fn value_to_text(
+        &self,
+        param_id: ClapId,
+        value: f64,
+        writer: &mut ParamDisplayWriter,
+    ) -> std::fmt::Result {
+        let i = params::index_of(param_id.get()).ok_or(std::fmt::Error)?;
+        let p = PARAMS[i];
+        match i {
+            KEYBOARD => write!(writer, "{}", KEYBOARDS[(p.clamp(value) as usize).min(1)]),
+            params::GAIN_DB => write!(writer, "{value:.1} dB"),
+            params::VELOCITY_CURVE => write!(writer, "{value:.2}"),
+            _ if p.max == 1.0 && p.stepped => {
+                write!(writer, "{}", if value >= 0.5 { "down" } else { "up" })
+            }
+            _ => write!(writer, "{}", value.round()),
+        }
+    }
+
+    fn text_to_value(&self, param_id: ClapId, text: &CStr) -> Option<f64> {
+        let i = params::index_of(param_id.get())?;
+        let text = text.to_str().ok()?.trim();
+        let value = match i {
+            KEYBOARD => KEYBOARDS.iter().position(|k| *k == text)? as f64,
+            _ if PARAMS[i].max == 1.0 && PARAMS[i].stepped => match text {
+                "down" | "on" | "1" => 1.0,
+                "up" | "off" | "0" => 0.0,
+                _ => return None,
+            },
+            _ => text.trim_end_matches("dB").trim().parse().ok()?,
+        };
+        Some(PARAMS[i].clamp(value))
+    }
+
+    fn flush(&self, input: &InputEvents, _output: &mut OutputEvents) {
+        // The processor is not active: values are only stored (a rebuild parameter's change is
+        // built at the next activation).
+        for event in input {
+            if let Some(CoreEventSpace::ParamValue(e)) = event.as_core_event() {
+                if let Some(i) = e.param_id().and_then(|id| params::index_of(id.get())) {
+                    self.shared.values.set(i, e.value());
+                }
+            }
+        }
+    }
+}
+
+impl PluginAudioProcessorParams for processor::Processor<'_> {
+    fn flush(&mut self, input: &InputEvents, _output: &mut OutputEvents) {
+        for event in input {
+            self.handle(event);
+        }
+    }
+}
+
+impl PluginStateImpl for MainThread<'_> {
+    fn save(&self, output: &mut OutputStream) -> Result<(), PluginError> {
+        output.write_all(state::save(&self.shared.values).as_bytes())?;
+        Ok(())
+    }
+
+    fn load(&self, input: &mut InputStream) -> Result<(), PluginError> {
+        let mut bytes = Vec::new();
+        input
+            .take(state::MAX_STATE_BYTES as u64 + 1)
+            .read_to_end(&mut bytes)?;
+        // A refusal's reason reaches the host's log through clack.
+        let loaded = state::load(&bytes).map_err(|e| PluginError::Error(Box::new(e)))?;
+        let rebuild = [KEYBOARD, params::VOICES]
+            .iter()
+            .any(|&i| self.shared.values.get(i) != loaded[i]);
+        for (i, v) in loaded.into_iter().enumerate() {
+            self.shared.values.set(i, v);
+        }
+        if let Some(host_params) = self.host.get_extension::<HostParams>() {
+            host_params.rescan(&self.host, ParamRescanFlags::VALUES);
+        }
+        if rebuild {
+            self.rebuild();
+        }
+        Ok(())
+    }
+}
+
+clack_export_entry!(SinglePluginEntry<Unacorda>);

@@ -1,0 +1,191 @@
+//! The plugin's parameters: the three pedals, the output gain and the velocity curve
+//! (automatable, applied within the block at their event's frame), the keyboard and the voice
+//! pool's size (not automatable: a change rebuilds the piano, on the host's restart). Values are
+//! shared between the main thread and the audio thread as atomics.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// One parameter: its CLAP id, names, range, default and kind.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Spec {
+    pub id: u32,
+    /// Its name in hosts, and the state's field.
+    pub name: &'static str,
+    pub key: &'static str,
+    pub min: f64,
+    pub max: f64,
+    pub default: f64,
+    /// Integer values only (switches, counts, choices).
+    pub stepped: bool,
+    /// The host may automate it; otherwise a change rebuilds the piano.
+    pub automatable: bool,
+}
+
+/// Index of each parameter in [`PARAMS`] (its CLAP id is the index + 1).
+pub const SUSTAIN: usize = 0;
+pub const SOSTENUTO: usize = 1;
+pub const SOFT: usize = 2;
+pub const GAIN_DB: usize = 3;
+pub const VELOCITY_CURVE: usize = 4;
+pub const KEYBOARD: usize = 5;
+pub const VOICES: usize = 6;
+
+/// The built-in keyboards the `keyboard` parameter chooses from (its values 0, 1).
+pub const KEYBOARDS: [&str; 2] = ["concert", "paper"];
+
+const fn switch(id: u32, name: &'static str, key: &'static str) -> Spec {
+    Spec {
+        id,
+        name,
+        key,
+        min: 0.0,
+        max: 1.0,
+        default: 0.0,
+        stepped: true,
+        automatable: true,
+    }
+}
+
+/// Every parameter, in the order hosts list them.
+pub const PARAMS: [Spec; 7] = [
+    switch(1, "Sustain pedal", "sustain"),
+    switch(2, "Sostenuto pedal", "sostenuto"),
+    switch(3, "Soft pedal (una corda)", "soft"),
+    Spec {
+        id: 4,
+        name: "Output gain (dB)",
+        key: "gain_db",
+        min: -60.0,
+        max: 12.0,
+        default: 0.0,
+        stepped: false,
+        automatable: true,
+    },
+    // MIDI velocity v becomes 127 (v/127)^curve before the hammer's speed is found from it
+    // (unacorda::midi::hammer_speed_m_s): above 1 a harder touch is needed for the same
+    // loudness, below 1 a lighter one.
+    Spec {
+        id: 5,
+        name: "Velocity curve (exponent)",
+        key: "velocity_curve",
+        min: 0.25,
+        max: 4.0,
+        default: 1.0,
+        stepped: false,
+        automatable: true,
+    },
+    Spec {
+        id: 6,
+        name: "Keyboard",
+        key: "keyboard",
+        min: 0.0,
+        max: (KEYBOARDS.len() - 1) as f64,
+        default: 0.0,
+        stepped: true,
+        automatable: false,
+    },
+    Spec {
+        id: 7,
+        name: "Voices",
+        key: "voices",
+        min: 1.0,
+        max: unacorda::play::MAX_VOICES as f64,
+        default: unacorda::play::DEFAULT_VOICES as f64,
+        stepped: true,
+        automatable: false,
+    },
+];
+
+/// The index of the parameter with CLAP id `id`.
+pub fn index_of(id: u32) -> Option<usize> {
+    PARAMS.iter().position(|p| p.id == id)
+}
+
+impl Spec {
+    /// `value` brought into range (rounded where stepped); NaN becomes the default.
+    pub fn clamp(&self, value: f64) -> f64 {
+        if value.is_nan() {
+            return self.default;
+        }
+        let v = value.clamp(self.min, self.max);
+        if self.stepped {
+            v.round()
+        } else {
+            v
+        }
+    }
+}
+
+/// The parameters' values (any thread: relaxed atomics holding `f64` bits).
+#[derive(Debug)]
+pub struct Values([AtomicU64; PARAMS.len()]);
+
+impl Default for Values {
+    fn default() -> Self {
+        Values(std::array::from_fn(|i| {
+            AtomicU64::new(PARAMS[i].default.to_bits())
+        }))
+    }
+}
+
+impl Values {
+    pub fn get(&self, index: usize) -> f64 {
+        f64::from_bits(self.0[index].load(Ordering::Relaxed))
+    }
+
+    /// Set parameter `index` (clamped to its range); returns the value stored.
+    pub fn set(&self, index: usize, value: f64) -> f64 {
+        let v = PARAMS[index].clamp(value);
+        self.0[index].store(v.to_bits(), Ordering::Relaxed);
+        v
+    }
+
+    /// A switch parameter as on/off.
+    pub fn on(&self, index: usize) -> bool {
+        self.get(index) >= 0.5
+    }
+
+    /// The keyboard chosen.
+    pub fn keyboard(&self) -> &'static str {
+        KEYBOARDS[(self.get(KEYBOARD) as usize).min(KEYBOARDS.len() - 1)]
+    }
+
+    /// The voice pool's size chosen.
+    pub fn voices(&self) -> usize {
+        self.get(VOICES) as usize
+    }
+}
+
+/// MIDI velocity `v` (1–127) through the velocity curve `exponent`; 1 leaves it as it is.
+pub fn curved_velocity(v: u8, exponent: f64) -> u8 {
+    if exponent == 1.0 {
+        return v;
+    }
+    let x = f64::from(v.clamp(1, 127)) / 127.0;
+    (127.0 * x.powf(exponent)).round().clamp(1.0, 127.0) as u8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ids_are_distinct_and_defaults_in_range() {
+        for (i, p) in PARAMS.iter().enumerate() {
+            assert_eq!(index_of(p.id), Some(i));
+            assert_eq!(p.clamp(p.default), p.default, "{}", p.key);
+        }
+        assert_eq!(index_of(0), None);
+    }
+
+    #[test]
+    fn the_velocity_curve_is_monotonic_and_identity_at_one() {
+        for e in [0.25, 0.5, 1.0, 2.0, 4.0] {
+            let v: Vec<u8> = (1..=127).map(|v| curved_velocity(v, e)).collect();
+            assert!(v.windows(2).all(|w| w[1] >= w[0]), "exponent {e}");
+            assert_eq!((v[0].max(1), v[126]), (v[0], 127));
+        }
+        assert!((1..=127).all(|v| curved_velocity(v, 1.0) == v));
+        assert!(curved_velocity(64, 2.0) < 64 && curved_velocity(64, 0.5) > 64);
+    }
+}

@@ -1,0 +1,97 @@
+//! The 88 keys prepared once per process and shared by every instance and every activation: a
+//! piano is built (its keys read back from the command line's key cache where they are kept,
+//! `$UNACORDA_CACHE`) the first time a keyboard, engine rate and pool size are asked for, and
+//! later activations clone it. Hosts run one engine per host rate: from 44.1 to 192 kHz the engine
+//! runs at the host's rate; below, at the smallest multiple of it from 44.1 kHz, decimated by
+//! the synth.
+
+use std::sync::{Arc, Mutex};
+use unacorda::config::output::OutputSettings;
+use unacorda::config::scaling::Scaling;
+use unacorda::engine::exact::ExactPool;
+use unacorda::play::Piano;
+
+/// Host rates the plugin plays at (Hz); others activate silent.
+pub const HOST_RATES_HZ: std::ops::RangeInclusive<f64> = 8_000.0..=192_000.0;
+/// The lowest rate the engine runs at (Hz).
+pub const MIN_ENGINE_RATE_HZ: f64 = 44_100.0;
+/// Prepared pianos kept (each ~12 MB for the 88 keys).
+const KEPT: usize = 4;
+
+/// What an activation plays: a piano of its own and the synth's output settings.
+pub struct Prepared {
+    pub piano: Piano<ExactPool>,
+    pub settings: OutputSettings,
+    /// Engine steps per host frame (1 from 44.1 kHz up).
+    pub oversampling: u32,
+}
+
+/// A prepared piano's keyboard, engine rate (Hz) and pool size.
+type Key = (&'static str, u32, usize);
+/// A piano as built, with the output settings of its keyboard.
+type Built = Arc<(Piano<ExactPool>, OutputSettings)>;
+/// The pianos prepared so far, oldest first (any thread that activates an instance).
+static PIANOS: Mutex<Vec<(Key, Built)>> = Mutex::new(Vec::new());
+
+/// Engine steps per host frame at `host_rate_hz`, or why it cannot play there.
+pub fn oversampling(host_rate_hz: f64) -> Result<u32, String> {
+    if !HOST_RATES_HZ.contains(&host_rate_hz) || host_rate_hz.fract() != 0.0 {
+        return Err(format!(
+            "unacorda: the host's sample rate {host_rate_hz} Hz is not a whole number of Hz in {}–{} Hz: the plugin stays silent",
+            HOST_RATES_HZ.start(),
+            HOST_RATES_HZ.end()
+        ));
+    }
+    Ok((MIN_ENGINE_RATE_HZ / host_rate_hz).ceil().max(1.0) as u32)
+}
+
+/// The piano of `keyboard` with `voices` voices for a host at `host_rate_hz`: built on all cores
+/// the first time, cloned from the kept one after that.
+pub fn prepare(
+    keyboard: &'static str,
+    host_rate_hz: f64,
+    voices: usize,
+) -> Result<Prepared, String> {
+    let oversampling = oversampling(host_rate_hz)?;
+    let engine_rate = host_rate_hz as u32 * oversampling;
+    let key = (keyboard, engine_rate, voices);
+    let found = {
+        let kept = PIANOS.lock().unwrap_or_else(|e| e.into_inner());
+        kept.iter().find(|(k, _)| *k == key).map(|(_, p)| p.clone())
+    };
+    let built = match found {
+        Some(built) => built,
+        None => {
+            let built = Arc::new(build(keyboard, engine_rate, voices)?);
+            let mut kept = PIANOS.lock().unwrap_or_else(|e| e.into_inner());
+            if kept.len() >= KEPT {
+                kept.remove(0);
+            }
+            kept.push((key, built.clone()));
+            built
+        }
+    };
+    let (piano, settings) = &*built;
+    Ok(Prepared {
+        piano: piano.clone(),
+        settings: OutputSettings {
+            rate_hz: host_rate_hz,
+            ..*settings
+        },
+        oversampling,
+    })
+}
+
+fn build(
+    keyboard: &str,
+    engine_rate_hz: u32,
+    voices: usize,
+) -> Result<(Piano<ExactPool>, OutputSettings), String> {
+    let mut scaling = Scaling::resolve(keyboard).map_err(|e| format!("unacorda: {e}"))?;
+    scaling.base.preset.simulation.output_rate_hz = engine_rate_hz;
+    let keys: Vec<usize> = (1..=88).collect();
+    let cache = unacorda::keycache::KeyCache::from_env();
+    let piano = Piano::<ExactPool>::build_with(&scaling, &keys, voices, cache.as_ref())
+        .map_err(|e| format!("unacorda: {keyboard} at {engine_rate_hz} Hz: {e}"))?;
+    Ok((piano, scaling.output_settings()))
+}

@@ -1,0 +1,297 @@
+//! The audio thread's side: notes, MIDI and parameter changes applied at their frame, the synth
+//! realigned to its grid ([`Aligned`]), the output gain, and sleep when nothing sounds. Never
+//! allocates, locks or prints in `process` (the plugin's tests run it under `assert_no_alloc`).
+
+use crate::params::{
+    curved_velocity, GAIN_DB, KEYBOARD, PARAMS, SOFT, SOSTENUTO, SUSTAIN, VELOCITY_CURVE, VOICES,
+};
+use crate::{MainThread, Shared};
+use clack_plugin::events::spaces::CoreEventSpace;
+use clack_plugin::events::Match;
+use clack_plugin::prelude::*;
+use std::sync::atomic::Ordering;
+use unacorda::audio::aligned::LATENCY_FRAMES;
+use unacorda::audio::synth::EVENT_QUEUE;
+use unacorda::audio::{Aligned, Synth};
+use unacorda::engine::exact::ExactPool;
+use unacorda::midi::{map_channel_message, Event, Pedal};
+
+/// Frames rendered at a time into the interleaved scratch buffer.
+const SCRATCH_FRAMES: usize = 256;
+
+/// The output gain's smoothing: the gain moves this fraction of the way to its target each
+/// frame (a time constant of ~5 ms at 48 kHz), so automating it never clicks.
+const GAIN_SMOOTHING: f32 = 0.004;
+
+/// An active instance's audio side (audio thread).
+pub struct Processor<'a> {
+    shared: &'a Shared,
+    host: HostAudioProcessorHandle<'a>,
+    /// The synth, or none when the activation could not build one (it plays silence).
+    engine: Option<Aligned<ExactPool>>,
+    /// Channels the engine renders (1 or 2) and the interleaved buffer it renders them into.
+    channels: usize,
+    scratch: Vec<f32>,
+    /// The pedal parameters as last played (a state load changes them behind the processor).
+    pedals: [bool; 3],
+    /// The gain applied to the last frame (linear).
+    gain: f32,
+    /// The keyboard and pool size this activation built, and whether a rebuild was asked for.
+    built: [f64; 2],
+    restart_asked: bool,
+}
+
+const PEDALS: [(usize, Pedal); 3] = [
+    (SUSTAIN, Pedal::Sustain),
+    (SOSTENUTO, Pedal::Sostenuto),
+    (SOFT, Pedal::Soft),
+];
+
+impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
+    fn activate(
+        host: HostAudioProcessorHandle<'a>,
+        main_thread: &MainThread<'a>,
+        shared: &'a Shared,
+        config: PluginAudioConfiguration,
+    ) -> Result<Self, PluginError> {
+        let values = &shared.values;
+        let built = [values.get(KEYBOARD), values.get(VOICES)];
+        // Activation never fails: what cannot be built plays silence and says why, once.
+        let (engine, channels, latency) =
+            match start(values.keyboard(), config.sample_rate, values.voices()) {
+                Ok((engine, channels, latency)) => {
+                    *shared
+                        .silent_because
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner()) = None;
+                    (Some(engine), channels, latency)
+                }
+                Err(why) => {
+                    let mut last = shared
+                        .silent_because
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner());
+                    if last.as_deref() != Some(why.as_str()) {
+                        main_thread.warn(&why);
+                        *last = Some(why);
+                    }
+                    (None, 2, 0)
+                }
+            };
+        shared.latency_frames.store(latency, Ordering::Relaxed);
+        Ok(Processor {
+            shared,
+            host,
+            engine,
+            channels,
+            scratch: vec![0.0; SCRATCH_FRAMES * channels],
+            pedals: [false; 3],
+            gain: db_to_gain(values.get(GAIN_DB)),
+            built,
+            restart_asked: false,
+        })
+    }
+
+    fn process(
+        &mut self,
+        _process: Process,
+        mut audio: Audio,
+        events: Events,
+    ) -> Result<ProcessStatus, PluginError> {
+        let frames = audio.frames_count() as usize;
+        // Without an output port or with one of 64-bit samples there is nothing to write into
+        // (an error here would have clack format a message on the audio thread).
+        let Some(mut port) = audio.output_port(0) else {
+            return Ok(ProcessStatus::Continue);
+        };
+        let Some(mut out) = port.channels().ok().and_then(|c| c.into_f32()) else {
+            return Ok(ProcessStatus::Continue);
+        };
+        self.settle_pedals();
+        let mut at = 0;
+        for event in events.input {
+            let time = (event.header().time() as usize).clamp(at, frames);
+            self.render(&mut out, at..time);
+            at = time;
+            self.handle(event);
+        }
+        self.render(&mut out, at..frames);
+        let silent = self.engine.as_ref().is_none_or(|e| e.is_silent());
+        Ok(if silent {
+            ProcessStatus::Sleep
+        } else {
+            ProcessStatus::Continue
+        })
+    }
+
+    fn reset(&mut self) {
+        if let Some(engine) = &mut self.engine {
+            engine.silence();
+        }
+        self.pedals = [false; 3];
+    }
+}
+
+/// The engine for a host at `rate_hz`: its synth realigned to the host's blocks, its channels
+/// and the latency to report (host frames).
+fn start(
+    keyboard: &'static str,
+    rate_hz: f64,
+    voices: usize,
+) -> Result<(Aligned<ExactPool>, usize, u32), String> {
+    let prepared = crate::prepare::prepare(keyboard, rate_hz, voices)?;
+    let channels = usize::from(prepared.settings.channels);
+    let (mut synth, handle) = Synth::new(prepared.piano, prepared.settings, EVENT_QUEUE)
+        .map_err(|e| format!("unacorda: {e}"))?;
+    if std::thread::available_parallelism().is_ok_and(|n| n.get() >= 2) {
+        // The helper thread lends the engine a second core; without it, one core.
+        let _ = synth.use_second_core();
+        synth.ask_real_time_priority();
+    }
+    let latency = LATENCY_FRAMES as f64 + synth.decimation_delay_frames();
+    let engine = Aligned::new(synth, handle.events, handle.stats, channels);
+    Ok((engine, channels, latency.round() as u32))
+}
+
+fn db_to_gain(db: f64) -> f32 {
+    10f64.powf(db / 20.0) as f32
+}
+
+impl Processor<'_> {
+    /// Play the pedal parameters that changed outside the audio thread (a state load).
+    fn settle_pedals(&mut self) {
+        for (i, &(index, pedal)) in PEDALS.iter().enumerate() {
+            let down = self.shared.values.on(index);
+            if down != self.pedals[i] {
+                self.pedals[i] = down;
+                self.play(Event::Pedal { pedal, down });
+            }
+        }
+    }
+
+    fn play(&mut self, event: Event) {
+        if let Some(engine) = &mut self.engine {
+            engine.schedule(event);
+        }
+    }
+
+    /// Apply one host event at the next frame.
+    pub(crate) fn handle(&mut self, event: &UnknownEvent) {
+        let curve = self.shared.values.get(VELOCITY_CURVE);
+        let note = |key: Match<u16>| match key {
+            Match::Specific(k) => u8::try_from(k).ok().filter(|k| *k < 128),
+            Match::All => None,
+        };
+        let event = match event.as_core_event() {
+            // CLAP's velocity 0–1; 0 is the softest strike, not a release.
+            Some(CoreEventSpace::NoteOn(e)) => note(e.pckn().key).map(|note| Event::NoteOn {
+                note,
+                velocity: curved_velocity(
+                    (e.velocity() * 127.0).round().clamp(1.0, 127.0) as u8,
+                    curve,
+                ),
+            }),
+            Some(CoreEventSpace::NoteOff(e)) => Some(match note(e.pckn().key) {
+                Some(note) => Event::NoteOff { note },
+                None => Event::AllNotesOff,
+            }),
+            // A choke stops the note at once: its damper falls (every damper for a wildcard).
+            Some(CoreEventSpace::NoteChoke(e)) => Some(match note(e.pckn().key) {
+                Some(note) => Event::NoteOff { note },
+                None => Event::AllSoundOff,
+            }),
+            Some(CoreEventSpace::Midi(e)) => {
+                let [status, data1, data2] = e.data();
+                match map_channel_message(status, data1, data2) {
+                    Some(Event::NoteOn { note, velocity }) => Some(Event::NoteOn {
+                        note,
+                        velocity: curved_velocity(velocity, curve),
+                    }),
+                    other => other,
+                }
+            }
+            Some(CoreEventSpace::ParamValue(e)) => {
+                let index = e
+                    .param_id()
+                    .and_then(|id| crate::params::index_of(id.get()));
+                match index {
+                    Some(index) if e.pckn().matches_all() => self.set_param(index, e.value()),
+                    _ => None,
+                }
+            }
+            _ => None,
+        };
+        if let Some(event) = event {
+            self.play(event);
+        }
+    }
+
+    /// A parameter's new value; the pedal event it plays, if any.
+    fn set_param(&mut self, index: usize, value: f64) -> Option<Event> {
+        let value = self.shared.values.set(index, value);
+        if let Some(i) = PEDALS.iter().position(|&(p, _)| p == index) {
+            let down = value >= 0.5;
+            if down != self.pedals[i] {
+                self.pedals[i] = down;
+                return Some(Event::Pedal {
+                    pedal: PEDALS[i].1,
+                    down,
+                });
+            }
+        }
+        let rebuilds = [KEYBOARD, VOICES].iter().position(|&p| p == index);
+        if let Some(b) = rebuilds {
+            if value != self.built[b] && !self.restart_asked {
+                // The host deactivates and activates the plugin: the new piano is built there.
+                self.restart_asked = true;
+                self.host.request_restart();
+            }
+        }
+        debug_assert!(index < PARAMS.len());
+        None
+    }
+
+    /// Frames `range` of the host's block: rendered, the gain applied, written to every channel.
+    fn render(
+        &mut self,
+        out: &mut clack_plugin::process::audio::OutputChannels<f32>,
+        range: std::ops::Range<usize>,
+    ) {
+        let target = db_to_gain(self.shared.values.get(GAIN_DB));
+        let ch = self.channels;
+        let host_channels = out.channel_count();
+        let mut start = range.start;
+        while start < range.end {
+            let n = (range.end - start).min(SCRATCH_FRAMES);
+            let scratch = &mut self.scratch[..n * ch];
+            match &mut self.engine {
+                Some(engine) => engine.process(scratch),
+                None => scratch.fill(0.0),
+            }
+            let mut gain = self.gain;
+            for frame in scratch.chunks_exact_mut(ch) {
+                gain += (target - gain) * GAIN_SMOOTHING;
+                frame.iter_mut().for_each(|s| *s *= gain);
+            }
+            self.gain = gain;
+            for c in 0..host_channels {
+                let Some(dest) = out.channel_mut(c) else {
+                    continue;
+                };
+                let Some(dest) = dest.get_mut(start..start + n) else {
+                    continue;
+                };
+                let source = c as usize;
+                for (d, frame) in dest.iter_mut().zip(scratch.chunks_exact(ch)) {
+                    *d = match (host_channels, ch) {
+                        // A mono host port hears both channels.
+                        (1, 2) => 0.5 * (frame[0] + frame[1]),
+                        _ if source < 2 => frame[source.min(ch - 1)],
+                        _ => 0.0,
+                    };
+                }
+            }
+            start += n;
+        }
+    }
+}

@@ -1,0 +1,375 @@
+//! The plugin loaded in process through clack-host from its entry point: its ports, parameters
+//! and state; `process` never allocating over hundreds of blocks of notes, releases, pedals and
+//! parameter changes; and its sound, in host blocks of 1 to 4096 frames, equal sample for sample
+//! to the offline render of the same events once the reported latency is taken off.
+
+mod host;
+
+use assert_no_alloc::{assert_no_alloc, violation_count, AllocDisabler};
+use clack_host::prelude::PluginEntry;
+use clack_plugin::entry::SinglePluginEntry;
+use host::{Instance, Play};
+use std::ops::ControlFlow;
+use unacorda::engine::exact::ExactPool;
+use unacorda::midi::file::TimedEvent;
+use unacorda::midi::{Event, Pedal};
+use unacorda_clap::Unacorda;
+
+#[global_allocator]
+static ALLOCATOR: AllocDisabler = AllocDisabler;
+
+/// Activations share a process-wide piano cache and two cores: one test at a time.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+const RATE_HZ: f64 = 48_000.0;
+/// Parameter ids (see unacorda_clap::params::PARAMS).
+const SUSTAIN: u32 = 1;
+const SOFT: u32 = 3;
+const GAIN_DB: u32 = 4;
+
+fn entry() -> PluginEntry {
+    PluginEntry::load_from_clack::<SinglePluginEntry<Unacorda>>(c"").unwrap()
+}
+
+fn instance() -> Instance {
+    host::instantiate(&entry())
+}
+
+/// `f` under the allocation checker; the allocations it made.
+fn checked(f: &mut dyn FnMut()) -> u32 {
+    let before = violation_count();
+    assert_no_alloc(f);
+    violation_count() - before
+}
+
+/// A performance in the host's events: CLAP notes (one at velocity 0, the softest strike), MIDI
+/// notes and the sustain pedal as MIDI CC64, the soft pedal as a parameter, releases with the
+/// pedal down and up, a wildcard note-off.
+fn script() -> Vec<(u64, Play)> {
+    let ms = |t: f64| (t * RATE_HZ / 1000.0).round() as u64;
+    let mut s = vec![
+        (ms(0.0) + 17, Play::On(60, 100.0 / 127.0)),
+        (ms(20.0), Play::Midi([0x90, 64, 80])),
+        (ms(35.0), Play::On(67, 0.0)),
+        (ms(60.0), Play::Midi([0xB0, 64, 127])),
+        (ms(80.0), Play::Off(Some(60))),
+        (ms(90.0), Play::Midi([0x80, 64, 0])),
+        (ms(110.0), Play::Param(SOFT, 1.0)),
+        (ms(120.0), Play::On(48, 90.0 / 127.0)),
+        (ms(130.0), Play::Midi([0x91, 36, 110])),
+        (ms(160.0), Play::Midi([0xB0, 64, 0])),
+        (ms(170.0), Play::Param(SOFT, 0.0)),
+        (ms(175.0), Play::On(72, 60.0 / 127.0)),
+        (ms(200.0), Play::Off(None)),
+        (ms(210.0), Play::Midi([0x90, 84, 127])),
+        (ms(230.0), Play::Midi([0x90, 84, 0])),
+    ];
+    s.sort_by_key(|e| e.0);
+    s
+}
+
+/// The script as the piano's events, timed as a MIDI file's (what `render --midi` plays).
+fn as_piano_events(script: &[(u64, Play)]) -> Vec<TimedEvent> {
+    script
+        .iter()
+        .filter_map(|&(frame, play)| {
+            let event = match play {
+                Play::On(note, v) => Event::NoteOn {
+                    note: note as u8,
+                    velocity: ((v * 127.0).round() as u8).max(1),
+                },
+                Play::Off(Some(note)) => Event::NoteOff { note: note as u8 },
+                Play::Off(None) => Event::AllNotesOff,
+                Play::Choke(_) => return None,
+                Play::Midi([s, d1, d2]) => unacorda::midi::map_channel_message(s, d1, d2)?,
+                Play::Param(SOFT, v) => Event::Pedal {
+                    pedal: Pedal::Soft,
+                    down: v >= 0.5,
+                },
+                Play::Param(SUSTAIN, v) => Event::Pedal {
+                    pedal: Pedal::Sustain,
+                    down: v >= 0.5,
+                },
+                Play::Param(..) => return None,
+            };
+            Some(TimedEvent {
+                time_s: frame as f64 / RATE_HZ,
+                event,
+            })
+        })
+        .collect()
+}
+
+/// The offline render of `events` on the concert keyboard (`render --offline --midi`'s path,
+/// one core): both channels.
+fn offline(events: &[TimedEvent], tail_s: f64) -> (Vec<f32>, Vec<f32>) {
+    let scaling = unacorda::config::scaling::Scaling::resolve("concert").unwrap();
+    let cache = unacorda::keycache::KeyCache::from_env();
+    let keyboard = unacorda::play::Keyboard {
+        scaling: &scaling,
+        cache: cache.as_ref(),
+    };
+    let mut samples = Vec::new();
+    let offline = unacorda::render::Offline {
+        tail_s,
+        voices: unacorda::play::DEFAULT_VOICES,
+        cores: 1,
+    };
+    let r = unacorda::render::render_midi_into::<ExactPool>(
+        keyboard,
+        events,
+        offline,
+        |_| {},
+        None,
+        |block| {
+            samples.extend_from_slice(block);
+            ControlFlow::Continue(())
+        },
+    )
+    .unwrap();
+    assert_eq!(r.channels, 2);
+    (
+        samples.iter().step_by(2).copied().collect(),
+        samples.iter().skip(1).step_by(2).copied().collect(),
+    )
+}
+
+fn first_sound(x: &[f32]) -> Option<usize> {
+    x.iter().position(|&s| s != 0.0)
+}
+
+#[test]
+fn ports_parameters_and_state() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut plugin = instance();
+    let (outputs, channels, note_ports, dialects) = host::ports(&mut plugin);
+    println!("audio outputs {outputs} ({channels} channels), note inputs {note_ports}, dialects {dialects:#b}");
+    assert_eq!((outputs, channels, note_ports), (1, 2, 1));
+    // CLAP (bit 0) and MIDI (bit 1): the pedals come as MIDI.
+    assert_eq!(dialects & 0b11, 0b11);
+    let params = host::params(&mut plugin);
+    for p in &params {
+        println!(
+            "param {:>2} {:<28} {:>6} … {:<6} default {}",
+            p.0, p.1, p.2, p.3, p.4
+        );
+    }
+    assert_eq!(params.len(), 7);
+    assert!(params.iter().any(|p| p.1.contains("Soft pedal")));
+
+    let state = host::save(&mut plugin);
+    println!(
+        "state ({} bytes):\n{}",
+        state.len(),
+        String::from_utf8_lossy(&state)
+    );
+    let changed = String::from_utf8(state.clone())
+        .unwrap()
+        .replace("soft = 0", "soft = 1")
+        .replace("gain_db = 0.0", "gain_db = -6.5");
+    let rescans = host::rescans(&mut plugin);
+    host::load(&mut plugin, changed.as_bytes()).unwrap();
+    assert_eq!(host::param_value(&mut plugin, SOFT), Some(1.0));
+    assert_eq!(host::param_value(&mut plugin, GAIN_DB), Some(-6.5));
+    assert_eq!(
+        host::rescans(&mut plugin),
+        rescans + 1,
+        "a load tells the host the values changed"
+    );
+    assert_eq!(
+        host::save(&mut plugin),
+        changed.as_bytes(),
+        "the state round-trips exactly"
+    );
+    for bad in [
+        changed.replace("unacorda-clap", "someone-else"),
+        changed.replace("version = 1", "version = 7"),
+        changed.replace("voices = 64", "voices = 100000"),
+    ] {
+        let e = host::load(&mut plugin, bad.as_bytes()).unwrap_err();
+        println!("refused: {e}");
+    }
+    assert_eq!(
+        host::save(&mut plugin),
+        changed.as_bytes(),
+        "a refused state changes nothing"
+    );
+}
+
+/// The performance at 48 kHz in blocks of 1 to 4096 frames under the allocation checker: 0
+/// allocations, sound from the first note's frame plus the latency, and every sample of both
+/// channels equal to the offline render's.
+#[test]
+fn plays_exactly_like_the_offline_render_in_any_blocks_without_allocating() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut plugin = instance();
+    let started = std::time::Instant::now();
+    let mut active = host::activate(&mut plugin, RATE_HZ);
+    println!("activated in {:.2} s", started.elapsed().as_secs_f64());
+    let latency = host::latency(&mut plugin) as usize;
+    assert_eq!(latency, unacorda::audio::aligned::LATENCY_FRAMES as usize);
+    let script = script();
+    let tail_s = 0.2;
+    let events = as_piano_events(&script);
+    let (left, right) = offline(&events, tail_s);
+    let frames = left.len();
+    let blocks = [1, 4096, 17, 333, 2, 1000, 95, 31, 64, 3, 512, 777];
+    let heard = active.run(frames + latency, &blocks, &script, checked);
+    let n_blocks = {
+        let mut n = 0;
+        let mut total = 0;
+        for &b in blocks.iter().cycle() {
+            if total >= frames + latency {
+                break;
+            }
+            total += b;
+            n += 1;
+        }
+        n
+    };
+    println!(
+        "{n_blocks} blocks of {blocks:?} frames, {} events: {} allocations in process()",
+        script.len(),
+        heard.allocations
+    );
+    assert_eq!(heard.allocations, 0, "process() allocated");
+    let first = first_sound(&heard.left).unwrap();
+    println!(
+        "first note at frame {}, first sound at {first} (latency {latency}); offline render's first sound at {:?}",
+        script[0].0,
+        first_sound(&left)
+    );
+    assert_eq!(Some(first - latency), first_sound(&left));
+    assert!((first - latency) as u64 >= script[0].0 && (first - latency) as u64 <= script[0].0 + 2);
+    for (name, plugin_side, render_side) in [
+        ("left", &heard.left, &left),
+        ("right", &heard.right, &right),
+    ] {
+        let differ = plugin_side[latency..]
+            .iter()
+            .zip(render_side.iter())
+            .filter(|(a, b)| a.to_bits() != b.to_bits())
+            .count();
+        let peak = render_side.iter().fold(0f32, |m, s| m.max(s.abs()));
+        println!(
+            "{name}: {frames} frames, peak {peak:.3}, {differ} differ from the offline render"
+        );
+        assert!(peak > 0.01);
+        assert_eq!(differ, 0, "{name} differs from the offline render");
+    }
+    host::deactivate(&mut plugin, active);
+}
+
+/// The sustain pedal (as a parameter) keeps a released note ringing; the soft pedal changes the
+/// strike; a host's reset silences everything at once; with nothing sounding the plugin sleeps.
+#[test]
+fn pedals_reset_and_sleep() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut plugin = instance();
+    let mut active = host::activate(&mut plugin, RATE_HZ);
+    let rms =
+        |x: &[f32]| (x.iter().map(|s| f64::from(*s).powi(2)).sum::<f64>() / x.len() as f64).sqrt();
+    let db = |a: f64, b: f64| 20.0 * (a / b).log10();
+    let second = RATE_HZ as usize;
+    let quiet = active.run(second / 10, &[256], &[], |f| {
+        f();
+        0
+    });
+    println!(
+        "before any note: {} of {} blocks asleep",
+        quiet.sleeps,
+        (second / 10).div_ceil(256)
+    );
+    assert!(quiet.sleeps > 0 && quiet.left.iter().all(|&s| s == 0.0));
+
+    // C4 struck and released after 0.1 s, without and with the sustain pedal.
+    let mut played = Vec::new();
+    for (sustain, soft) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)] {
+        let t0 = active.frame;
+        let script = [
+            (t0, Play::Param(SUSTAIN, sustain)),
+            (t0, Play::Param(SOFT, soft)),
+            (t0 + 1, Play::On(60, 0.7)),
+            (t0 + second as u64 / 10, Play::Off(Some(60))),
+        ];
+        let heard = active.run(second / 2, &[480], &script, |f| {
+            f();
+            0
+        });
+        active.processor.reset();
+        played.push(heard);
+        let after = active.run(1024, &[256], &[], |f| {
+            f();
+            0
+        });
+        let nz = first_sound(&after.left);
+        println!(
+            "after reset: first non-zero {nz:?}, peak {}",
+            after.left.iter().fold(0f32, |m, s| m.max(s.abs()))
+        );
+        assert!(
+            after.left.iter().chain(&after.right).all(|&s| s == 0.0),
+            "a reset silences everything"
+        );
+        println!("after reset: {} of 4 blocks asleep", after.sleeps);
+        assert_eq!(after.sleeps, 4, "silent after a reset, the plugin sleeps");
+    }
+    let late = |h: &host::Heard| rms(&h.left[second * 3 / 10..second / 2]);
+    let early = |h: &host::Heard| rms(&h.left[..second / 20]);
+    let held = db(late(&played[1]), late(&played[0]));
+    let soft = db(early(&played[2]), early(&played[0]));
+    println!(
+        "C4 released at 0.1 s: 0.3–0.5 s {held:+.1} dB with the sustain pedal; first 50 ms {soft:+.1} dB with the soft pedal"
+    );
+    assert!(held > 20.0, "the sustain pedal holds a released note");
+    assert!(soft < -1.0, "the soft pedal strikes fewer strings: quieter");
+    host::deactivate(&mut plugin, active);
+}
+
+/// Activation never fails: from 44.1 to 192 kHz the engine runs at the host's rate, below at a
+/// multiple of it (the decimator's delay added to the latency), and at an absurd rate the plugin
+/// plays silence. A note sounds from its frame plus the reported latency at every rate; a second
+/// activation reuses the prepared keys.
+#[test]
+fn activates_at_every_rate() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut plugin = instance();
+    for rate_hz in [44_100.0, 96_000.0, 22_050.0, 1.0] {
+        for activation in ["first", "second"] {
+            let started = std::time::Instant::now();
+            let mut active = host::activate(&mut plugin, rate_hz);
+            let took_s = started.elapsed().as_secs_f64();
+            let latency = host::latency(&mut plugin) as usize;
+            let at = 100;
+            let frames = (0.05 * rate_hz).max(1000.0) as usize;
+            let heard = active.run(
+                frames,
+                &[rate_hz as usize / 100 + 7],
+                &[(at as u64, Play::On(69, 0.8))],
+                |f| {
+                    f();
+                    0
+                },
+            );
+            let first = first_sound(&heard.left);
+            let peak = heard.left.iter().fold(0f32, |m, s| m.max(s.abs()));
+            println!(
+                "{rate_hz} Hz, {activation} activation in {took_s:.2} s: latency {latency} frames, note at frame {at}, first sound at {first:?}, peak {peak:.3}"
+            );
+            if rate_hz < 8_000.0 {
+                assert_eq!((first, latency), (None, 0), "an absurd rate plays silence");
+            } else if rate_hz >= 44_100.0 {
+                assert_eq!(first, Some(at + latency));
+            } else {
+                // The decimator's filter rings ahead of its delay: sound starts before it, within
+                // its length.
+                assert!(
+                    first.is_some_and(|f| f >= at && f <= at + latency),
+                    "{first:?}"
+                );
+                assert!(peak > 0.01);
+            }
+            host::deactivate(&mut plugin, active);
+        }
+    }
+}

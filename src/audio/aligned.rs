@@ -1,0 +1,121 @@
+//! A host's blocks of any length played on the synth's grid ([`ALIGN_FRAMES`]): the synth renders
+//! whole cells of the grid, one cell behind the host, so that however a host cuts time into
+//! blocks (1 to 4096 frames, changing from block to block), every sample is the one an offline
+//! render gives, delayed by [`LATENCY_FRAMES`] (0.67 ms at 48 kHz), which the host is told and
+//! compensates. Events are scheduled at the host's next frame; a cell is rendered only once every
+//! event inside it is known. Never allocates after [`Aligned::new`].
+
+use super::synth::{Scheduled, Stats, Synth, ALIGN_FRAMES};
+use crate::engine::VoicePool;
+use crate::midi::Event;
+use ringbuf::traits::Producer;
+use ringbuf::HeapProd;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+
+/// How far the output lags the events: one cell of the grid.
+pub const LATENCY_FRAMES: u64 = ALIGN_FRAMES;
+
+/// A synth driven by a host's blocks (touched by the audio thread only).
+pub struct Aligned<E: VoicePool> {
+    synth: Synth<E>,
+    events: HeapProd<Scheduled>,
+    stats: Arc<Stats>,
+    channels: usize,
+    /// The last cell rendered (interleaved), and how many of its frames the host has taken;
+    /// before the first cell, a cell of silence (the latency).
+    cell: Vec<f32>,
+    taken: usize,
+    /// Output frames handed to the host so far.
+    handed: u64,
+}
+
+impl<E: VoicePool> Aligned<E> {
+    /// Play `synth` in `channels` interleaved channels, its events through `events` (the
+    /// producer of its handle).
+    pub fn new(
+        synth: Synth<E>,
+        events: HeapProd<Scheduled>,
+        stats: Arc<Stats>,
+        channels: usize,
+    ) -> Self {
+        let channels = channels.max(1);
+        Aligned {
+            synth,
+            events,
+            stats,
+            channels,
+            cell: vec![0.0; ALIGN_FRAMES as usize * channels],
+            taken: 0,
+            handed: 0,
+        }
+    }
+
+    /// The synth (its piano, its clock).
+    pub fn synth(&self) -> &Synth<E> {
+        &self.synth
+    }
+
+    /// The synth, to change its state outside the event path.
+    pub fn synth_mut(&mut self) -> &mut Synth<E> {
+        &mut self.synth
+    }
+
+    /// Output frames handed to the host so far.
+    pub fn handed(&self) -> u64 {
+        self.handed
+    }
+
+    /// Play `event` at the next frame the host will be handed (heard [`LATENCY_FRAMES`] later).
+    /// When the queue is full (thousands of events inside one cell) the event is dropped and
+    /// counted in [`Stats::late_events`]; returns whether it was queued.
+    pub fn schedule(&mut self, event: Event) -> bool {
+        let queued = self
+            .events
+            .try_push(Scheduled {
+                frame: self.handed,
+                event,
+            })
+            .is_ok();
+        if !queued {
+            self.stats.late_events.fetch_add(1, Ordering::Relaxed);
+        }
+        queued
+    }
+
+    /// Fill `out` (interleaved, the channels of [`Aligned::new`]) with the next frames.
+    pub fn process(&mut self, out: &mut [f32]) {
+        let ch = self.channels;
+        let cell_frames = ALIGN_FRAMES as usize;
+        let whole = out.len() / ch * ch;
+        let mut out = &mut out[..whole];
+        while !out.is_empty() {
+            if self.taken == cell_frames {
+                // Every event up to this cell's end has been scheduled: its last frame is the
+                // frame the host is handed now, less the latency.
+                self.synth.process(&mut self.cell, ch);
+                self.taken = 0;
+            }
+            let n = (cell_frames - self.taken).min(out.len() / ch);
+            let (head, rest) = std::mem::take(&mut out).split_at_mut(n * ch);
+            head.copy_from_slice(&self.cell[self.taken * ch..(self.taken + n) * ch]);
+            self.taken += n;
+            self.handed += n as u64;
+            out = rest;
+        }
+    }
+
+    /// Whether the output is silent from here on until the next event: no voice sounds, no event
+    /// is waiting and the cell being handed out is below the 24-bit floor.
+    pub fn is_silent(&self) -> bool {
+        let floor = f32::EPSILON;
+        self.cell.iter().all(|s| s.abs() < floor) && self.synth.is_quiet()
+    }
+
+    /// Silence every voice at once (a host's reset): keys up, pedals up, strings and board at
+    /// rest, the queued events dropped and the cell cleared.
+    pub fn silence(&mut self) {
+        self.synth.silence();
+        self.cell.fill(0.0);
+    }
+}
