@@ -10,4 +10,4 @@ cargo clippy --release --locked --workspace --all-targets -- -D warnings
 # The library as the plugin builds it: without the command line's dependencies.
 cargo clippy --release --locked -p unacorda --no-default-features --lib -- -D warnings
 cargo test --release --locked --workspace
-cargo bench --locked --no-run
+cargo bench --locked --workspace --no-run

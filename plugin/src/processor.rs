@@ -3,7 +3,7 @@
 //! allocates, locks or prints in `process` (the plugin's tests run it under `assert_no_alloc`).
 
 use crate::params::{
-    curved_velocity, GAIN_DB, KEYBOARD, PARAMS, SOFT, SOSTENUTO, SUSTAIN, VELOCITY_CURVE, VOICES,
+    curved_velocity, GAIN_DB, KEYBOARD, SOFT, SOSTENUTO, SUSTAIN, VELOCITY_CURVE, VOICES,
 };
 use crate::{MainThread, Shared};
 use clack_plugin::events::spaces::CoreEventSpace;
@@ -15,6 +15,10 @@ use unacorda::audio::synth::EVENT_QUEUE;
 use unacorda::audio::{Aligned, Synth};
 use unacorda::engine::exact::ExactPool;
 use unacorda::midi::{map_channel_message, Event, Pedal};
+
+/// The ring-out the tail reports: how long the slowest mode takes to fall this far (dB), from a
+/// fortissimo's level to below the 24-bit floor.
+pub const TAIL_FALL_DB: f64 = 120.0;
 
 /// Frames rendered at a time into the interleaved scratch buffer.
 const SCRATCH_FRAMES: usize = 256;
@@ -36,6 +40,8 @@ pub struct Processor<'a> {
     pedals: [bool; 3],
     /// The gain applied to the last frame (linear).
     gain: f32,
+    /// The ring-out reported as the tail (host frames).
+    tail_frames: u32,
     /// The keyboard and pool size this activation built, and whether a rebuild was asked for.
     built: [f64; 2],
     restart_asked: bool,
@@ -79,6 +85,10 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
                 }
             };
         shared.latency_frames.store(latency, Ordering::Relaxed);
+        let tail_frames = engine.as_ref().map_or(0, |e| {
+            let ring_out_s = e.synth().piano().instrument.ring_out_s(TAIL_FALL_DB);
+            (ring_out_s * config.sample_rate).min(f64::from(i32::MAX - 1)) as u32
+        });
         Ok(Processor {
             shared,
             host,
@@ -87,6 +97,7 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             scratch: vec![0.0; SCRATCH_FRAMES * channels],
             pedals: [false; 3],
             gain: db_to_gain(values.get(GAIN_DB)),
+            tail_frames,
             built,
             restart_asked: false,
         })
@@ -247,7 +258,6 @@ impl Processor<'_> {
                 self.host.request_restart();
             }
         }
-        debug_assert!(index < PARAMS.len());
         None
     }
 
@@ -293,5 +303,11 @@ impl Processor<'_> {
             }
             start += n;
         }
+    }
+}
+
+impl clack_extensions::tail::PluginTailImpl for Processor<'_> {
+    fn get(&self) -> clack_extensions::tail::TailLength {
+        clack_extensions::tail::TailLength::Finite(self.tail_frames)
     }
 }

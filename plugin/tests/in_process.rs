@@ -26,6 +26,8 @@ const RATE_HZ: f64 = 48_000.0;
 const SUSTAIN: u32 = 1;
 const SOFT: u32 = 3;
 const GAIN_DB: u32 = 4;
+const VELOCITY_CURVE: u32 = 5;
+const KEYBOARD: u32 = 6;
 
 fn entry() -> PluginEntry {
     PluginEntry::load_from_clack::<SinglePluginEntry<Unacorda>>(c"").unwrap()
@@ -340,6 +342,7 @@ fn activates_at_every_rate() {
             let mut active = host::activate(&mut plugin, rate_hz);
             let took_s = started.elapsed().as_secs_f64();
             let latency = host::latency(&mut plugin) as usize;
+            let tail_s = f64::from(host::tail(&mut active).unwrap()) / rate_hz;
             let at = 100;
             let frames = (0.05 * rate_hz).max(1000.0) as usize;
             let heard = active.run(
@@ -354,12 +357,18 @@ fn activates_at_every_rate() {
             let first = first_sound(&heard.left);
             let peak = heard.left.iter().fold(0f32, |m, s| m.max(s.abs()));
             println!(
-                "{rate_hz} Hz, {activation} activation in {took_s:.2} s: latency {latency} frames, note at frame {at}, first sound at {first:?}, peak {peak:.3}"
+                "{rate_hz} Hz, {activation} activation in {took_s:.2} s: latency {latency} frames, tail {tail_s:.1} s, note at frame {at}, first sound at {first:?}, peak {peak:.3}"
             );
             if rate_hz < 8_000.0 {
-                assert_eq!((first, latency), (None, 0), "an absurd rate plays silence");
+                assert_eq!(
+                    (first, latency, tail_s),
+                    (None, 0, 0.0),
+                    "an absurd rate plays silence"
+                );
             } else if rate_hz >= 44_100.0 {
                 assert_eq!(first, Some(at + latency));
+                // The concert keyboard's slowest partial, A0's first, rings 34 s to -60 dB.
+                assert!((40.0..=120.0).contains(&tail_s), "tail {tail_s} s");
             } else {
                 // The decimator's filter rings ahead of its delay: sound starts before it, within
                 // its length.
@@ -372,4 +381,49 @@ fn activates_at_every_rate() {
             host::deactivate(&mut plugin, active);
         }
     }
+}
+
+/// The automatable parameters move the sound without allocating: the gain by its decibels, the
+/// velocity curve by the strike; a change of keyboard asks the host for a restart, once.
+#[test]
+fn gain_curve_and_rebuild_parameters() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut plugin = instance();
+    let mut active = host::activate(&mut plugin, RATE_HZ);
+    let rms =
+        |x: &[f32]| (x.iter().map(|s| f64::from(*s).powi(2)).sum::<f64>() / x.len() as f64).sqrt();
+    let frames = RATE_HZ as usize / 5;
+    let mut heard = Vec::new();
+    for (gain_db, curve) in [(0.0, 1.0), (-12.0, 1.0), (0.0, 2.0)] {
+        let t0 = active.frame;
+        let script = [
+            (t0, Play::Param(GAIN_DB, gain_db)),
+            (t0, Play::Param(VELOCITY_CURVE, curve)),
+            // The gain settles within its ~5 ms smoothing before the note.
+            (t0 + 960, Play::On(60, 0.6)),
+        ];
+        let h = active.run(frames, &[100, 17, 512], &script, checked);
+        assert_eq!(h.allocations, 0, "process() allocated");
+        active.processor.reset();
+        heard.push(rms(&h.left[960..]));
+    }
+    let restarts = host::restarts(&mut plugin);
+    let t0 = active.frame;
+    let script = [
+        (t0, Play::Param(KEYBOARD, 1.0)),
+        (t0 + 5, Play::Param(KEYBOARD, 1.0)),
+    ];
+    let h = active.run(256, &[64], &script, checked);
+    assert_eq!(h.allocations, 0, "process() allocated");
+    let db = |a: f64| 20.0 * (a / heard[0]).log10();
+    println!(
+        "C4 at velocity 76: gain -12 dB -> {:+.2} dB; velocity curve 2 -> {:+.2} dB; keyboard changed: {} restart request(s)",
+        db(heard[1]),
+        db(heard[2]),
+        host::restarts(&mut plugin) - restarts
+    );
+    assert!((db(heard[1]) + 12.0).abs() < 0.05, "the gain");
+    assert!(db(heard[2]) < -3.0, "a steeper curve strikes softer");
+    assert_eq!(host::restarts(&mut plugin), restarts + 1);
+    host::deactivate(&mut plugin, active);
 }

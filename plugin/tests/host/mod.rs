@@ -174,6 +174,13 @@ pub fn latency(instance: &mut Instance) -> u32 {
         .map_or(0, |l| l.get(&handle))
 }
 
+/// The ring-out the active plugin reports as its tail (frames; `None`: no tail extension).
+pub fn tail(active: &mut Active) -> Option<u32> {
+    let handle = active.processor.plugin_handle();
+    let tail = handle.get_extension::<clack_extensions::tail::PluginTail>()?;
+    Some(tail.get(&handle).to_raw())
+}
+
 /// What [`Active::run`] heard: both channels and each block's status.
 pub struct Heard {
     pub left: Vec<f32>,

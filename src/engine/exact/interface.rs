@@ -82,6 +82,11 @@ pub(crate) struct BoardState {
 }
 
 impl SharedBoard {
+    /// Each shared mode's eigenvalue `lambda` (1/s; the padding's are zero).
+    pub(crate) fn lambda(&self) -> &[c64] {
+        &self.lambda
+    }
+
     /// The shared modes of `board` for the step `h`, no key on them yet.
     pub(crate) fn new(board: &SoundboardModes, h: f64) -> SharedBoard {
         let modes: Vec<usize> = (0..board.len())

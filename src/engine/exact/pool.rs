@@ -42,6 +42,21 @@ impl ExactPool {
         ExactKey::new(spec)
     }
 
+    /// How long the pool may ring once nothing drives it (s): the time the slowest of its keys'
+    /// modes (their dampers lifted) and the shared board's takes to fall by `fall_db`.
+    pub fn ring_out_s(&self, fall_db: f64) -> f64 {
+        let slowest_per_s = self
+            .keys
+            .iter()
+            .flat_map(|k| k.modes.lambda.iter())
+            .chain(self.board.lambda())
+            .map(|l| -l.re)
+            .filter(|&sigma| sigma > 0.0)
+            .fold(f64::INFINITY, f64::min);
+        // An amplitude e^{-sigma t} falls by 20 log10(e) sigma dB a second.
+        fall_db / (20.0 * std::f64::consts::LOG10_E * slowest_per_s)
+    }
+
     /// The pool for `specs` (one per key, in order with `keys`) with `voices` voices.
     pub fn from_keys(
         specs: &[UnisonSpec],
