@@ -237,7 +237,7 @@ fn play_aligned<E: VoicePool>(
     blocks: &[usize],
 ) -> Vec<f32> {
     let latency = LATENCY_FRAMES as usize;
-    let mut aligned = Aligned::new(synth, handle.events, handle.stats.clone(), 1);
+    let mut aligned = Aligned::new(synth, handle, 1);
     let mut out = vec![0f32; frames + latency];
     let (mut next, mut at) = (0, 0);
     for &len in blocks.iter().cycle() {
@@ -273,20 +273,15 @@ fn play_aligned<E: VoicePool>(
 fn any_host_blocks_sound_exactly_like_the_offline_render() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     for case in [few(), chord()] {
-        let Case {
-            name,
-            ref piano,
-            settings,
-            ref script,
-            blocks,
-        } = case;
-        let frames = blocks * 64;
+        let (name, script, settings) = (case.name, &case.script, case.settings);
+        let frames = case.blocks * 64;
+        let synth = || Synth::new(case.piano.clone(), settings, EVENT_QUEUE).unwrap();
         let offline = {
-            let (synth, handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
+            let (synth, handle) = synth();
             play(synth, handle, script, frames / 256, 256, false)
         };
         let by_64 = {
-            let (synth, handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
+            let (synth, handle) = synth();
             play(synth, handle, script, frames / 64, 64, false)
         };
         compare(
@@ -296,7 +291,7 @@ fn any_host_blocks_sound_exactly_like_the_offline_render() {
         );
         // Lengths from 1 to 4096 frames, none a multiple of the grid but 4096.
         let host_blocks = [1, 4096, 17, 333, 2, 1000, 95, 31, 33, 3];
-        let (synth, handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
+        let (synth, handle) = synth();
         let hosted = play_aligned(synth, handle, script, offline.len(), &host_blocks);
         compare(
             &format!("{name}, host blocks of {host_blocks:?} realigned vs the offline render"),

@@ -63,32 +63,34 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         let values = &shared.values;
         let built = [values.get(KEYBOARD), values.get(VOICES)];
         // Activation never fails: what cannot be built plays silence and says why, once.
-        let (engine, channels, latency) =
-            match start(values.keyboard(), config.sample_rate, values.voices()) {
-                Ok((engine, channels, latency)) => {
-                    *shared
-                        .silent_because
-                        .lock()
-                        .unwrap_or_else(|e| e.into_inner()) = None;
-                    (Some(engine), channels, latency)
+        let (engine, latency) = match start(values.keyboard(), config.sample_rate, values.voices())
+        {
+            Ok((engine, latency)) => {
+                *shared
+                    .silent_because
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner()) = None;
+                (Some(engine), latency)
+            }
+            Err(why) => {
+                let mut last = shared
+                    .silent_because
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner());
+                if last.as_deref() != Some(why.as_str()) {
+                    main_thread.warn(&why);
+                    *last = Some(why);
                 }
-                Err(why) => {
-                    let mut last = shared
-                        .silent_because
-                        .lock()
-                        .unwrap_or_else(|e| e.into_inner());
-                    if last.as_deref() != Some(why.as_str()) {
-                        main_thread.warn(&why);
-                        *last = Some(why);
-                    }
-                    (None, 2, 0)
-                }
-            };
+                (None, 0)
+            }
+        };
         shared.latency_frames.store(latency, Ordering::Relaxed);
         let tail_frames = engine.as_ref().map_or(0, |e| {
             let ring_out_s = e.synth().piano().instrument.ring_out_s(TAIL_FALL_DB);
             (ring_out_s * config.sample_rate).min(f64::from(i32::MAX - 1)) as u32
         });
+        // Silence is written to both channels of the port.
+        let channels = engine.as_ref().map_or(2, Aligned::channels);
         Ok(Processor {
             shared,
             host,
@@ -143,13 +145,13 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
     }
 }
 
-/// The engine for a host at `rate_hz`: its synth realigned to the host's blocks, its channels
-/// and the latency to report (host frames).
+/// The engine for a host at `rate_hz`: its synth realigned to the host's blocks, and the
+/// latency to report (host frames).
 fn start(
     keyboard: &'static str,
     rate_hz: f64,
     voices: usize,
-) -> Result<(Aligned<ExactPool>, usize, u32), String> {
+) -> Result<(Aligned<ExactPool>, u32), String> {
     let prepared = crate::prepare::prepare(keyboard, rate_hz, voices)?;
     let channels = usize::from(prepared.settings.channels);
     let (mut synth, handle) = Synth::new(prepared.piano, prepared.settings, EVENT_QUEUE)
@@ -160,8 +162,8 @@ fn start(
         synth.ask_real_time_priority();
     }
     let latency = LATENCY_FRAMES as f64 + synth.decimation_delay_frames();
-    let engine = Aligned::new(synth, handle.events, handle.stats, channels);
-    Ok((engine, channels, latency.round() as u32))
+    let engine = Aligned::new(synth, handle, channels);
+    Ok((engine, latency.round() as u32))
 }
 
 fn db_to_gain(db: f64) -> f32 {
@@ -169,7 +171,8 @@ fn db_to_gain(db: f64) -> f32 {
 }
 
 impl Processor<'_> {
-    /// Play the pedal parameters that changed outside the audio thread (a state load).
+    /// Play the pedal parameters that changed since they were last played (an automation event,
+    /// or a state load on the main thread).
     fn settle_pedals(&mut self) {
         for (i, &(index, pedal)) in PEDALS.iter().enumerate() {
             let down = self.shared.values.on(index);
@@ -225,10 +228,10 @@ impl Processor<'_> {
                 let index = e
                     .param_id()
                     .and_then(|id| crate::params::index_of(id.get()));
-                match index {
-                    Some(index) if e.pckn().matches_all() => self.set_param(index, e.value()),
-                    _ => None,
+                if let Some(index) = index.filter(|_| e.pckn().matches_all()) {
+                    self.set_param(index, e.value());
                 }
+                None
             }
             _ => None,
         };
@@ -237,19 +240,10 @@ impl Processor<'_> {
         }
     }
 
-    /// A parameter's new value; the pedal event it plays, if any.
-    fn set_param(&mut self, index: usize, value: f64) -> Option<Event> {
+    /// A parameter's new value: a pedal's is played at once, a rebuild's asks for a restart.
+    fn set_param(&mut self, index: usize, value: f64) {
         let value = self.shared.values.set(index, value);
-        if let Some(i) = PEDALS.iter().position(|&(p, _)| p == index) {
-            let down = value >= 0.5;
-            if down != self.pedals[i] {
-                self.pedals[i] = down;
-                return Some(Event::Pedal {
-                    pedal: PEDALS[i].1,
-                    down,
-                });
-            }
-        }
+        self.settle_pedals();
         let rebuilds = [KEYBOARD, VOICES].iter().position(|&p| p == index);
         if let Some(b) = rebuilds {
             if value != self.built[b] && !self.restart_asked {
@@ -258,7 +252,6 @@ impl Processor<'_> {
                 self.host.request_restart();
             }
         }
-        None
     }
 
     /// Frames `range` of the host's block: rendered, the gain applied, written to every channel.

@@ -137,10 +137,12 @@ fn the_built_plugin_plays_like_the_command_line() {
         let mut active = host::activate(&mut plugin, rate_hz);
         let latency = host::latency(&mut plugin) as u64;
         let at = 1234;
-        let heard = active.run(8192, &blocks, &[(at, Play::Midi([0x90, 69, 100]))], |f| {
-            f();
-            0
-        });
+        let heard = active.run(
+            8192,
+            &blocks,
+            &[(at, Play::Midi([0x90, 69, 100]))],
+            host::unchecked,
+        );
         let first = heard.left.iter().position(|&s| s != 0.0);
         println!("{rate_hz} Hz: note at frame {at}, first sound at {first:?} (latency {latency})");
         assert_eq!(first, Some((at + latency) as usize));
@@ -174,10 +176,7 @@ fn the_built_plugin_plays_like_the_command_line() {
         .iter()
         .map(|&(tick, data)| (tick * FRAMES_PER_TICK, Play::Midi(data)))
         .collect();
-    let heard = active.run(frames + latency, &blocks, &script, |f| {
-        f();
-        0
-    });
+    let heard = active.run(frames + latency, &blocks, &script, host::unchecked);
     host::deactivate(&mut plugin, active);
     for (c, name, side) in [(0, "left", &heard.left), (1, "right", &heard.right)] {
         let cli_side: Vec<f32> = rendered.iter().skip(c).step_by(2).copied().collect();

@@ -269,14 +269,9 @@ fn pedals_reset_and_sleep() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let mut plugin = instance();
     let mut active = host::activate(&mut plugin, RATE_HZ);
-    let rms =
-        |x: &[f32]| (x.iter().map(|s| f64::from(*s).powi(2)).sum::<f64>() / x.len() as f64).sqrt();
     let db = |a: f64, b: f64| 20.0 * (a / b).log10();
     let second = RATE_HZ as usize;
-    let quiet = active.run(second / 10, &[256], &[], |f| {
-        f();
-        0
-    });
+    let quiet = active.run(second / 10, &[256], &[], host::unchecked);
     println!(
         "before any note: {} of {} blocks asleep",
         quiet.sleeps,
@@ -294,16 +289,10 @@ fn pedals_reset_and_sleep() {
             (t0 + 1, Play::On(60, 0.7)),
             (t0 + second as u64 / 10, Play::Off(Some(60))),
         ];
-        let heard = active.run(second / 2, &[480], &script, |f| {
-            f();
-            0
-        });
+        let heard = active.run(second / 2, &[480], &script, host::unchecked);
         active.processor.reset();
         played.push(heard);
-        let after = active.run(1024, &[256], &[], |f| {
-            f();
-            0
-        });
+        let after = active.run(1024, &[256], &[], host::unchecked);
         let nz = first_sound(&after.left);
         println!(
             "after reset: first non-zero {nz:?}, peak {}",
@@ -316,8 +305,8 @@ fn pedals_reset_and_sleep() {
         println!("after reset: {} of 4 blocks asleep", after.sleeps);
         assert_eq!(after.sleeps, 4, "silent after a reset, the plugin sleeps");
     }
-    let late = |h: &host::Heard| rms(&h.left[second * 3 / 10..second / 2]);
-    let early = |h: &host::Heard| rms(&h.left[..second / 20]);
+    let late = |h: &host::Heard| host::rms(&h.left[second * 3 / 10..second / 2]);
+    let early = |h: &host::Heard| host::rms(&h.left[..second / 20]);
     let held = db(late(&played[1]), late(&played[0]));
     let soft = db(early(&played[2]), early(&played[0]));
     println!(
@@ -349,10 +338,7 @@ fn activates_at_every_rate() {
                 frames,
                 &[rate_hz as usize / 100 + 7],
                 &[(at as u64, Play::On(69, 0.8))],
-                |f| {
-                    f();
-                    0
-                },
+                host::unchecked,
             );
             let first = first_sound(&heard.left);
             let peak = heard.left.iter().fold(0f32, |m, s| m.max(s.abs()));
@@ -390,8 +376,6 @@ fn gain_curve_and_rebuild_parameters() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let mut plugin = instance();
     let mut active = host::activate(&mut plugin, RATE_HZ);
-    let rms =
-        |x: &[f32]| (x.iter().map(|s| f64::from(*s).powi(2)).sum::<f64>() / x.len() as f64).sqrt();
     let frames = RATE_HZ as usize / 5;
     let mut heard = Vec::new();
     for (gain_db, curve) in [(0.0, 1.0), (-12.0, 1.0), (0.0, 2.0)] {
@@ -405,7 +389,7 @@ fn gain_curve_and_rebuild_parameters() {
         let h = active.run(frames, &[100, 17, 512], &script, checked);
         assert_eq!(h.allocations, 0, "process() allocated");
         active.processor.reset();
-        heard.push(rms(&h.left[960..]));
+        heard.push(host::rms(&h.left[960..]));
     }
     let restarts = host::restarts(&mut plugin);
     let t0 = active.frame;

@@ -5,13 +5,11 @@
 //! compensates. Events are scheduled at the host's next frame; a cell is rendered only once every
 //! event inside it is known. Never allocates after [`Aligned::new`].
 
-use super::synth::{Scheduled, Stats, Synth, ALIGN_FRAMES};
+use super::synth::{Scheduled, Synth, SynthHandle, ALIGN_FRAMES};
 use crate::engine::VoicePool;
 use crate::midi::Event;
 use ringbuf::traits::Producer;
-use ringbuf::HeapProd;
 use std::sync::atomic::Ordering;
-use std::sync::Arc;
 
 /// How far the output lags the events: one cell of the grid.
 pub const LATENCY_FRAMES: u64 = ALIGN_FRAMES;
@@ -19,8 +17,8 @@ pub const LATENCY_FRAMES: u64 = ALIGN_FRAMES;
 /// A synth driven by a host's blocks (touched by the audio thread only).
 pub struct Aligned<E: VoicePool> {
     synth: Synth<E>,
-    events: HeapProd<Scheduled>,
-    stats: Arc<Stats>,
+    /// The synth's handle: its event queue and counters.
+    handle: SynthHandle<E>,
     channels: usize,
     /// The last cell rendered (interleaved), and how many of its frames the host has taken;
     /// before the first cell, a cell of silence (the latency).
@@ -31,19 +29,12 @@ pub struct Aligned<E: VoicePool> {
 }
 
 impl<E: VoicePool> Aligned<E> {
-    /// Play `synth` in `channels` interleaved channels, its events through `events` (the
-    /// producer of its handle).
-    pub fn new(
-        synth: Synth<E>,
-        events: HeapProd<Scheduled>,
-        stats: Arc<Stats>,
-        channels: usize,
-    ) -> Self {
+    /// Play `synth` in `channels` interleaved channels, its events through its `handle`.
+    pub fn new(synth: Synth<E>, handle: SynthHandle<E>, channels: usize) -> Self {
         let channels = channels.max(1);
         Aligned {
             synth,
-            events,
-            stats,
+            handle,
             channels,
             cell: vec![0.0; ALIGN_FRAMES as usize * channels],
             taken: 0,
@@ -56,14 +47,9 @@ impl<E: VoicePool> Aligned<E> {
         &self.synth
     }
 
-    /// The synth, to change its state outside the event path.
-    pub fn synth_mut(&mut self) -> &mut Synth<E> {
-        &mut self.synth
-    }
-
-    /// Output frames handed to the host so far.
-    pub fn handed(&self) -> u64 {
-        self.handed
+    /// Channels of the interleaved frames it hands out.
+    pub fn channels(&self) -> usize {
+        self.channels
     }
 
     /// Play `event` at the next frame the host will be handed (heard [`LATENCY_FRAMES`] later).
@@ -71,6 +57,7 @@ impl<E: VoicePool> Aligned<E> {
     /// counted in [`Stats::late_events`]; returns whether it was queued.
     pub fn schedule(&mut self, event: Event) -> bool {
         let queued = self
+            .handle
             .events
             .try_push(Scheduled {
                 frame: self.handed,
@@ -78,7 +65,10 @@ impl<E: VoicePool> Aligned<E> {
             })
             .is_ok();
         if !queued {
-            self.stats.late_events.fetch_add(1, Ordering::Relaxed);
+            self.handle
+                .stats
+                .late_events
+                .fetch_add(1, Ordering::Relaxed);
         }
         queued
     }

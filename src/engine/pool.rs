@@ -274,11 +274,7 @@ pub trait Policy {
             let e = self.voice_energy_j(k);
             let hammer_ok = self.hammer_finite(k);
             if self.state(k).active && (!e.is_finite() || e > bound_j || !hammer_ok) {
-                self.rest_strings(k);
-                self.set_hammer(k, 0.0, 0.0);
-                let s = self.state_mut(k);
-                (s.active, s.hammer_on, s.fade_left, s.pending) = (false, false, 0, None);
-                s.coupling = 1.0;
+                self.rest_voice(k);
                 reset += 1;
             }
         }
@@ -290,16 +286,22 @@ pub trait Policy {
         reset
     }
 
-    /// Everything at rest at once (a host's reset): every voice's strings and hammer still, out
-    /// of the simulation and its fade dropped (its key kept), and the board still.
+    /// Everything at rest at once (a host's reset): every voice as [`Policy::rest_voice`] leaves
+    /// it, and the board still.
     fn silence(&mut self) {
         for k in 0..self.n_voices() {
-            self.rest_strings(k);
-            self.set_hammer(k, 0.0, 0.0);
-            let s = self.state_mut(k);
-            (s.active, s.hammer_on, s.fade_left, s.pending) = (false, false, 0, None);
-            s.coupling = 1.0;
+            self.rest_voice(k);
         }
         self.rest_board();
+    }
+
+    /// Voice `k` at rest: its strings and hammer still, out of the simulation, its fade and the
+    /// key waiting for it dropped (its own key kept).
+    fn rest_voice(&mut self, k: usize) {
+        self.rest_strings(k);
+        self.set_hammer(k, 0.0, 0.0);
+        let s = self.state_mut(k);
+        (s.active, s.hammer_on, s.fade_left, s.pending) = (false, false, 0, None);
+        s.coupling = 1.0;
     }
 }

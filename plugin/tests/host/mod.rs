@@ -190,6 +190,17 @@ pub struct Heard {
     pub allocations: u32,
 }
 
+/// For [`Active::run`]: run `process` as it is, counting nothing.
+pub fn unchecked(f: &mut dyn FnMut()) -> u32 {
+    f();
+    0
+}
+
+/// Root mean square of a channel.
+pub fn rms(x: &[f32]) -> f64 {
+    (x.iter().map(|s| f64::from(*s).powi(2)).sum::<f64>() / x.len() as f64).sqrt()
+}
+
 /// An activated, processing instance.
 pub struct Active {
     pub processor: StartedPluginAudioProcessor<Host>,
