@@ -28,6 +28,7 @@
 //! the mid-plane, moves in the plane by `-lever ∇w` when the board rotates under it, which gives
 //! the L (along the strings) and P (across them) components (DESIGN.md §4).
 
+pub mod equivalent;
 pub mod radiation;
 
 use crate::engine::physics::soundboard::{BridgePoint, SoundboardModes};
@@ -132,6 +133,10 @@ pub struct ReductionSpec {
     pub f_max_hz: f64,
     /// Bridge points whose dominant modes are kept (the paper: C2).
     pub points: Vec<String>,
+    /// With listeners: the kept modes below this frequency (Hz) radiate what the full board's
+    /// modes radiate ([`equivalent`]); absent (and above it), each by its own Rayleigh integral.
+    #[serde(default)]
+    pub radiation_fit_below_hz: Option<f64>,
 }
 
 /// Name of key `k` (1 = A0 … 88 = C8), with flats so that names hold no `#`.
@@ -273,6 +278,10 @@ pub enum BoardError {
     MassMatrix,
     #[error("the eigensolver did not converge")]
     Eigen,
+    #[error(
+        "the fit of the reduced modes' radiation is singular (no listener or no bridge point?)"
+    )]
+    RadiationFit,
 }
 
 fn check(field: &str, value: f64, lo: f64, hi: f64) -> Result<(), BoardError> {
@@ -388,6 +397,21 @@ impl BoardSpec {
                 value: "[]".to_owned(),
                 allowed: "at least one key name".to_owned(),
             });
+        }
+        if let Some(f) = self.reduction.radiation_fit_below_hz {
+            check(
+                "reduction.radiation_fit_below_hz",
+                f,
+                self.reduction.f_min_hz,
+                self.reduction.f_max_hz,
+            )?;
+            if self.listeners.is_empty() {
+                return Err(BoardError::Range {
+                    field: "reduction.radiation_fit_below_hz".to_owned(),
+                    value: f.to_string(),
+                    allowed: "no value without a [[listeners]] entry".to_owned(),
+                });
+            }
         }
         if let Some(p) = self.reduction.points.iter().find(|p| !named(p)) {
             return Err(BoardError::Range {
@@ -699,6 +723,19 @@ pub fn reduce(
     f_min_hz: f64,
     f_max_hz: f64,
 ) -> SoundboardModes {
+    let keep = kept_modes(full, points, f_min_hz, f_max_hz);
+    let mut reduced = full.clone();
+    reduced.retain(|k| keep.binary_search(&k).is_ok());
+    reduced
+}
+
+/// The modes [`reduce`] keeps, ascending.
+pub fn kept_modes(
+    full: &SoundboardModes,
+    points: &[&str],
+    f_min_hz: f64,
+    f_max_hz: f64,
+) -> Vec<usize> {
     let n_bands = (12.0 * (f_max_hz / f_min_hz).log2()).ceil() as usize;
     let mut keep = vec![false; full.len()];
     for p in points.iter().filter_map(|name| full.point(name)) {
@@ -717,9 +754,7 @@ pub fn reduce(
             }
         }
     }
-    let mut reduced = full.clone();
-    reduced.retain(|k| keep[k]);
-    reduced
+    (0..full.len()).filter(|&k| keep[k]).collect()
 }
 
 /// Solve and reduce the board, with the header lines that say how the asset was made (the text
@@ -732,7 +767,12 @@ pub fn generate_asset(
     radiation::listen(spec, &mut solved);
     let r = &spec.reduction;
     let points: Vec<&str> = r.points.iter().map(String::as_str).collect();
-    let reduced = reduce(&solved.modes, &points, r.f_min_hz, r.f_max_hz);
+    let kept = kept_modes(&solved.modes, &points, r.f_min_hz, r.f_max_hz);
+    let mut reduced = solved.modes.clone();
+    reduced.retain(|k| kept.binary_search(&k).is_ok());
+    if let Some(below_hz) = r.radiation_fit_below_hz {
+        reduced.listeners = equivalent::fit(&solved.modes, &kept, below_hz)?;
+    }
     let p = &spec.plate;
     let mut header = vec![
         "unacorda reduced soundboard model (DESIGN.md §1.3, §4; format in src/config/asset.rs)".to_string(),
@@ -781,6 +821,11 @@ pub fn generate_asset(
             radiation::GRID_SPACING_M,
             radiation::SOUND_SPEED_M_S,
             at.join(", ")
+        ));
+    }
+    if let Some(below_hz) = r.radiation_fit_below_hz {
+        header.push(format!(
+            "kept modes below {below_hz} Hz radiate what the full board's modes radiate for forces at the bridges (least squares over frequency and every key, src/board/equivalent.rs); above, each by its own Rayleigh integral"
         ));
     }
     Ok((solved, reduced, header))
