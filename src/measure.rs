@@ -59,31 +59,40 @@ pub fn block_times_s<E: VoicePool>(
 ) -> (Vec<f64>, bool) {
     let period = Duration::try_from_secs_f64(frames as f64 / rate_hz).unwrap_or_default();
     synth.ask_real_time_priority();
-    let (mut times, granted) = std::thread::scope(|scope| {
+    std::thread::scope(|scope| {
         let measure = scope.spawn(|| {
             let priority = Promotion::default();
             priority.ask();
             let mut out = vec![0f32; frames];
-            let start = Instant::now();
-            let times: Vec<f64> = (1..=blocks as u32)
-                .map(|b| {
-                    let t = Instant::now();
-                    synth.process(&mut out, 1);
-                    let took = t.elapsed().as_secs_f64();
-                    let next = start + period * b;
-                    let now = Instant::now();
-                    if next > now {
-                        std::thread::sleep(next - now);
-                    }
-                    took
-                })
-                .collect();
+            let times = paced_times_s(period, blocks, || {
+                let t = Instant::now();
+                synth.process(&mut out, 1);
+                t.elapsed().as_secs_f64()
+            });
             (times, priority.granted())
         });
         measure.join().expect("the measuring thread does not panic")
-    });
+    })
+}
+
+/// Run `block` (which returns the seconds it took to compute) `blocks` times, one every
+/// `period` as a device asks for them (each started on time, or at once after one that ran
+/// late), and return the times, sorted.
+pub fn paced_times_s(period: Duration, blocks: usize, mut block: impl FnMut() -> f64) -> Vec<f64> {
+    let start = Instant::now();
+    let mut times: Vec<f64> = (1..=blocks as u32)
+        .map(|b| {
+            let took = block();
+            let next = start + period * b;
+            let now = Instant::now();
+            if next > now {
+                std::thread::sleep(next - now);
+            }
+            took
+        })
+        .collect();
     times.sort_by(f64::total_cmp);
-    (times, granted)
+    times
 }
 
 /// Percentile `p` (0–1) of sorted, non-empty `x`.

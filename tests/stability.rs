@@ -29,7 +29,7 @@ use unacorda::midi::file::{parse, single_track_bytes, TimedEvent};
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Keyboard;
 use unacorda::play::Piano;
-use unacorda::render::render_midi_into;
+use unacorda::render::render_midi_kept;
 
 const CHORD: [&str; 9] = ["C1", "C2", "C4", "E4", "G4", "C5", "E5", "G5", "C6"];
 
@@ -200,7 +200,6 @@ fn chord(release_s: f64, pedal_up_s: Option<f64>) -> Vec<TimedEvent> {
 /// Level (dBFS) of every quarter second of `render --midi`'s output on engine `E`.
 fn quarter_seconds<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> Vec<f64> {
     let scaling = Scaling::resolve("paper").unwrap();
-    let mut samples = Vec::new();
     let keyboard = Keyboard {
         scaling: &scaling,
         cache: None,
@@ -210,19 +209,8 @@ fn quarter_seconds<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> Vec<f64>
         voices: 32,
         cores: 1,
     };
-    let r = render_midi_into::<E>(
-        keyboard,
-        events,
-        offline,
-        |_| {},
-        None,
-        |block| {
-            samples.extend_from_slice(block);
-            std::ops::ControlFlow::Continue(())
-        },
-    )
-    .unwrap();
-    samples
+    let r = render_midi_kept::<E>(keyboard, events, offline, |_| {}, None).unwrap();
+    r.samples
         .chunks((0.25 * r.rate_hz) as usize)
         .map(|w| {
             let ms = w.iter().map(|&x| f64::from(x).powi(2)).sum::<f64>() / w.len() as f64;

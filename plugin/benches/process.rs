@@ -11,6 +11,7 @@ use clack_host::prelude::PluginEntry;
 use clack_plugin::entry::SinglePluginEntry;
 use host::Play;
 use std::time::{Duration, Instant};
+use unacorda::measure::{paced_times_s, percentile};
 
 const RATE_HZ: f64 = 48_000.0;
 const BLOCK: usize = 64;
@@ -35,24 +36,18 @@ fn main() {
         let warm = voices * 48 + (0.05 * RATE_HZ) as usize;
         active.run(warm, &[BLOCK], &script, host::unchecked);
         let blocks = (seconds / deadline_s) as usize;
-        let mut times = Vec::with_capacity(blocks);
         let period = Duration::from_secs_f64(deadline_s);
-        let start = Instant::now();
-        for b in 1..=blocks as u32 {
+        let times = paced_times_s(period, blocks, || {
+            let mut took = 0.0;
             active.run(BLOCK, &[BLOCK], &[], |f| {
                 let t = Instant::now();
                 f();
-                times.push(t.elapsed().as_secs_f64());
+                took = t.elapsed().as_secs_f64();
                 0
             });
-            let next = start + period * b;
-            let now = Instant::now();
-            if next > now {
-                std::thread::sleep(next - now);
-            }
-        }
-        times.sort_by(f64::total_cmp);
-        let at = |p: f64| times[((times.len() - 1) as f64 * p).round() as usize] / deadline_s;
+            took
+        });
+        let at = |p: f64| percentile(&times, p) / deadline_s;
         println!(
             "plugin process(), {voices} voices under the pedal, {blocks} blocks of {BLOCK} frames at 48 kHz: median {:.2} x the block's duration, p99.9 {:.2} x",
             at(0.5),

@@ -9,7 +9,6 @@ use assert_no_alloc::{assert_no_alloc, violation_count, AllocDisabler};
 use clack_host::prelude::PluginEntry;
 use clack_plugin::entry::SinglePluginEntry;
 use host::{Instance, Play};
-use std::ops::ControlFlow;
 use unacorda::engine::exact::ExactPool;
 use unacorda::midi::file::TimedEvent;
 use unacorda::midi::{Event, Pedal};
@@ -111,28 +110,18 @@ fn offline(events: &[TimedEvent], tail_s: f64) -> (Vec<f32>, Vec<f32>) {
         scaling: &scaling,
         cache: cache.as_ref(),
     };
-    let mut samples = Vec::new();
     let offline = unacorda::render::Offline {
         tail_s,
         voices: unacorda::play::DEFAULT_VOICES,
         cores: 1,
     };
-    let r = unacorda::render::render_midi_into::<ExactPool>(
-        keyboard,
-        events,
-        offline,
-        |_| {},
-        None,
-        |block| {
-            samples.extend_from_slice(block);
-            ControlFlow::Continue(())
-        },
-    )
-    .unwrap();
+    let r =
+        unacorda::render::render_midi_kept::<ExactPool>(keyboard, events, offline, |_| {}, None)
+            .unwrap();
     assert_eq!(r.channels, 2);
     (
-        samples.iter().step_by(2).copied().collect(),
-        samples.iter().skip(1).step_by(2).copied().collect(),
+        r.samples.iter().step_by(2).copied().collect(),
+        r.samples.iter().skip(1).step_by(2).copied().collect(),
     )
 }
 

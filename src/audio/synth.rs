@@ -115,13 +115,19 @@ pub struct Synth<E: VoicePool> {
     /// (a run is at most [`ALIGN_FRAMES`] long).
     volume: Vec<[f64; CHANNELS]>,
     helper: Option<Helper>,
-    /// The growth guard: the pool's energy when nothing last began to drive it, which voices were
-    /// sounding then (a hash), the periods in a row its energy has stood above that, and whether
-    /// something drove the pool when this period began.
+    /// The growth guard's memory, and whether something drove the pool when this period began.
+    growth: Growth,
+    driven_at_start: bool,
+}
+
+/// What the growth guard ([`GROWTH_PERIODS`]) remembers: the pool's energy when nothing last
+/// began to drive it, which voices were sounding then (a hash), and the periods in a row its
+/// energy has stood above that. The default is a pool at rest.
+#[derive(Debug, Clone, Copy, Default)]
+struct Growth {
     reference_j: f64,
     sounding: u64,
     rising_periods: u32,
-    driven_at_start: bool,
 }
 
 /// The other threads' side: schedule events, send commands, read the clock and the counters.
@@ -183,9 +189,7 @@ impl<E: VoicePool> Synth<E> {
             running: true,
             volume: vec![[0.0; CHANNELS]; ALIGN_FRAMES as usize * ratio as usize],
             helper: None,
-            reference_j: 0.0,
-            sounding: 0,
-            rising_periods: 0,
+            growth: Growth::default(),
             driven_at_start: false,
         };
         let handle = SynthHandle {
@@ -261,7 +265,7 @@ impl<E: VoicePool> Synth<E> {
         // Strings and board at rest radiate nothing.
         self.radiation.iter_mut().for_each(|r| r.restart(0.0));
         self.decimator.reset();
-        (self.reference_j, self.sounding, self.rising_periods) = (0.0, 0, 0);
+        self.growth = Growth::default();
     }
 
     /// Give the engine a second core from now on: a helper thread that takes half of each of
@@ -303,7 +307,7 @@ impl<E: VoicePool> Synth<E> {
                 Control::Replace(new) => {
                     let old = std::mem::replace(&mut self.piano, new);
                     self.radiation.iter_mut().for_each(|r| r.restart(0.0));
-                    (self.reference_j, self.sounding, self.rising_periods) = (0.0, 0, 0);
+                    self.growth = Growth::default();
                     if let Err(TrySendError::Full(old) | TrySendError::Disconnected(old)) =
                         self.returned.try_send(old)
                     {
@@ -437,20 +441,26 @@ impl<E: VoicePool> Synth<E> {
             .fold(0xcbf2_9ce4_8422_2325u64, |h, k| {
                 (h ^ k as u64).wrapping_mul(0x100_0000_01b3)
             });
-        if driven || inst.is_driven() || sounding != self.sounding {
-            (self.reference_j, self.sounding, self.rising_periods) = (e, sounding, 0);
+        let g = &mut self.growth;
+        if driven || inst.is_driven() || sounding != g.sounding {
+            *g = Growth {
+                reference_j: e,
+                sounding,
+                rising_periods: 0,
+            };
             return;
         }
-        let above = e > self.reference_j * (1.0 + GROWTH_TOLERANCE) && e > self.silence_j;
-        self.rising_periods = if above { self.rising_periods + 1 } else { 0 };
-        if self.rising_periods >= GROWTH_PERIODS {
+        let above = e > g.reference_j * (1.0 + GROWTH_TOLERANCE) && e > self.silence_j;
+        g.rising_periods = if above { g.rising_periods + 1 } else { 0 };
+        if g.rising_periods >= GROWTH_PERIODS {
             // Every voice holding energy, and the board.
             let n = inst.reset_runaways(0.0);
             self.restart_radiation();
             self.decimator.reset();
             self.stats.resets.fetch_add(n as u64, Ordering::Relaxed);
             self.stats.growth_resets.fetch_add(1, Ordering::Relaxed);
-            (self.reference_j, self.rising_periods) = (0.0, 0);
+            // The same voices stay; their energy is measured again from rest.
+            (self.growth.reference_j, self.growth.rising_periods) = (0.0, 0);
         }
     }
 

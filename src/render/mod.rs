@@ -5,7 +5,7 @@ pub mod performance;
 pub mod strike;
 
 pub use performance::{
-    render_midi, render_midi_into, render_midi_with, Offline, Performance, RenderError, Rendered,
-    OFFLINE_BLOCK,
+    render_midi, render_midi_into, render_midi_kept, render_midi_with, Offline, Performance,
+    RenderError, Rendered, OFFLINE_BLOCK,
 };
 pub use strike::{simulate, simulate_with, Frame, Recording, Renderer};

@@ -80,14 +80,12 @@ pub fn render_midi_with(
     progress: impl FnMut(f64),
     tap: impl FnMut(&Rk4Pool, u64),
 ) -> Result<Performance, RenderError> {
-    let mut samples = Vec::new();
-    let keyboard = crate::play::Keyboard {
-        scaling,
-        cache: None,
-    };
     let mut tap = tap;
-    let r = render_midi_into::<Rk4Pool>(
-        keyboard,
+    render_midi_kept::<Rk4Pool>(
+        crate::play::Keyboard {
+            scaling,
+            cache: None,
+        },
         events,
         Offline {
             tail_s,
@@ -96,11 +94,22 @@ pub fn render_midi_with(
         },
         progress,
         Some(&mut tap),
-        |block| {
-            samples.extend_from_slice(block);
-            ControlFlow::Continue(())
-        },
-    )?;
+    )
+}
+
+/// [`render_midi_into`] with the whole performance kept in memory, on the engine `E`.
+pub fn render_midi_kept<E: crate::engine::VoicePool>(
+    keyboard: crate::play::Keyboard<'_>,
+    events: &[crate::midi::file::TimedEvent],
+    offline: Offline,
+    progress: impl FnMut(f64),
+    tap: Option<Tap<'_, E>>,
+) -> Result<Performance, RenderError> {
+    let mut samples = Vec::new();
+    let r = render_midi_into::<E>(keyboard, events, offline, progress, tap, |block| {
+        samples.extend_from_slice(block);
+        ControlFlow::Continue(())
+    })?;
     Ok(Performance {
         rate_hz: r.rate_hz,
         channels: r.channels,
