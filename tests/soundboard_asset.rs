@@ -156,30 +156,32 @@ fn the_reduced_model_follows_the_full_one_at_c2() {
     assert!(worst_tt < 1.5);
 }
 
-/// A key's sound at a listener through `board`: the transfer from a force at its bridge point
-/// (T) to the pressure, at its partials `n f0` below `below_hz`, partial `n` weighing `1/n` (a
-/// struck string's force on the bridge falls so). Returns each partial's transfer.
-fn partials_heard(
-    board: &SoundboardModes,
-    key: usize,
-    listener: usize,
-    below_hz: f64,
-) -> Vec<(f64, (f64, f64))> {
+/// What `board` radiates to `listener`: the weights the engines read
+/// ([`SoundboardModes::radiation_weights`]) with that listener heard.
+fn weights_at(board: &SoundboardModes, listener: usize) -> [Vec<f64>; 2] {
     let mut b = board.clone();
     b.heard = [Some(listener), Some(listener)];
-    let point = b
-        .points
-        .iter()
-        .position(|p| p.name == key_name(key))
-        .unwrap();
-    let weights = b.radiation_weights(0);
+    b.radiation_weights(0)
+}
+
+/// A key's sound at a listener through `board` radiating with `weights` ([`weights_at`]): the
+/// transfer from a force at its bridge point (T) to the pressure, at its partials `n f0` below
+/// `below_hz`, partial `n` weighing `1/n` (a struck string's force on the bridge falls so).
+/// Returns each partial's transfer.
+fn partials_heard(
+    board: &SoundboardModes,
+    weights: &[Vec<f64>; 2],
+    key: usize,
+    below_hz: f64,
+) -> Vec<(f64, (f64, f64))> {
+    let shape = &board.point(&key_name(key)).unwrap().shape[0];
     let f0 = 440.0 * 2f64.powf((key as f64 - 49.0) / 12.0);
     (1..)
         .map(|n| n as f64 * f0)
         .take_while(|&f| f < below_hz)
         .enumerate()
         .map(|(i, f)| {
-            let (re, im) = pressure_per_force(&b, &weights, &b.points[point].shape[0], f);
+            let (re, im) = pressure_per_force(board, weights, shape, f);
             (f, (re / (i + 1) as f64, im / (i + 1) as f64))
         })
         .collect()
@@ -226,23 +228,27 @@ fn the_kept_modes_radiate_as_the_full_board() {
         listener("bass_close"),
         listener("treble_close"),
     );
+    // Each board's weights at the three listeners, in that order.
+    let boards =
+        [full, &alone, fitted].map(|b| (b, [above, left, right].map(|l| weights_at(b, l))));
     let below_hz = g.spec.reduction.radiation_fit_below_hz.unwrap();
     let mut worst = [(0.0f64, 0); 2];
     let mut squares = [0.0; 2];
     let mut correlations: [Vec<f64>; 3] = Default::default();
     // Keys with a partial below the fit's limit: A0 … F#6.
     let keys = (1..=88).filter(|&k| 440.0 * 2f64.powf((k as f64 - 49.0) / 12.0) < below_hz);
-    println!("level of a key's partials below {below_hz} Hz heard, re the full board (dB): at `above`, by the pair (mean power)");
+    println!("level of a key's partials below {below_hz} Hz heard, re the full board (dB): at `above`, by the pair (the mean of its two channels' levels)");
     println!("  key   full @above   alone   fitted |  full pair  alone   fitted");
     for key in keys.clone() {
-        let heard = |b: &SoundboardModes, l: usize| partials_heard(b, key, l, below_hz);
-        let mut row = Vec::new();
-        for l in [above, left, right] {
-            let f = level(&heard(full, l));
-            let a = level(&heard(&alone, l));
-            let e = level(&heard(fitted, l));
-            row.push((f, a - f, e - f));
-        }
+        let heard = |(b, w): &(&SoundboardModes, [[Vec<f64>; 2]; 3]), l: usize, below_hz: f64| {
+            partials_heard(b, &w[l], key, below_hz)
+        };
+        let row: Vec<(f64, f64, f64)> = (0..3)
+            .map(|l| {
+                let [f, a, e] = boards.each_ref().map(|b| level(&heard(b, l, below_hz)));
+                (f, a - f, e - f)
+            })
+            .collect();
         for (which, dev) in [row[0].1, row[0].2].into_iter().enumerate() {
             squares[which] += dev * dev;
             if dev.abs() > worst[which].0.abs() {
@@ -262,9 +268,9 @@ fn the_kept_modes_radiate_as_the_full_board() {
             );
         }
         if (40..=64).contains(&key) {
-            let upper = |b: &SoundboardModes, l: usize| partials_heard(b, key, l, 7000.0);
-            for (c, b) in [full, &alone, fitted].into_iter().enumerate() {
-                correlations[c].push(correlation(&upper(b, left), &upper(b, right)).abs());
+            for (c, b) in boards.iter().enumerate() {
+                let (l, r) = (heard(b, 1, 7000.0), heard(b, 2, 7000.0));
+                correlations[c].push(correlation(&l, &r).abs());
             }
         }
     }

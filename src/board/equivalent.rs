@@ -49,7 +49,10 @@ pub fn fit(
     let (low, high): (Vec<usize>, Vec<usize>) =
         kept.iter().partition(|&&m| full.freq_hz[m] < below_hz);
     let grid = grid(f_min_hz, below_hz);
-    let all: Vec<usize> = (0..full.len()).collect();
+    // The target: the full board without the kept modes that radiate by their own integrals.
+    let heard: Vec<usize> = (0..full.len())
+        .filter(|m| high.binary_search(m).is_err())
+        .collect();
     let mut listeners = Vec::new();
     for l in 0..full.listeners.len() {
         let own: Vec<C> = full.listeners[l]
@@ -64,10 +67,7 @@ pub fn fit(
                 .flat_map(|d| grid.iter().map(move |&w| (d, w)))
                 .map(|(d, w)| {
                     let shape = &p.shape[d];
-                    let target = sub(
-                        transfer(full, &all, shape, &own, w),
-                        transfer(full, &high, shape, &own, w),
-                    );
+                    let target = transfer(full, &heard, shape, &own, w);
                     (columns(full, &low, shape, w), target)
                 })
                 .collect();
@@ -119,20 +119,15 @@ pub fn pressure_per_force(
     shape: &[f64],
     freq_hz: f64,
 ) -> (f64, f64) {
-    let w = 2.0 * PI * freq_hz;
-    (0..board.len()).fold((0.0, 0.0), |acc, m| {
-        // a_m qdd_m is a_m times the unit of Re D; b_m qd_m is -b_m / w_m times that of Im D.
-        let (ur, ui) = unit(board, m, w);
-        let (a, b) = (
-            weights[0][m],
-            -weights[1][m] / (2.0 * PI * board.freq_hz[m]),
-        );
-        let s = shape[m];
-        (
-            acc.0 + s * (a * ur.0 + b * ui.0),
-            acc.1 + s * (a * ur.1 + b * ui.1),
-        )
-    })
+    // a_m qdd_m is a_m times the unit of Re D; b_m qd_m is -b_m / w_m times that of Im D.
+    let d: Vec<C> = (0..board.len())
+        .map(|m| {
+            let wm = 2.0 * PI * board.freq_hz[m];
+            (weights[0][m], -weights[1][m] / wm)
+        })
+        .collect();
+    let all: Vec<usize> = (0..board.len()).collect();
+    transfer(board, &all, shape, &d, 2.0 * PI * freq_hz)
 }
 
 /// The transfer through `modes` with Rayleigh integrals `d` per mode of `full`, at shape
@@ -159,10 +154,6 @@ fn columns(full: &SoundboardModes, modes: &[usize], shape: &[f64], w: f64) -> Ve
             [(s * ur.0, s * ur.1), (s * ui.0, s * ui.1)]
         })
         .collect()
-}
-
-fn sub(x: C, y: C) -> C {
-    (x.0 - y.0, x.1 - y.1)
 }
 
 fn abs2(x: C) -> f64 {

@@ -723,9 +723,13 @@ pub fn reduce(
     f_min_hz: f64,
     f_max_hz: f64,
 ) -> SoundboardModes {
-    let keep = kept_modes(full, points, f_min_hz, f_max_hz);
+    kept_only(full, &kept_modes(full, points, f_min_hz, f_max_hz))
+}
+
+/// `full` with its modes `kept` (ascending) alone.
+fn kept_only(full: &SoundboardModes, kept: &[usize]) -> SoundboardModes {
     let mut reduced = full.clone();
-    reduced.retain(|k| keep.binary_search(&k).is_ok());
+    reduced.retain(|k| kept.binary_search(&k).is_ok());
     reduced
 }
 
@@ -768,8 +772,7 @@ pub fn generate_asset(
     let r = &spec.reduction;
     let points: Vec<&str> = r.points.iter().map(String::as_str).collect();
     let kept = kept_modes(&solved.modes, &points, r.f_min_hz, r.f_max_hz);
-    let mut reduced = solved.modes.clone();
-    reduced.retain(|k| kept.binary_search(&k).is_ok());
+    let mut reduced = kept_only(&solved.modes, &kept);
     if let Some(below_hz) = r.radiation_fit_below_hz {
         reduced.listeners = equivalent::fit(&solved.modes, &kept, below_hz)?;
     }
