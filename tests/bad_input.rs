@@ -115,6 +115,12 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
     assert!(e.contains("`voicing.felt_exponent` = 9 (key 1)") && e.contains("[1, 6]"));
     let e = keyboard_error("bad_keyboard_full_scale.toml");
     assert!(e.contains("`full_scale_pa` = 1000000000") && e.contains("[1e-6, 1e4] Pa"));
+    let e = keyboard_error("bad_keyboard_bass_octave_key.toml");
+    assert!(e.contains("`bass_octave_from_key` = 49") && e.contains("1 (A0) to 36 (Ab3)"));
+    let e = keyboard_error("bad_keyboard_bass_octave.toml");
+    assert!(
+        e.contains("bad_keyboard_bass_octave.toml") && e.contains("line 4") && e.contains("`10:5`")
+    );
     // A listener the asset does not have, alone or in a stereo pair, is refused when the first
     // key is made, naming the asset's.
     for (file, field) in [

@@ -54,6 +54,11 @@ pub struct Scaling {
     pub dampers: Vec<DamperAnchor>,
     pub voicing: Vec<VoicingAnchor>,
     pub tuning: Tuning,
+    /// The octave a stretched tuning reaches in the bass (`bass_octave`).
+    pub bass_octave: BassOctave,
+    /// The key from which down the bass octaves are `bass_octave`'s (`bass_octave_from_key`,
+    /// 1–36); between it and the temperament they blend from 2:1.
+    pub bass_octave_from_key: usize,
     /// The soundboard asset's listener every key radiates to (`radiation.listener`); `None`: the
     /// base preset's.
     pub listener: Option<String>,
@@ -77,7 +82,43 @@ pub enum Tuning {
     Stretched,
 }
 
-/// The keys a stretched tuning leaves in equal temperament (A3–A4), from which it sets octaves.
+/// The octave a stretched tuning reaches in the bass: the lower key's partial that is tuned
+/// beatless against the upper key's half-numbered one. The wider the pair, the more the strings'
+/// stiffness counts and the wider the octave. Tuners choose the interval per register and blend
+/// between them (docs/realism-sources.md §3): from the temperament's 2:1 to this one.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+pub enum BassOctave {
+    #[default]
+    #[serde(rename = "4:2")]
+    FourTwo,
+    #[serde(rename = "6:3")]
+    SixThree,
+    #[serde(rename = "8:4")]
+    EightFour,
+    #[serde(rename = "10:5")]
+    TenFive,
+}
+
+impl BassOctave {
+    /// The lower key's partial number (the upper key's is half of it).
+    pub fn lower_partial(self) -> f64 {
+        match self {
+            BassOctave::FourTwo => 4.0,
+            BassOctave::SixThree => 6.0,
+            BassOctave::EightFour => 8.0,
+            BassOctave::TenFive => 10.0,
+        }
+    }
+}
+
+/// `bass_octave_from_key` when a keyboard gives none: E2.
+const BASS_OCTAVE_FROM_KEY: usize = 20;
+
+/// How many keys either side the bass's inharmonicity is averaged over for a stretched tuning
+/// ([`LoadedScaling::tuning_inharmonicity`]): an octave's span.
+const TUNING_B_WINDOW_KEYS: usize = 6;
+
+/// The temperament octave A3–A4, from which a stretched tuning sets octaves outwards.
 const TEMPERAMENT_OCTAVE: std::ops::RangeInclusive<usize> = 37..=49;
 
 /// A scaling file as written.
@@ -104,6 +145,10 @@ struct ScalingFile {
     voicing: Vec<VoicingAnchor>,
     /// `equal` (the default) or `stretched`; inherited from the base keyboard when absent.
     tuning: Option<Tuning>,
+    /// `4:2` (the default), `6:3`, `8:4` or `10:5`; inherited from the base keyboard when absent.
+    bass_octave: Option<BassOctave>,
+    /// 1–36 (default 20, E2); inherited from the base keyboard when absent.
+    bass_octave_from_key: Option<usize>,
 }
 
 /// String settings of the base preset that a keyboard replaces on every key.
@@ -330,6 +375,14 @@ impl Scaling {
                 .tuning
                 .or_else(|| base.as_ref().map(|b| b.tuning))
                 .unwrap_or_default(),
+            bass_octave: file
+                .bass_octave
+                .or_else(|| base.as_ref().map(|b| b.bass_octave))
+                .unwrap_or_default(),
+            bass_octave_from_key: file
+                .bass_octave_from_key
+                .or_else(|| base.as_ref().map(|b| b.bass_octave_from_key))
+                .unwrap_or(BASS_OCTAVE_FROM_KEY),
             listener: file
                 .listener
                 .or_else(|| base.as_ref().and_then(|b| b.listener.clone())),
@@ -376,6 +429,14 @@ impl Scaling {
                     ),
                 ));
             }
+        }
+        let below_temperament = 1..*TEMPERAMENT_OCTAVE.start();
+        if !below_temperament.contains(&self.bass_octave_from_key) {
+            return Err(bad(
+                "bass_octave_from_key",
+                self.bass_octave_from_key.to_string(),
+                "a key below the temperament, 1 (A0) to 36 (Ab3)",
+            ));
         }
         // Points along the keyboard (anchors, losses, dampers, voicing) run in increasing keys
         // from A0 to C8.
@@ -650,25 +711,63 @@ impl LoadedScaling {
     }
 
     /// The stretch of `key`'s tuning against equal temperament (cents): 0 for `equal`; for
-    /// `stretched`, the octaves a tuner sets from the temperament octave A3–A4 outwards on the
-    /// keys' own inharmonicity (Eq. 2's `B` of each speaking length): above, each key's first
-    /// partial on the second of the key an octave below (2:1); below, each key's fourth partial
-    /// on the second of the key an octave above (4:2). With `f_n = n f0 sqrt(1 + B n^2)` an
-    /// octave up adds `600 log2((1 + 4B) / (1 + B))` of the lower key, an octave down
-    /// `600 log2((1 + 4B') (1 + B) / ((1 + B') (1 + 16 B)))`, `B'` the upper key's.
+    /// `stretched`, what a tuner sets from the strings' inharmonicity (Eq. 2's `B` of each speaking
+    /// length, partial `n` at `n f1 sqrt((1 + B n^2) / (1 + B))`, `f1` the first), octave by
+    /// octave from A4 outwards:
+    /// - the temperament octave A3–A4 a 2:1 octave, its semitones equal;
+    /// - above, each key's first partial on the second of the key an octave below (2:1);
+    /// - below, each key's partial `2m` on the partial `m` of the key an octave above, the
+    ///   octave's width blended linearly in key from a 2:1 octave's just below the temperament to
+    ///   a `bass_octave` one's from `bass_octave_from_key` down,
+    ///
+    /// on the [`tuning_inharmonicity`](Self::tuning_inharmonicity) of the bass and temperament.
+    /// The widths meet at the temperament's two ends, so that no semitone there is off by more
+    /// than the stretch's own slope.
     pub fn stretch_cents(&self, key: usize) -> f64 {
-        if self.scaling.tuning == Tuning::Equal || (TEMPERAMENT_OCTAVE).contains(&key) {
+        if self.scaling.tuning == Tuning::Equal {
             return 0.0;
         }
-        let b = |k: usize| self.strings_of(k).nominal_string().speaking_inharmonicity();
-        let octave = |b: f64| 600.0 * ((1.0 + 4.0 * b) / (1.0 + b)).log2();
-        if key > *TEMPERAMENT_OCTAVE.end() {
-            self.stretch_cents(key - 12) + octave(b(key - 12))
-        } else {
-            let (here, above) = (b(key), b(key + 12));
-            self.stretch_cents(key + 12) + octave(above)
-                - 600.0 * ((1.0 + 16.0 * here) / (1.0 + here)).log2()
+        // Partial n's offset from n times the first partial (cents).
+        let partial = |b: f64, n: f64| 600.0 * ((1.0 + n * n * b) / (1.0 + b)).log2();
+        let (a3, a4) = (*TEMPERAMENT_OCTAVE.start(), *TEMPERAMENT_OCTAVE.end());
+        let b = |k: usize| self.tuning_inharmonicity(k);
+        // An octave below `k + 12` with the lower key's partial `2m` on the upper's `m`.
+        let octave_below = |k: usize, m: f64| partial(b(k), 2.0 * m) - partial(b(k + 12), m);
+        if key > a4 {
+            return self.stretch_cents(key - 12) + partial(b(key - 12), 2.0);
         }
+        if key >= a3 {
+            return -octave_below(a3, 1.0) * (a4 - key) as f64 / 12.0;
+        }
+        let bass = self.scaling.bass_octave.lower_partial() / 2.0;
+        let from = self.scaling.bass_octave_from_key;
+        // 0 just below the temperament, 1 from `from` down.
+        let t = match from + 1 < a3 {
+            true => ((a3 - 1 - key) as f64 / (a3 - 1 - from) as f64).min(1.0),
+            false => 1.0,
+        };
+        self.stretch_cents(key + 12)
+            - (1.0 - t) * octave_below(key, 1.0)
+            - t * octave_below(key, bass)
+    }
+
+    /// The `B` of `key`'s speaking length (Eq. 2) as a stretched tuning reads it: the strings' own
+    /// above the temperament; in the bass and the temperament (A0–A4) the geometric mean of the
+    /// strings' own over [`TUNING_B_WINDOW_KEYS`] keys either side (fewer at A0 and A4), as an
+    /// electronic tuner models a scale's inharmonicity from the notes it measured rather than
+    /// following each one (TuneLab, docs/realism-sources.md §3). The wound strings' `B` jumps where
+    /// the plain strings begin (1.1e-4 to 1.9e-4 at G2 on the concert keyboard), and octaves
+    /// beatless on each string's own would put a semitone 2–3 cents narrow there.
+    pub fn tuning_inharmonicity(&self, key: usize) -> f64 {
+        let own = |k: usize| self.strings_of(k).nominal_string().speaking_inharmonicity();
+        let a4 = *TEMPERAMENT_OCTAVE.end();
+        if key > a4 {
+            return own(key);
+        }
+        let window =
+            key.saturating_sub(TUNING_B_WINDOW_KEYS).max(1)..=(key + TUNING_B_WINDOW_KEYS).min(a4);
+        let n = window.clone().count() as f64;
+        (window.map(|k| own(k).ln()).sum::<f64>() / n).exp()
     }
 
     /// The pitch `key` is tuned to (Hz): equal temperament (A4 = 440 Hz) and the stretch.
