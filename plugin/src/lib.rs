@@ -8,6 +8,7 @@
 //! - [`params`]: the parameters and their shared values,
 //! - [`state`]: the saved state (versioned text, refused when foreign or newer),
 //! - [`prepare`]: the 88 keys prepared once per process, shared by instances and activations,
+//! - [`rebuild`]: a new keyboard or pool size built in the background while the old one plays,
 //! - [`processor`]: the audio thread's side.
 
 use clack_extensions::audio_ports::{
@@ -38,6 +39,7 @@ use std::sync::Mutex;
 pub mod params;
 pub mod prepare;
 pub mod processor;
+pub mod rebuild;
 pub mod state;
 
 use params::{Values, KEYBOARD, KEYBOARDS, PARAMS};
@@ -57,6 +59,9 @@ pub struct Shared {
     pub latency_frames: AtomicU32,
     /// Why the last activation plays silent, if it does (main thread).
     pub silent_because: Mutex<Option<String>>,
+    /// The background build a change of keyboard or pool size asks for (both threads and the
+    /// build thread; [`rebuild::Rebuild`] says which touches what).
+    pub rebuild: rebuild::Rebuild,
 }
 
 impl PluginShared<'_> for Shared {}
@@ -67,7 +72,22 @@ pub struct MainThread<'a> {
     host: HostMainThreadHandle<'a>,
 }
 
-impl<'a> PluginMainThread<'a, Shared> for MainThread<'a> {}
+impl<'a> PluginMainThread<'a, Shared> for MainThread<'a> {
+    /// The audio thread asked for a piano to be built: start it in the background.
+    fn on_main_thread(&self) {
+        let values = &self.shared.values;
+        self.shared
+            .rebuild
+            .start_if_wanted(values.keyboard(), values.voices());
+    }
+}
+
+impl Drop for MainThread<'_> {
+    /// No build thread outlives the instance (nor, so, the plugin's code).
+    fn drop(&mut self) {
+        self.shared.rebuild.join();
+    }
+}
 
 impl Plugin for Unacorda {
     type AudioProcessor<'a> = processor::Processor<'a>;
@@ -102,6 +122,7 @@ impl DefaultPluginFactory for Unacorda {
             values: Values::default(),
             latency_frames: AtomicU32::new(0),
             silent_because: Mutex::new(None),
+            rebuild: rebuild::Rebuild::default(),
         })
     }
 
@@ -123,12 +144,6 @@ impl MainThread<'_> {
             }
             None => eprintln!("{message}"),
         }
-    }
-
-    /// A change of a parameter that rebuilds the piano: ask the host to restart the plugin
-    /// (deactivate and activate: the new piano is built there).
-    fn rebuild(&self) {
-        self.host.shared().request_restart();
     }
 }
 
@@ -268,6 +283,7 @@ impl PluginAudioProcessorParams for processor::Processor<'_> {
         for event in input {
             self.handle(event);
         }
+        self.follow_rebuild();
     }
 }
 
@@ -293,8 +309,11 @@ impl PluginStateImpl for MainThread<'_> {
         if let Some(host_params) = self.host.get_extension::<HostParams>() {
             host_params.rescan(&self.host, ParamRescanFlags::VALUES);
         }
-        if rebuild {
-            self.rebuild();
+        if rebuild && self.shared.rebuild.active() {
+            // The processor sees the new keyboard or pool size at its next block (woken if it
+            // sleeps), has it built in the background and asks for a restart; an inactive one
+            // builds it at its activation.
+            self.host.shared().request_process();
         }
         Ok(())
     }

@@ -1,9 +1,10 @@
 //! The 88 keys prepared once per process and shared by every instance and every activation: a
 //! piano is built (its keys read back from the command line's key cache where they are kept,
 //! `$UNACORDA_CACHE`) the first time a keyboard, engine rate and pool size are asked for, and
-//! later activations clone it. Hosts run one engine per host rate: from 44.1 to 192 kHz the engine
-//! runs at the host's rate; below, at the smallest multiple of it from 44.1 kHz, decimated by
-//! the synth.
+//! later activations clone it. One piano is built at a time: an activation that asks for the
+//! piano a background build ([`crate::rebuild`]) is making waits for it and clones it. Hosts run
+//! one engine per host rate: from 44.1 to 192 kHz the engine runs at the host's rate; below, at
+//! the smallest multiple of it from 44.1 kHz, decimated by the synth.
 
 use std::sync::{Arc, Mutex};
 use unacorda::config::output::OutputSettings;
@@ -30,8 +31,11 @@ pub struct Prepared {
 type Key = (&'static str, u32, usize);
 /// A piano as built, with the output settings of its keyboard.
 type Built = Arc<(Piano<ExactPool>, OutputSettings)>;
-/// The pianos prepared so far, oldest first (any thread that activates an instance).
+/// The pianos prepared so far, oldest first (any thread that activates an instance or builds in
+/// the background).
 static PIANOS: Mutex<Vec<(Key, Built)>> = Mutex::new(Vec::new());
+/// Held while a piano is built, so that no two threads build at once (the same threads).
+static BUILDING: Mutex<()> = Mutex::new(());
 
 /// Engine steps per host frame at `host_rate_hz`, or why it cannot play there.
 pub fn oversampling(host_rate_hz: f64) -> Result<u32, String> {
@@ -53,24 +57,7 @@ pub fn prepare(
     voices: usize,
 ) -> Result<Prepared, String> {
     let oversampling = oversampling(host_rate_hz)?;
-    let engine_rate = host_rate_hz as u32 * oversampling;
-    let key = (keyboard, engine_rate, voices);
-    let found = {
-        let kept = PIANOS.lock().unwrap_or_else(|e| e.into_inner());
-        kept.iter().find(|(k, _)| *k == key).map(|(_, p)| p.clone())
-    };
-    let built = match found {
-        Some(built) => built,
-        None => {
-            let built = Arc::new(build(keyboard, engine_rate, voices)?);
-            let mut kept = PIANOS.lock().unwrap_or_else(|e| e.into_inner());
-            if kept.len() >= KEPT {
-                kept.remove(0);
-            }
-            kept.push((key, built.clone()));
-            built
-        }
-    };
+    let built = kept_or_built((keyboard, host_rate_hz as u32 * oversampling, voices))?;
     let (piano, settings) = &*built;
     Ok(Prepared {
         piano: piano.clone(),
@@ -80,6 +67,40 @@ pub fn prepare(
         },
         oversampling,
     })
+}
+
+/// Build and keep the piano [`prepare`] would give for these arguments, if it is not kept yet
+/// (a background build; the activation then clones it).
+pub fn keep(keyboard: &'static str, host_rate_hz: f64, voices: usize) -> Result<(), String> {
+    let engine_rate = host_rate_hz as u32 * oversampling(host_rate_hz)?;
+    kept_or_built((keyboard, engine_rate, voices)).map(|_| ())
+}
+
+/// The piano for `key`: the kept one, or built (after any build under way) and kept.
+fn kept_or_built(key: Key) -> Result<Built, String> {
+    let kept = |key: &Key| {
+        let pianos = PIANOS.lock().unwrap_or_else(|e| e.into_inner());
+        pianos
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, p)| p.clone())
+    };
+    if let Some(built) = kept(&key) {
+        return Ok(built);
+    }
+    let _building = BUILDING.lock().unwrap_or_else(|e| e.into_inner());
+    // The build this one waited for may have been this piano.
+    if let Some(built) = kept(&key) {
+        return Ok(built);
+    }
+    let (keyboard, engine_rate, voices) = key;
+    let built = Arc::new(build(keyboard, engine_rate, voices)?);
+    let mut pianos = PIANOS.lock().unwrap_or_else(|e| e.into_inner());
+    if pianos.len() >= KEPT {
+        pianos.remove(0);
+    }
+    pianos.push((key, built.clone()));
+    Ok(built)
 }
 
 fn build(

@@ -42,9 +42,21 @@ pub struct Processor<'a> {
     gain: f32,
     /// The ring-out reported as the tail (host frames).
     tail_frames: u32,
-    /// The keyboard and pool size this activation built, and whether a rebuild was asked for.
+    /// The keyboard and pool size this activation built.
     built: [f64; 2],
-    restart_asked: bool,
+    /// Where a change of them stands.
+    rebuild: Rebuilding,
+}
+
+/// A change of keyboard or pool size while active ([`crate::rebuild`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Rebuilding {
+    /// Playing what was built.
+    No,
+    /// The main thread builds these values (keyboard, pool size) in the background.
+    Building([f64; 2]),
+    /// Built; the host was asked to restart the plugin.
+    Restarting,
 }
 
 const PEDALS: [(usize, Pedal); 3] = [
@@ -85,6 +97,7 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             }
         };
         shared.latency_frames.store(latency, Ordering::Relaxed);
+        shared.rebuild.activated(config.sample_rate);
         let tail_frames = engine.as_ref().map_or(0, |e| {
             let ring_out_s = e.synth().piano().instrument.ring_out_s(TAIL_FALL_DB);
             (ring_out_s * config.sample_rate).min(f64::from(i32::MAX - 1)) as u32
@@ -101,8 +114,12 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             gain: db_to_gain(values.get(GAIN_DB)),
             tail_frames,
             built,
-            restart_asked: false,
+            rebuild: Rebuilding::No,
         })
+    }
+
+    fn deactivate(self, _main_thread: &MainThread<'a>) {
+        self.shared.rebuild.deactivated();
     }
 
     fn process(
@@ -129,8 +146,12 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             self.handle(event);
         }
         self.render(&mut out, at..frames);
+        self.follow_rebuild();
         let silent = self.engine.as_ref().is_none_or(|e| e.is_silent());
-        Ok(if silent {
+        // While a piano is built the host keeps calling, so that the restart is asked for when
+        // it is ready.
+        let building = matches!(self.rebuild, Rebuilding::Building(_));
+        Ok(if silent && !building {
             ProcessStatus::Sleep
         } else {
             ProcessStatus::Continue
@@ -240,18 +261,41 @@ impl Processor<'_> {
         }
     }
 
-    /// A parameter's new value: a pedal's is played at once, a rebuild's asks for a restart.
+    /// A parameter's new value: a pedal's is played at once (a keyboard's or pool size's is
+    /// followed at the end of the block: [`Self::follow_rebuild`]).
     fn set_param(&mut self, index: usize, value: f64) {
-        let value = self.shared.values.set(index, value);
+        self.shared.values.set(index, value);
         self.settle_pedals();
-        let rebuilds = [KEYBOARD, VOICES].iter().position(|&p| p == index);
-        if let Some(b) = rebuilds {
-            if value != self.built[b] && !self.restart_asked {
-                // The host deactivates and activates the plugin: the new piano is built there.
-                self.restart_asked = true;
-                self.host.request_restart();
+    }
+
+    /// Follow a change of keyboard or pool size (by automation or a state load): ask the main
+    /// thread to build it in the background, and once it is built ask the host to restart the
+    /// plugin (whose activation then finds it built). A change during the build is built after
+    /// it. Never allocates.
+    pub(crate) fn follow_rebuild(&mut self) {
+        let values = &self.shared.values;
+        let wanted = [values.get(KEYBOARD), values.get(VOICES)];
+        match self.rebuild {
+            Rebuilding::No if wanted != self.built => self.ask_build(wanted),
+            Rebuilding::Building(asked) if self.shared.rebuild.take_done() => {
+                if wanted == self.built {
+                    // Changed back while it was built.
+                    self.rebuild = Rebuilding::No;
+                } else if wanted == asked {
+                    self.rebuild = Rebuilding::Restarting;
+                    self.host.request_restart();
+                } else {
+                    self.ask_build(wanted);
+                }
             }
+            _ => {}
         }
+    }
+
+    fn ask_build(&mut self, values: [f64; 2]) {
+        self.rebuild = Rebuilding::Building(values);
+        self.shared.rebuild.ask();
+        self.host.request_callback();
     }
 
     /// Frames `range` of the host's block: rendered, the gain applied, written to every channel.

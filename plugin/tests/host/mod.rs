@@ -25,6 +25,8 @@ pub struct Host;
 pub struct HostShared {
     pub restarts: AtomicU32,
     pub rescans: AtomicU32,
+    /// Main-thread callbacks the plugin asked for.
+    pub callbacks: AtomicU32,
 }
 pub struct HostMain<'a> {
     shared: &'a HostShared,
@@ -36,7 +38,9 @@ impl<'a> SharedHandler<'a> for HostShared {
         self.restarts.fetch_add(1, Ordering::Relaxed);
     }
     fn request_process(&self) {}
-    fn request_callback(&self) {}
+    fn request_callback(&self) {
+        self.callbacks.fetch_add(1, Ordering::Relaxed);
+    }
 }
 impl<'a> MainThreadHandler<'a> for HostMain<'a> {}
 impl<'a> AudioProcessorHandler<'a> for HostAudio {}
@@ -164,6 +168,18 @@ pub fn restarts(instance: &mut Instance) -> u32 {
     instance
         .instance
         .access_shared_handler(|h| h.restarts.load(Ordering::Relaxed))
+}
+
+/// How many main-thread callbacks the plugin asked for.
+pub fn callbacks(instance: &mut Instance) -> u32 {
+    instance
+        .instance
+        .access_shared_handler(|h| h.callbacks.load(Ordering::Relaxed))
+}
+
+/// Call the plugin's main-thread callback, as a host does after `request_callback`.
+pub fn on_main_thread(instance: &mut Instance) {
+    instance.instance.call_on_main_thread_callback();
 }
 
 /// The latency the plugin reports.
