@@ -85,8 +85,11 @@ pub struct Rk4Pool<T: Real = f64> {
     /// Each voice's policy state (`engine::pool`), read by every evaluation.
     states: Vec<VoiceState>,
     voice_of_key: Vec<Option<usize>>,
-    /// Mode ranges simulated in this step: the active voices' and the board's.
+    /// Mode ranges simulated in this step, the first `n_live`: the active voices' and the
+    /// board's. One slot per voice and the board, filled in place (a `Vec` pushed to would lose
+    /// its reserved room in a clone, and the clone's first step would allocate).
     live: Vec<Range<usize>>,
+    n_live: usize,
     /// `W v` of the duplex product for up to six blocks (T and P of three strings).
     duplex_z: Vec<T>,
     fade_steps: u32,
@@ -200,7 +203,8 @@ impl<T: Real> Rk4Pool<T> {
         Ok(Rk4Pool {
             duplex_z: vec![T::ZERO; 2 * MAX_STRINGS * max_rank],
             voice_of_key: vec![None; specs.len()],
-            live: Vec::with_capacity(voices + 1),
+            live: vec![0..0; voices + 1],
+            n_live: 0,
             fade_steps: (STEAL_FADE_S / h).round().max(1.0) as u32,
             model,
             q: vec![T::ZERO; n],
@@ -426,13 +430,15 @@ impl<T: Real> Rk4Pool<T> {
 
     /// Advance one RK4 step; never allocates.
     pub fn step(&mut self) {
-        self.live.clear();
+        let mut n = 0;
         for (k, voice) in self.model.voices.iter().enumerate() {
             if self.states[k].active {
-                self.live.push(voice.base..voice.base + voice.n_modes);
+                self.live[n] = voice.base..voice.base + voice.n_modes;
+                n += 1;
             }
         }
-        self.live.push(self.model.board.clone());
+        self.live[n] = self.model.board.clone();
+        self.n_live = n + 1;
         #[cfg(target_arch = "x86_64")]
         if self.fast_path {
             // SAFETY: `fast_path` is set only when the CPU reports AVX2 and FMA.
@@ -457,7 +463,7 @@ impl<T: Real> Rk4Pool<T> {
     #[inline(always)]
     fn step_impl<const SIMD: bool>(&mut self) {
         let h = self.model.h;
-        let (m, states, live) = (&self.model, &self.states, &self.live);
+        let (m, states, live) = (&self.model, &self.states, &self.live[..self.n_live]);
         let z = &mut self.duplex_z;
         let (q0, v0, hy0, hv0) = (&self.q, &self.v, &self.hammer_y, &self.hammer_v);
         let (qs, vs, acc) = (&mut self.qs, &mut self.vs, &mut self.acc);
