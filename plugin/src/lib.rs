@@ -42,7 +42,7 @@ pub mod processor;
 pub mod rebuild;
 pub mod state;
 
-use params::{Values, KEYBOARD, KEYBOARDS, PARAMS};
+use params::{Values, PARAMS, REBUILDS};
 
 /// The plugin's id in hosts.
 pub const PLUGIN_ID: &str = "org.unacorda.piano";
@@ -76,9 +76,11 @@ impl<'a> PluginMainThread<'a, Shared> for MainThread<'a> {
     /// The audio thread asked for a piano to be built: start it in the background.
     fn on_main_thread(&self) {
         let values = &self.shared.values;
-        self.shared
-            .rebuild
-            .start_if_wanted(values.keyboard(), values.voices());
+        self.shared.rebuild.start_if_wanted(
+            values.keyboard(),
+            values.voices(),
+            values.integrator(),
+        );
     }
 }
 
@@ -212,7 +214,7 @@ impl PluginMainThreadParams for MainThread<'_> {
         } else {
             flags |= ParamInfoFlags::REQUIRES_PROCESS;
         }
-        if param_index as usize == KEYBOARD {
+        if p.choices.is_some() {
             flags |= ParamInfoFlags::IS_ENUM;
         }
         info.set(&ParamInfo {
@@ -239,8 +241,10 @@ impl PluginMainThreadParams for MainThread<'_> {
     ) -> std::fmt::Result {
         let i = params::index_of(param_id.get()).ok_or(std::fmt::Error)?;
         let p = PARAMS[i];
+        if let Some(name) = p.choice(value) {
+            return write!(writer, "{name}");
+        }
         match i {
-            KEYBOARD => write!(writer, "{}", KEYBOARDS[(p.clamp(value) as usize).min(1)]),
             params::GAIN_DB => write!(writer, "{value:.1} dB"),
             params::VELOCITY_CURVE => write!(writer, "{value:.2}"),
             _ if p.max == 1.0 && p.stepped => {
@@ -253,9 +257,9 @@ impl PluginMainThreadParams for MainThread<'_> {
     fn text_to_value(&self, param_id: ClapId, text: &CStr) -> Option<f64> {
         let i = params::index_of(param_id.get())?;
         let text = text.to_str().ok()?.trim();
-        let value = match i {
-            KEYBOARD => KEYBOARDS.iter().position(|k| *k == text)? as f64,
-            _ if PARAMS[i].max == 1.0 && PARAMS[i].stepped => match text {
+        let value = match PARAMS[i].choices {
+            Some(names) => names.iter().position(|k| *k == text)? as f64,
+            None if PARAMS[i].max == 1.0 && PARAMS[i].stepped => match text {
                 "down" | "on" | "1" => 1.0,
                 "up" | "off" | "0" => 0.0,
                 _ => return None,
@@ -300,7 +304,7 @@ impl PluginStateImpl for MainThread<'_> {
             .read_to_end(&mut bytes)?;
         // A refusal's reason reaches the host's log through clack.
         let loaded = state::load(&bytes).map_err(|e| PluginError::Error(Box::new(e)))?;
-        let rebuild = [KEYBOARD, params::VOICES]
+        let rebuild = REBUILDS
             .iter()
             .any(|&i| self.shared.values.get(i) != loaded[i]);
         for (i, v) in loaded.into_iter().enumerate() {

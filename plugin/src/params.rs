@@ -1,7 +1,7 @@
 //! The plugin's parameters: the three pedals, the output gain and the velocity curve
-//! (automatable, applied within the block at their event's frame), the keyboard and the voice
-//! pool's size (not automatable: a change rebuilds the piano, on the host's restart). Values are
-//! shared between the main thread and the audio thread as atomics.
+//! (automatable, applied within the block at their event's frame), the keyboard, the voice pool's
+//! size and the integrator (not automatable: a change rebuilds the piano in the background,
+//! [`crate::rebuild`]). Values are shared between the main thread and the audio thread as atomics.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -19,6 +19,10 @@ pub struct Spec {
     pub stepped: bool,
     /// The host may automate it; otherwise a change rebuilds the piano.
     pub automatable: bool,
+    /// The names of a choice's values 0, 1, … (hosts show them; the state writes them).
+    pub choices: Option<&'static [&'static str]>,
+    /// The state version that first saved it (an older state gives it its default).
+    pub since_version: i64,
 }
 
 /// Index of each parameter in [`PARAMS`] (its CLAP id is the index + 1).
@@ -29,9 +33,13 @@ pub const GAIN_DB: usize = 3;
 pub const VELOCITY_CURVE: usize = 4;
 pub const KEYBOARD: usize = 5;
 pub const VOICES: usize = 6;
+pub const INTEGRATOR: usize = 7;
 
 /// The built-in keyboards the `keyboard` parameter chooses from (its values 0, 1).
 pub const KEYBOARDS: [&str; 2] = ["concert", "paper"];
+/// The integrators the `integrator` parameter chooses from (its values 0, 1): the exact engine
+/// (`play`'s and `render --midi`'s) or the paper's RK4 (the reference; a few voices in real time).
+pub const INTEGRATORS: [&str; 2] = ["exact", "rk4"];
 
 const fn switch(id: u32, name: &'static str, key: &'static str) -> Spec {
     Spec {
@@ -43,11 +51,13 @@ const fn switch(id: u32, name: &'static str, key: &'static str) -> Spec {
         default: 0.0,
         stepped: true,
         automatable: true,
+        choices: None,
+        since_version: 1,
     }
 }
 
 /// Every parameter, in the order hosts list them.
-pub const PARAMS: [Spec; 7] = [
+pub const PARAMS: [Spec; 8] = [
     switch(1, "Sustain pedal", "sustain"),
     switch(2, "Sostenuto pedal", "sostenuto"),
     switch(3, "Soft pedal (una corda)", "soft"),
@@ -60,6 +70,8 @@ pub const PARAMS: [Spec; 7] = [
         default: 0.0,
         stepped: false,
         automatable: true,
+        choices: None,
+        since_version: 1,
     },
     // MIDI velocity v becomes 127 (v/127)^curve before the hammer's speed is found from it
     // (unacorda::midi::hammer_speed_m_s): above 1 a harder touch is needed for the same
@@ -73,6 +85,8 @@ pub const PARAMS: [Spec; 7] = [
         default: 1.0,
         stepped: false,
         automatable: true,
+        choices: None,
+        since_version: 1,
     },
     Spec {
         id: 6,
@@ -83,6 +97,8 @@ pub const PARAMS: [Spec; 7] = [
         default: 0.0,
         stepped: true,
         automatable: false,
+        choices: Some(&KEYBOARDS),
+        since_version: 1,
     },
     Spec {
         id: 7,
@@ -93,8 +109,25 @@ pub const PARAMS: [Spec; 7] = [
         default: unacorda::play::DEFAULT_VOICES as f64,
         stepped: true,
         automatable: false,
+        choices: None,
+        since_version: 1,
+    },
+    Spec {
+        id: 8,
+        name: "Integrator",
+        key: "integrator",
+        min: 0.0,
+        max: (INTEGRATORS.len() - 1) as f64,
+        default: 0.0,
+        stepped: true,
+        automatable: false,
+        choices: Some(&INTEGRATORS),
+        since_version: 2,
     },
 ];
+
+/// The parameters whose change rebuilds the piano.
+pub const REBUILDS: [usize; 3] = [KEYBOARD, VOICES, INTEGRATOR];
 
 /// The index of the parameter with CLAP id `id`.
 pub fn index_of(id: u32) -> Option<usize> {
@@ -102,6 +135,12 @@ pub fn index_of(id: u32) -> Option<usize> {
 }
 
 impl Spec {
+    /// The name of a choice's `value`, if it is a choice.
+    pub fn choice(&self, value: f64) -> Option<&'static str> {
+        let choices = self.choices?;
+        Some(choices[(self.clamp(value) as usize).min(choices.len() - 1)])
+    }
+
     /// `value` brought into range (rounded where stepped); NaN becomes the default.
     pub fn clamp(&self, value: f64) -> f64 {
         if value.is_nan() {
@@ -148,6 +187,19 @@ impl Values {
     /// The keyboard chosen.
     pub fn keyboard(&self) -> &'static str {
         KEYBOARDS[(self.get(KEYBOARD) as usize).min(KEYBOARDS.len() - 1)]
+    }
+
+    /// The integrator chosen.
+    pub fn integrator(&self) -> unacorda::engine::Integrator {
+        match self.get(INTEGRATOR) >= 0.5 {
+            true => unacorda::engine::Integrator::Rk4,
+            false => unacorda::engine::Integrator::Exact,
+        }
+    }
+
+    /// The values whose change rebuilds the piano ([`REBUILDS`]).
+    pub fn rebuilds(&self) -> [f64; REBUILDS.len()] {
+        REBUILDS.map(|i| self.get(i))
     }
 
     /// The voice pool's size chosen.

@@ -10,6 +10,8 @@ use std::sync::{Arc, Mutex};
 use unacorda::config::output::OutputSettings;
 use unacorda::config::scaling::Scaling;
 use unacorda::engine::exact::ExactPool;
+use unacorda::engine::rk4::Rk4Pool;
+use unacorda::engine::Integrator;
 use unacorda::play::Piano;
 
 /// Host rates the plugin plays at (Hz); others activate silent.
@@ -19,18 +21,25 @@ pub const MIN_ENGINE_RATE_HZ: f64 = 44_100.0;
 /// Prepared pianos kept (each ~12 MB for the 88 keys).
 const KEPT: usize = 4;
 
+/// A piano on either engine (boxed: the two differ in size).
+#[derive(Clone)]
+pub enum Pianos {
+    Exact(Box<Piano<ExactPool>>),
+    Rk4(Box<Piano<Rk4Pool>>),
+}
+
 /// What an activation plays: a piano of its own and the synth's output settings.
 pub struct Prepared {
-    pub piano: Piano<ExactPool>,
+    pub piano: Pianos,
     pub settings: OutputSettings,
     /// Engine steps per host frame (1 from 44.1 kHz up).
     pub oversampling: u32,
 }
 
-/// A prepared piano's keyboard, engine rate (Hz) and pool size.
-type Key = (&'static str, u32, usize);
+/// A prepared piano's keyboard, engine rate (Hz), pool size and integrator.
+type Key = (&'static str, u32, usize, Integrator);
 /// A piano as built, with the output settings of its keyboard.
-type Built = Arc<(Piano<ExactPool>, OutputSettings)>;
+type Built = Arc<(Pianos, OutputSettings)>;
 /// The pianos prepared so far, oldest first (any thread that activates an instance or builds in
 /// the background).
 static PIANOS: Mutex<Vec<(Key, Built)>> = Mutex::new(Vec::new());
@@ -49,15 +58,17 @@ pub fn oversampling(host_rate_hz: f64) -> Result<u32, String> {
     Ok((MIN_ENGINE_RATE_HZ / host_rate_hz).ceil().max(1.0) as u32)
 }
 
-/// The piano of `keyboard` with `voices` voices for a host at `host_rate_hz`: built on all cores
-/// the first time, cloned from the kept one after that.
+/// The piano of `keyboard` with `voices` voices on `integrator` for a host at `host_rate_hz`:
+/// built on all cores the first time, cloned from the kept one after that.
 pub fn prepare(
     keyboard: &'static str,
     host_rate_hz: f64,
     voices: usize,
+    integrator: Integrator,
 ) -> Result<Prepared, String> {
     let oversampling = oversampling(host_rate_hz)?;
-    let built = kept_or_built((keyboard, host_rate_hz as u32 * oversampling, voices))?;
+    let engine_rate = host_rate_hz as u32 * oversampling;
+    let built = kept_or_built((keyboard, engine_rate, voices, integrator))?;
     let (piano, settings) = &*built;
     Ok(Prepared {
         piano: piano.clone(),
@@ -71,9 +82,14 @@ pub fn prepare(
 
 /// Build and keep the piano [`prepare`] would give for these arguments, if it is not kept yet
 /// (a background build; the activation then clones it).
-pub fn keep(keyboard: &'static str, host_rate_hz: f64, voices: usize) -> Result<(), String> {
+pub fn keep(
+    keyboard: &'static str,
+    host_rate_hz: f64,
+    voices: usize,
+    integrator: Integrator,
+) -> Result<(), String> {
     let engine_rate = host_rate_hz as u32 * oversampling(host_rate_hz)?;
-    kept_or_built((keyboard, engine_rate, voices)).map(|_| ())
+    kept_or_built((keyboard, engine_rate, voices, integrator)).map(|_| ())
 }
 
 /// The piano for `key`: the kept one, or built (after any build under way) and kept.
@@ -93,8 +109,7 @@ fn kept_or_built(key: Key) -> Result<Built, String> {
     if let Some(built) = kept(&key) {
         return Ok(built);
     }
-    let (keyboard, engine_rate, voices) = key;
-    let built = Arc::new(build(keyboard, engine_rate, voices)?);
+    let built = Arc::new(build(key)?);
     let mut pianos = PIANOS.lock().unwrap_or_else(|e| e.into_inner());
     if pianos.len() >= KEPT {
         pianos.remove(0);
@@ -103,16 +118,20 @@ fn kept_or_built(key: Key) -> Result<Built, String> {
     Ok(built)
 }
 
-fn build(
-    keyboard: &str,
-    engine_rate_hz: u32,
-    voices: usize,
-) -> Result<(Piano<ExactPool>, OutputSettings), String> {
+fn build(key: Key) -> Result<(Pianos, OutputSettings), String> {
+    let (keyboard, engine_rate_hz, voices, integrator) = key;
     let mut scaling = Scaling::resolve(keyboard).map_err(|e| format!("unacorda: {e}"))?;
     scaling.base.preset.simulation.output_rate_hz = engine_rate_hz;
     let keys: Vec<usize> = (1..=88).collect();
     let cache = unacorda::keycache::KeyCache::from_env();
-    let piano = Piano::<ExactPool>::build_with(&scaling, &keys, voices, cache.as_ref())
-        .map_err(|e| format!("unacorda: {keyboard} at {engine_rate_hz} Hz: {e}"))?;
+    let failed = |e| format!("unacorda: {keyboard} at {engine_rate_hz} Hz: {e}");
+    let piano = match integrator {
+        Integrator::Exact => Pianos::Exact(Box::new(
+            Piano::build_with(&scaling, &keys, voices, cache.as_ref()).map_err(failed)?,
+        )),
+        Integrator::Rk4 => Pianos::Rk4(Box::new(
+            Piano::build_with(&scaling, &keys, voices, cache.as_ref()).map_err(failed)?,
+        )),
+    };
     Ok((piano, scaling.output_settings()))
 }

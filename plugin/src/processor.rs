@@ -2,10 +2,10 @@
 //! realigned to its grid ([`Aligned`]), the output gain, and sleep when nothing sounds. Never
 //! allocates, locks or prints in `process` (the plugin's tests run it under `assert_no_alloc`).
 
-use crate::params::{
-    curved_velocity, GAIN_DB, KEYBOARD, SOFT, SOSTENUTO, SUSTAIN, VELOCITY_CURVE, VOICES,
-};
+use crate::params::{curved_velocity, GAIN_DB, REBUILDS, SOFT, SOSTENUTO, SUSTAIN, VELOCITY_CURVE};
+use crate::prepare::Pianos;
 use crate::{MainThread, Shared};
+use clack_extensions::tail::TailLength;
 use clack_plugin::events::spaces::CoreEventSpace;
 use clack_plugin::events::Match;
 use clack_plugin::prelude::*;
@@ -14,6 +14,7 @@ use unacorda::audio::aligned::LATENCY_FRAMES;
 use unacorda::audio::synth::EVENT_QUEUE;
 use unacorda::audio::{Aligned, Synth};
 use unacorda::engine::exact::ExactPool;
+use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::midi::{map_channel_message, Event, Pedal};
 
 /// The ring-out the tail reports: how long the slowest mode takes to fall this far (dB), from a
@@ -32,7 +33,7 @@ pub struct Processor<'a> {
     shared: &'a Shared,
     host: HostAudioProcessorHandle<'a>,
     /// The synth, or none when the activation could not build one (it plays silence).
-    engine: Option<Aligned<ExactPool>>,
+    engine: Option<Engine>,
     /// Channels the engine renders (1 or 2) and the interleaved buffer it renders them into.
     channels: usize,
     scratch: Vec<f32>,
@@ -40,21 +41,66 @@ pub struct Processor<'a> {
     pedals: [bool; 3],
     /// The gain applied to the last frame (linear).
     gain: f32,
-    /// The ring-out reported as the tail (host frames).
-    tail_frames: u32,
-    /// The keyboard and pool size this activation built.
-    built: [f64; 2],
+    /// The ring-out reported as the tail (host frames; infinite on RK4).
+    tail: TailLength,
+    /// The keyboard, pool size and integrator this activation built ([`REBUILDS`]).
+    built: [f64; REBUILDS.len()],
     /// Where a change of them stands.
     rebuild: Rebuilding,
 }
 
-/// A change of keyboard or pool size while active ([`crate::rebuild`]).
+/// The synth on either engine, realigned to the host's blocks.
+enum Engine {
+    Exact(Aligned<ExactPool>),
+    Rk4(Aligned<Rk4Pool>),
+}
+
+/// `engine.$method(args)` on whichever engine it is.
+macro_rules! on_engine {
+    ($engine:expr, $e:ident => $body:expr) => {
+        match $engine {
+            Engine::Exact($e) => $body,
+            Engine::Rk4($e) => $body,
+        }
+    };
+}
+
+impl Engine {
+    fn channels(&self) -> usize {
+        on_engine!(self, e => e.channels())
+    }
+    fn schedule(&mut self, event: Event) {
+        on_engine!(self, e => {
+            e.schedule(event);
+        })
+    }
+    fn process(&mut self, out: &mut [f32]) {
+        on_engine!(self, e => e.process(out))
+    }
+    fn is_silent(&self) -> bool {
+        on_engine!(self, e => e.is_silent())
+    }
+    fn silence(&mut self) {
+        on_engine!(self, e => e.silence())
+    }
+    /// How long the slowest mode takes to fall [`TAIL_FALL_DB`] (s): the exact engine's modes
+    /// say; RK4 has none to ask, and its tail is reported infinite (the plugin sleeps when
+    /// silent).
+    fn ring_out_s(&self) -> f64 {
+        match self {
+            Engine::Exact(e) => e.synth().piano().instrument.ring_out_s(TAIL_FALL_DB),
+            Engine::Rk4(_) => f64::INFINITY,
+        }
+    }
+}
+
+/// A change of keyboard, pool size or integrator while active ([`crate::rebuild`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Rebuilding {
     /// Playing what was built.
     No,
-    /// The main thread builds these values (keyboard, pool size) in the background.
-    Building([f64; 2]),
+    /// The main thread builds these values ([`REBUILDS`]) in the background.
+    Building([f64; REBUILDS.len()]),
     /// Built; the host was asked to restart the plugin.
     Restarting,
 }
@@ -73,10 +119,15 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         config: PluginAudioConfiguration,
     ) -> Result<Self, PluginError> {
         let values = &shared.values;
-        let built = [values.get(KEYBOARD), values.get(VOICES)];
+        let built = values.rebuilds();
         // Activation never fails: what cannot be built plays silence and says why, once.
-        let (engine, latency) = match start(values.keyboard(), config.sample_rate, values.voices())
-        {
+        let prepared = crate::prepare::prepare(
+            values.keyboard(),
+            config.sample_rate,
+            values.voices(),
+            values.integrator(),
+        );
+        let (engine, latency) = match prepared.and_then(start) {
             Ok((engine, latency)) => {
                 *shared
                     .silent_because
@@ -98,12 +149,13 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         };
         shared.latency_frames.store(latency, Ordering::Relaxed);
         shared.rebuild.activated(config.sample_rate);
-        let tail_frames = engine.as_ref().map_or(0, |e| {
-            let ring_out_s = e.synth().piano().instrument.ring_out_s(TAIL_FALL_DB);
-            (ring_out_s * config.sample_rate).min(f64::from(i32::MAX - 1)) as u32
-        });
+        let tail = match engine.as_ref().map(|e| e.ring_out_s() * config.sample_rate) {
+            None => TailLength::Finite(0),
+            Some(frames) if frames < f64::from(i32::MAX) => TailLength::Finite(frames as u32),
+            Some(_) => TailLength::Infinite,
+        };
         // Silence is written to both channels of the port.
-        let channels = engine.as_ref().map_or(2, Aligned::channels);
+        let channels = engine.as_ref().map_or(2, Engine::channels);
         Ok(Processor {
             shared,
             host,
@@ -112,7 +164,7 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             scratch: vec![0.0; SCRATCH_FRAMES * channels],
             pedals: [false; 3],
             gain: db_to_gain(values.get(GAIN_DB)),
-            tail_frames,
+            tail,
             built,
             rebuild: Rebuilding::No,
         })
@@ -166,25 +218,39 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
     }
 }
 
-/// The engine for a host at `rate_hz`: its synth realigned to the host's blocks, and the
-/// latency to report (host frames).
-fn start(
-    keyboard: &'static str,
-    rate_hz: f64,
-    voices: usize,
-) -> Result<(Aligned<ExactPool>, u32), String> {
-    let prepared = crate::prepare::prepare(keyboard, rate_hz, voices)?;
-    let channels = usize::from(prepared.settings.channels);
-    let (mut synth, handle) = Synth::new(prepared.piano, prepared.settings, EVENT_QUEUE)
-        .map_err(|e| format!("unacorda: {e}"))?;
+/// The engine of a prepared piano: its synth realigned to the host's blocks, and the latency to
+/// report (host frames).
+fn start(prepared: crate::prepare::Prepared) -> Result<(Engine, u32), String> {
+    let (settings, channels) = (prepared.settings, usize::from(prepared.settings.channels));
+    Ok(match prepared.piano {
+        Pianos::Exact(piano) => {
+            let (aligned, latency) = aligned(*piano, settings, channels)?;
+            (Engine::Exact(aligned), latency)
+        }
+        Pianos::Rk4(piano) => {
+            let (aligned, latency) = aligned(*piano, settings, channels)?;
+            (Engine::Rk4(aligned), latency)
+        }
+    })
+}
+
+fn aligned<E: VoicePool>(
+    piano: unacorda::play::Piano<E>,
+    settings: unacorda::config::output::OutputSettings,
+    channels: usize,
+) -> Result<(Aligned<E>, u32), String> {
+    let (mut synth, handle) =
+        Synth::new(piano, settings, EVENT_QUEUE).map_err(|e| format!("unacorda: {e}"))?;
     if std::thread::available_parallelism().is_ok_and(|n| n.get() >= 2) {
         // The helper thread lends the engine a second core; without it, one core.
         let _ = synth.use_second_core();
         synth.ask_real_time_priority();
     }
     let latency = LATENCY_FRAMES as f64 + synth.decimation_delay_frames();
-    let engine = Aligned::new(synth, handle, channels);
-    Ok((engine, latency.round() as u32))
+    Ok((
+        Aligned::new(synth, handle, channels),
+        latency.round() as u32,
+    ))
 }
 
 fn db_to_gain(db: f64) -> f32 {
@@ -268,13 +334,12 @@ impl Processor<'_> {
         self.settle_pedals();
     }
 
-    /// Follow a change of keyboard or pool size (by automation or a state load): ask the main
+    /// Follow a change of keyboard, pool size or integrator (by automation or a state load): ask the main
     /// thread to build it in the background, and once it is built ask the host to restart the
     /// plugin (whose activation then finds it built). A change during the build is built after
     /// it. Never allocates.
     pub(crate) fn follow_rebuild(&mut self) {
-        let values = &self.shared.values;
-        let wanted = [values.get(KEYBOARD), values.get(VOICES)];
+        let wanted = self.shared.values.rebuilds();
         match self.rebuild {
             Rebuilding::No if wanted != self.built => self.ask_build(wanted),
             Rebuilding::Building(asked) if self.shared.rebuild.take_done() => {
@@ -292,7 +357,7 @@ impl Processor<'_> {
         }
     }
 
-    fn ask_build(&mut self, values: [f64; 2]) {
+    fn ask_build(&mut self, values: [f64; REBUILDS.len()]) {
         self.rebuild = Rebuilding::Building(values);
         self.shared.rebuild.ask();
         self.host.request_callback();
@@ -344,7 +409,7 @@ impl Processor<'_> {
 }
 
 impl clack_extensions::tail::PluginTailImpl for Processor<'_> {
-    fn get(&self) -> clack_extensions::tail::TailLength {
-        clack_extensions::tail::TailLength::Finite(self.tail_frames)
+    fn get(&self) -> TailLength {
+        self.tail
     }
 }

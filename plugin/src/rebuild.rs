@@ -1,4 +1,4 @@
-//! A change of keyboard or pool size while the plugin plays. The audio thread asks the main
+//! A change of keyboard, pool size or integrator while the plugin plays. The audio thread asks the main
 //! thread (`request_callback`), which builds the new piano on a thread of its own into
 //! [`prepare`](crate::prepare)'s cache while the old piano plays on; once it is kept, the audio
 //! thread asks the host to restart the plugin, and the activation finds it there (a clone, not a
@@ -7,6 +7,7 @@
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
+use unacorda::engine::Integrator;
 
 /// The background build shared by an instance's threads.
 #[derive(Default)]
@@ -55,7 +56,7 @@ impl Rebuild {
     }
 
     /// Start the build asked for, if one is and a processor is active (main thread).
-    pub fn start_if_wanted(&self, keyboard: &'static str, voices: usize) {
+    pub fn start_if_wanted(&self, keyboard: &'static str, voices: usize, integrator: Integrator) {
         if !self.wanted.swap(false, Ordering::AcqRel) || !self.active() {
             return;
         }
@@ -63,7 +64,7 @@ impl Rebuild {
         let done = self.done.clone();
         let build = move || {
             // A piano that cannot be built is reported by the activation that asks for it.
-            let _ = crate::prepare::keep(keyboard, rate_hz, voices);
+            let _ = crate::prepare::keep(keyboard, rate_hz, voices, integrator);
             done.store(true, Ordering::Release);
         };
         let mut threads = self.threads.lock().unwrap_or_else(|e| e.into_inner());

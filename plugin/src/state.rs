@@ -1,15 +1,16 @@
 //! The plugin's saved state: a short TOML text naming its format and version, then every
 //! parameter by its key. A DAW project is untrusted input: a load refuses (and changes nothing)
 //! what is not this format, a newer version, an unknown or missing field or a value out of its
-//! range, saying which; the text is at most [`MAX_STATE_BYTES`].
+//! range, saying which; the text is at most [`MAX_STATE_BYTES`]. An older version's state gives
+//! the parameters it did not save their defaults (version 1: `integrator`, exact).
 
-use crate::params::{Values, KEYBOARD, KEYBOARDS, PARAMS};
+use crate::params::{Values, PARAMS};
 use std::fmt::Write as _;
 
 /// The format's name, first in every state.
 pub const FORMAT: &str = "unacorda-clap";
 /// The version this build writes and the newest it reads.
-pub const VERSION: i64 = 1;
+pub const VERSION: i64 = 2;
 /// Largest state read (a real one is ~250 bytes).
 pub const MAX_STATE_BYTES: usize = 64 * 1024;
 
@@ -30,8 +31,8 @@ pub enum StateError {
     BadVersion(i64),
     #[error("the state has no field `{0}`")]
     Missing(&'static str),
-    #[error("the state's field `{0}` is not known to version {VERSION}")]
-    Unknown(String),
+    #[error("the state's field `{0}` is not known to version {1}")]
+    Unknown(String, i64),
     #[error("the state's field `{field}` is {value}: expected {expected}")]
     Range {
         field: &'static str,
@@ -45,12 +46,12 @@ pub fn save(values: &Values) -> String {
     let mut s = format!("format = \"{FORMAT}\"\nversion = {VERSION}\n");
     for (i, p) in PARAMS.iter().enumerate() {
         let v = values.get(i);
-        // Written so as to read back exactly: names for the keyboard, integers where stepped,
-        // the shortest decimal that round-trips otherwise.
-        let _ = match i {
-            KEYBOARD => writeln!(s, "{} = \"{}\"", p.key, values.keyboard()),
-            _ if p.stepped => writeln!(s, "{} = {}", p.key, v as i64),
-            _ => writeln!(s, "{} = {v:?}", p.key),
+        // Written so as to read back exactly: names for choices, integers where stepped, the
+        // shortest decimal that round-trips otherwise.
+        let _ = match p.choice(v) {
+            Some(name) => writeln!(s, "{} = \"{name}\"", p.key),
+            None if p.stepped => writeln!(s, "{} = {}", p.key, v as i64),
+            None => writeln!(s, "{} = {v:?}", p.key),
         };
     }
     s
@@ -71,9 +72,9 @@ pub fn load(bytes: &[u8]) -> Result<[f64; PARAMS.len()], StateError> {
         Some(other) => return Err(StateError::Foreign(other.to_string())),
         None => return Err(StateError::Missing("format")),
     }
-    match table.get("version") {
+    let version = match table.get("version") {
         Some(toml::Value::Integer(v)) if *v > VERSION => return Err(StateError::Newer(*v)),
-        Some(toml::Value::Integer(v)) if *v >= 1 => {}
+        Some(toml::Value::Integer(v)) if *v >= 1 => *v,
         Some(toml::Value::Integer(v)) => return Err(StateError::BadVersion(*v)),
         Some(other) => {
             return Err(StateError::Range {
@@ -83,21 +84,25 @@ pub fn load(bytes: &[u8]) -> Result<[f64; PARAMS.len()], StateError> {
             })
         }
         None => return Err(StateError::Missing("version")),
-    }
-    if let Some(unknown) = table
-        .keys()
-        .find(|k| *k != "format" && *k != "version" && !PARAMS.iter().any(|p| p.key == *k))
-    {
-        return Err(StateError::Unknown(unknown.clone()));
+    };
+    let saved = |p: &crate::params::Spec| p.since_version <= version;
+    if let Some(unknown) = table.keys().find(|k| {
+        *k != "format" && *k != "version" && !PARAMS.iter().any(|p| saved(p) && p.key == *k)
+    }) {
+        return Err(StateError::Unknown(unknown.clone(), version));
     }
     let mut out = [0.0; PARAMS.len()];
     for (i, p) in PARAMS.iter().enumerate() {
+        if !saved(p) {
+            out[i] = p.default;
+            continue;
+        }
         let value = table.get(p.key).ok_or(StateError::Missing(p.key))?;
         let range = |value: &toml::Value| {
-            let expected = match (i, p.stepped) {
-                (KEYBOARD, _) => format!("one of {KEYBOARDS:?}"),
-                (_, true) => format!("an integer {}–{}", p.min, p.max),
-                (_, false) => format!("a number in [{}, {}]", p.min, p.max),
+            let expected = match (p.choices, p.stepped) {
+                (Some(names), _) => format!("one of {names:?}"),
+                (None, true) => format!("an integer {}–{}", p.min, p.max),
+                (None, false) => format!("a number in [{}, {}]", p.min, p.max),
             };
             StateError::Range {
                 field: p.key,
@@ -105,16 +110,16 @@ pub fn load(bytes: &[u8]) -> Result<[f64; PARAMS.len()], StateError> {
                 expected,
             }
         };
-        out[i] = match (i, value) {
-            (KEYBOARD, toml::Value::String(name)) => KEYBOARDS
+        out[i] = match (p.choices, value) {
+            (Some(names), toml::Value::String(name)) => names
                 .iter()
                 .position(|k| k == name)
                 .ok_or_else(|| range(value))?
                 as f64,
-            (KEYBOARD, _) => return Err(range(value)),
-            (_, toml::Value::Integer(n)) if p.stepped => *n as f64,
-            (_, toml::Value::Float(x)) if !p.stepped => *x,
-            (_, toml::Value::Integer(n)) if !p.stepped => *n as f64,
+            (Some(_), _) => return Err(range(value)),
+            (None, toml::Value::Integer(n)) if p.stepped => *n as f64,
+            (None, toml::Value::Float(x)) if !p.stepped => *x,
+            (None, toml::Value::Integer(n)) if !p.stepped => *n as f64,
             _ => return Err(range(value)),
         };
         if !(p.min..=p.max).contains(&out[i]) {
@@ -127,7 +132,7 @@ pub fn load(bytes: &[u8]) -> Result<[f64; PARAMS.len()], StateError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::params::{GAIN_DB, SOFT, VELOCITY_CURVE, VOICES};
+    use crate::params::{GAIN_DB, INTEGRATOR, KEYBOARD, SOFT, VELOCITY_CURVE, VOICES};
 
     #[test]
     fn a_state_round_trips_exactly() {
@@ -137,6 +142,7 @@ mod tests {
         values.set(VELOCITY_CURVE, 1.0 / 3.0);
         values.set(KEYBOARD, 1.0);
         values.set(VOICES, 17.0);
+        values.set(INTEGRATOR, 1.0);
         let text = save(&values);
         println!("{text}");
         let back = load(text.as_bytes()).unwrap();
@@ -153,7 +159,16 @@ mod tests {
                 good.replace("unacorda-clap", "other-synth"),
                 "another plugin",
             ),
-            (good.replace("version = 1", "version = 2"), "newer than"),
+            (good.replace("version = 2", "version = 3"), "newer than"),
+            (
+                good.replace("\"exact\"", "\"euler\""),
+                "one of [\"exact\", \"rk4\"]",
+            ),
+            // Version 1 did not save the integrator.
+            (
+                good.replace("version = 2", "version = 1"),
+                "`integrator` is not known",
+            ),
             (good.replace("voices = 64", "voices = 0"), "`voices` is 0"),
             (
                 good.replace("gain_db = 0.0", "gain_db = nan"),
@@ -172,6 +187,17 @@ mod tests {
         assert_eq!(
             load(&[b' '; MAX_STATE_BYTES + 1]),
             Err(StateError::TooLarge)
+        );
+    }
+
+    #[test]
+    fn a_version_1_state_loads_with_the_exact_integrator() {
+        let v1 = "format = \"unacorda-clap\"\nversion = 1\nsustain = 1\nsostenuto = 0\nsoft = 0\ngain_db = -3.5\nvelocity_curve = 1.0\nkeyboard = \"paper\"\nvoices = 32\n";
+        let back = load(v1.as_bytes()).unwrap();
+        assert_eq!(back[INTEGRATOR], 0.0);
+        assert_eq!(
+            (back[KEYBOARD], back[VOICES], back[GAIN_DB]),
+            (1.0, 32.0, -3.5)
         );
     }
 }

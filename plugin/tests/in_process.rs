@@ -10,6 +10,7 @@ use clack_host::prelude::PluginEntry;
 use clack_plugin::entry::SinglePluginEntry;
 use host::{Instance, Play};
 use unacorda::engine::exact::ExactPool;
+use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::midi::file::TimedEvent;
 use unacorda::midi::{Event, Pedal};
 use unacorda_clap::Unacorda;
@@ -101,9 +102,9 @@ fn as_piano_events(script: &[(u64, Play)]) -> Vec<TimedEvent> {
         .collect()
 }
 
-/// The offline render of `events` on the concert keyboard (`render --offline --midi`'s path,
-/// one core): both channels.
-fn offline(events: &[TimedEvent], tail_s: f64) -> (Vec<f32>, Vec<f32>) {
+/// The offline render of `events` on the concert keyboard on the engine `E` (`render --offline
+/// --midi`'s path, one core): both channels.
+fn offline<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> (Vec<f32>, Vec<f32>) {
     let scaling = unacorda::config::scaling::Scaling::resolve("concert").unwrap();
     let cache = unacorda::keycache::KeyCache::from_env();
     let keyboard = unacorda::play::Keyboard {
@@ -116,8 +117,7 @@ fn offline(events: &[TimedEvent], tail_s: f64) -> (Vec<f32>, Vec<f32>) {
         cores: 1,
     };
     let r =
-        unacorda::render::render_midi_kept::<ExactPool>(keyboard, events, offline, |_| {}, None)
-            .unwrap();
+        unacorda::render::render_midi_kept::<E>(keyboard, events, offline, |_| {}, None).unwrap();
     assert_eq!(r.channels, 2);
     (
         r.samples.iter().step_by(2).copied().collect(),
@@ -145,7 +145,7 @@ fn ports_parameters_and_state() {
             p.0, p.1, p.2, p.3, p.4
         );
     }
-    assert_eq!(params.len(), 7);
+    assert_eq!(params.len(), 8);
     assert!(params.iter().any(|p| p.1.contains("Soft pedal")));
 
     let state = host::save(&mut plugin);
@@ -174,7 +174,7 @@ fn ports_parameters_and_state() {
     );
     for bad in [
         changed.replace("unacorda-clap", "someone-else"),
-        changed.replace("version = 1", "version = 7"),
+        changed.replace("version = 2", "version = 7"),
         changed.replace("voices = 64", "voices = 100000"),
     ] {
         let e = host::load(&mut plugin, bad.as_bytes()).unwrap_err();
@@ -202,7 +202,7 @@ fn plays_exactly_like_the_offline_render_in_any_blocks_without_allocating() {
     let script = script();
     let tail_s = 0.2;
     let events = as_piano_events(&script);
-    let (left, right) = offline(&events, tail_s);
+    let (left, right) = offline::<ExactPool>(&events, tail_s);
     let frames = left.len();
     let blocks = [1, 4096, 17, 333, 2, 1000, 95, 31, 64, 3, 512, 777];
     let heard = active.run(frames + latency, &blocks, &script, checked);
@@ -248,6 +248,58 @@ fn plays_exactly_like_the_offline_render_in_any_blocks_without_allocating() {
         assert!(peak > 0.01);
         assert_eq!(differ, 0, "{name} differs from the offline render");
     }
+    host::deactivate(&mut plugin, active);
+}
+
+/// The integrator parameter (set by a state, before activation) plays the paper's RK4: the same
+/// events equal `render --offline --integrator rk4 --midi`'s, sample for sample, one grid cell
+/// late, without allocating; the latency reported adds the decimation filter's delay (RK4 runs
+/// above the output rate, and both renders carry that delay), and the tail is infinite (RK4 has
+/// no modes to say it).
+#[test]
+fn the_rk4_integrator_plays_like_its_offline_render() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut plugin = instance();
+    let state = String::from_utf8(host::save(&mut plugin))
+        .unwrap()
+        .replace("integrator = \"exact\"", "integrator = \"rk4\"");
+    host::load(&mut plugin, state.as_bytes()).unwrap();
+    let mut active = host::activate(&mut plugin, RATE_HZ);
+    let reported = host::latency(&mut plugin) as usize;
+    let latency = unacorda::audio::aligned::LATENCY_FRAMES as usize;
+    let script: Vec<_> = script().into_iter().take(6).collect();
+    let events = as_piano_events(&script);
+    let (left, right) = offline::<Rk4Pool>(&events, 0.1);
+    let heard = active.run(left.len() + latency, &[1, 333, 64, 4096], &script, checked);
+    assert_eq!(heard.allocations, 0, "process() allocated");
+    let tail = host::tail(&mut active).unwrap();
+    println!(
+        "RK4: latency reported {reported} (the grid's {latency} and the decimation filter's), first sound {:?} (offline {:?})",
+        first_sound(&heard.left),
+        first_sound(&left)
+    );
+    assert!(reported > latency);
+    for (name, plugin_side, render_side) in [
+        ("left", &heard.left, &left),
+        ("right", &heard.right, &right),
+    ] {
+        let differ = plugin_side[latency..]
+            .iter()
+            .zip(render_side.iter())
+            .filter(|(a, b)| a.to_bits() != b.to_bits())
+            .count();
+        let peak = render_side.iter().fold(0f32, |m, s| m.max(s.abs()));
+        println!(
+            "RK4 {name}: {} frames, peak {peak:.3}, {differ} differ from the offline render; tail {tail} frames",
+            render_side.len()
+        );
+        assert!(peak > 0.01);
+        assert_eq!(differ, 0, "{name} differs from the offline render");
+    }
+    assert!(
+        tail >= i32::MAX as u32,
+        "an infinite tail (CLAP: INT32_MAX or more)"
+    );
     host::deactivate(&mut plugin, active);
 }
 
