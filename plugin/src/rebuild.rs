@@ -1,5 +1,5 @@
-//! A change of keyboard, pool size or integrator while the plugin plays. The audio thread asks the main
-//! thread (`request_callback`), which builds the new piano on a thread of its own into
+//! A change of keyboard, pool size or integrator while the plugin plays. The audio thread asks
+//! the main thread (`request_callback`), which builds the new piano on a thread of its own into
 //! [`prepare`](crate::prepare)'s cache while the old piano plays on; once it is kept, the audio
 //! thread asks the host to restart the plugin, and the activation finds it there (a clone, not a
 //! build): the host never waits for the 88 keys.
@@ -26,7 +26,7 @@ pub struct Rebuild {
 }
 
 impl Rebuild {
-    /// An activation at `rate_hz` (audio thread): later builds are for that rate; a build
+    /// An activation at `rate_hz` (main thread): later builds are for that rate; a build
     /// finished for an earlier activation no longer counts.
     pub fn activated(&self, rate_hz: f64) {
         self.rate_bits.store(rate_hz.to_bits(), Ordering::Relaxed);
