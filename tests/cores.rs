@@ -375,7 +375,7 @@ struct Alternates {
 }
 
 impl Pair for Alternates {
-    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut()) -> bool {
+    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut (dyn FnMut() + Send)) -> bool {
         if self.calls.fetch_add(1, Ordering::Relaxed) % 2 == 1 {
             return false;
         }

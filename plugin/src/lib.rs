@@ -27,6 +27,7 @@ use clack_extensions::params::{
 };
 use clack_extensions::state::{PluginState, PluginStateImpl};
 use clack_extensions::tail::PluginTail;
+use clack_extensions::thread_pool::{PluginThreadPool, PluginThreadPoolImpl};
 use clack_plugin::events::spaces::CoreEventSpace;
 use clack_plugin::prelude::*;
 use clack_plugin::stream::{InputStream, OutputStream};
@@ -35,6 +36,7 @@ use std::fmt::Write as _;
 use std::io::{Read, Write as _};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Mutex;
+use unacorda::audio::host_pool::Rendezvous;
 
 pub mod params;
 pub mod prepare;
@@ -62,9 +64,19 @@ pub struct Shared {
     /// The background build a change of keyboard or pool size asks for (both threads and the
     /// build thread; [`rebuild::Rebuild`] says which touches what).
     pub rebuild: rebuild::Rebuild,
+    /// The engine's two halves handed to the host's thread pool (the audio thread posts them,
+    /// the host's workers run them: [`unacorda::audio::host_pool`]).
+    pub pool: Rendezvous,
 }
 
 impl PluginShared<'_> for Shared {}
+
+impl PluginThreadPoolImpl for Shared {
+    /// A task of the host's pool, asked for by the audio thread inside `process`.
+    fn exec(&self, task_index: u32) {
+        self.pool.exec(task_index);
+    }
+}
 
 /// The main thread's side.
 pub struct MainThread<'a> {
@@ -103,7 +115,8 @@ impl Plugin for Unacorda {
             .register::<PluginParams>()
             .register::<PluginState>()
             .register::<PluginLatency>()
-            .register::<PluginTail>();
+            .register::<PluginTail>()
+            .register::<PluginThreadPool>();
     }
 }
 
@@ -125,6 +138,7 @@ impl DefaultPluginFactory for Unacorda {
             latency_frames: AtomicU32::new(0),
             silent_because: Mutex::new(None),
             rebuild: rebuild::Rebuild::default(),
+            pool: Rendezvous::default(),
         })
     }
 

@@ -6,15 +6,17 @@ use crate::params::{curved_velocity, GAIN_DB, REBUILDS, SOFT, SOSTENUTO, SUSTAIN
 use crate::prepare::Pianos;
 use crate::{MainThread, Shared};
 use clack_extensions::tail::TailLength;
+use clack_extensions::thread_pool::HostThreadPool;
 use clack_plugin::events::spaces::CoreEventSpace;
 use clack_plugin::events::Match;
 use clack_plugin::prelude::*;
 use std::sync::atomic::Ordering;
 use unacorda::audio::aligned::LATENCY_FRAMES;
+use unacorda::audio::host_pool::HostPool;
 use unacorda::audio::synth::EVENT_QUEUE;
 use unacorda::audio::{Aligned, Synth};
 use unacorda::engine::exact::ExactPool;
-use unacorda::engine::{Rk4Pool, VoicePool};
+use unacorda::engine::{Pair, Rk4Pool, VoicePool};
 use unacorda::midi::{map_channel_message, Event, Pedal};
 
 /// The ring-out the tail reports: how long the slowest mode takes to fall this far (dB), from a
@@ -47,6 +49,8 @@ pub struct Processor<'a> {
     built: [f64; REBUILDS.len()],
     /// Where a change of them stands.
     rebuild: Rebuilding,
+    /// The host's thread pool, if it has one: the engine's second core, before the helper thread.
+    thread_pool: Option<HostThreadPool>,
 }
 
 /// The synth on either engine, realigned to the host's blocks.
@@ -74,8 +78,8 @@ impl Engine {
             e.schedule(event);
         })
     }
-    fn process(&mut self, out: &mut [f32]) {
-        on_engine!(self, e => e.process(out))
+    fn process(&mut self, out: &mut [f32], pair: Option<&dyn Pair>) {
+        on_engine!(self, e => e.process_on(out, pair))
     }
     fn is_silent(&self) -> bool {
         on_engine!(self, e => e.is_silent())
@@ -156,6 +160,8 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         };
         // Silence is written to both channels of the port.
         let channels = engine.as_ref().map_or(2, Engine::channels);
+        shared.pool.start_over();
+        let thread_pool = host.get_extension::<HostThreadPool>();
         Ok(Processor {
             shared,
             host,
@@ -167,6 +173,7 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             tail,
             built,
             rebuild: Rebuilding::No,
+            thread_pool,
         })
     }
 
@@ -372,12 +379,20 @@ impl Processor<'_> {
         let target = db_to_gain(self.shared.values.get(GAIN_DB));
         let ch = self.channels;
         let host_channels = out.channel_count();
+        // The host's pool lends the second core while it runs the two halves at once; from a
+        // host that runs its tasks one after another the helper thread takes over.
+        let host = std::cell::RefCell::new(&mut self.host);
+        let pair = self.thread_pool.map(|pool| HostPool {
+            rendezvous: &self.shared.pool,
+            request: move || pool.request_exec(&mut host.borrow_mut(), 2).is_ok(),
+        });
+        let pair = pair.as_ref().map(|p| p as &dyn Pair);
         let mut start = range.start;
         while start < range.end {
             let n = (range.end - start).min(SCRATCH_FRAMES);
             let scratch = &mut self.scratch[..n * ch];
             match &mut self.engine {
-                Some(engine) => engine.process(scratch),
+                Some(engine) => engine.process(scratch, pair),
                 None => scratch.fill(0.0),
             }
             let mut gain = self.gain;

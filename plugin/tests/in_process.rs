@@ -8,7 +8,7 @@ mod host;
 use assert_no_alloc::{assert_no_alloc, violation_count, AllocDisabler};
 use clack_host::prelude::PluginEntry;
 use clack_plugin::entry::SinglePluginEntry;
-use host::{Instance, Play};
+use host::{Instance, Play, Threads};
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::midi::file::TimedEvent;
@@ -255,6 +255,51 @@ fn equals_offline(engine: &str, heard: &host::Heard, latency: usize, render: [&[
         );
         assert!(peak > 0.01);
         assert_eq!(differ, 0, "{engine} {name} differs from the offline render");
+    }
+}
+
+/// CLAP's thread pool: a host that runs the plugin's two tasks at once lends the engine its second
+/// core (the two halves inside the plugin together); a host that runs them one after the other
+/// gets them back at once, without a deadlock, and after a few blocks is no longer asked (the
+/// helper thread takes over). Either way the same samples as the offline render, and no
+/// allocation on the audio thread or the host's worker.
+#[test]
+fn a_hosts_thread_pool_lends_a_core_and_a_serial_one_gets_its_tasks_back() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let script = script();
+    let events = as_piano_events(&script);
+    let (left, right) = offline::<ExactPool>(&events, 0.1);
+    for threads in [Threads::Parallel, Threads::Serial] {
+        let mut plugin = host::instantiate_with(&entry(), threads, checked);
+        let mut active = host::activate(&mut plugin, RATE_HZ);
+        let latency = host::latency(&mut plugin) as usize;
+        let heard = active.run(left.len() + latency, &[64, 256, 1000, 17], &script, checked);
+        let (requests, tasks, most_at_once, together, worker_allocations) = host::pool(&mut plugin);
+        println!(
+            "{threads:?} host pool: {requests} requests, {tasks} tasks, {together} requests with both inside the plugin together (at most {most_at_once} at once); {} + {worker_allocations} allocations",
+            heard.allocations
+        );
+        assert_eq!(heard.allocations, 0, "process() allocated");
+        assert_eq!(worker_allocations, 0, "the worker's half allocated");
+        assert_eq!(tasks, 2 * requests);
+        match threads {
+            Threads::Parallel => assert_eq!(most_at_once, 2, "the halves ran together"),
+            _ => {
+                assert_eq!(most_at_once, 1);
+                assert_eq!(
+                    requests,
+                    unacorda::audio::host_pool::SERIAL_MISSES,
+                    "asked until the host seemed serial, then no more"
+                );
+            }
+        }
+        equals_offline(
+            &format!("{threads:?} pool"),
+            &heard,
+            latency,
+            [&left, &right],
+        );
+        host::deactivate(&mut plugin, active);
     }
 }
 

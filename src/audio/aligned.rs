@@ -6,7 +6,7 @@
 //! event inside it is known. Never allocates after [`Aligned::new`].
 
 use super::synth::{Scheduled, Synth, SynthHandle, ALIGN_FRAMES};
-use crate::engine::VoicePool;
+use crate::engine::{Pair, VoicePool};
 use crate::midi::Event;
 use ringbuf::traits::Producer;
 use std::sync::atomic::Ordering;
@@ -75,6 +75,11 @@ impl<E: VoicePool> Aligned<E> {
 
     /// Fill `out` (interleaved, the channels of [`Aligned::new`]) with the next frames.
     pub fn process(&mut self, out: &mut [f32]) {
+        self.process_on(out, None);
+    }
+
+    /// [`Aligned::process`] with `pair` lending the engine a second core ([`Synth::process_on`]).
+    pub fn process_on(&mut self, out: &mut [f32], pair: Option<&dyn Pair>) {
         let ch = self.channels;
         let cell_frames = ALIGN_FRAMES as usize;
         let whole = out.len() / ch * ch;
@@ -83,7 +88,7 @@ impl<E: VoicePool> Aligned<E> {
             if self.taken == cell_frames {
                 // Every event up to this cell's end has been scheduled: its last frame is the
                 // frame the host is handed now, less the latency.
-                self.synth.process(&mut self.cell, ch);
+                self.synth.process_on(&mut self.cell, ch, pair);
                 self.taken = 0;
             }
             let n = (cell_frames - self.taken).min(out.len() / ch);

@@ -224,7 +224,7 @@ fn rest_for(now: Instant, next: Instant) -> Option<Duration> {
 }
 
 impl Pair for Helper {
-    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut()) -> bool {
+    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut (dyn FnMut() + Send)) -> bool {
         let Some(thread) = &self.thread else {
             return false;
         };

@@ -1,7 +1,8 @@
 //! The sound shell: decimation to the output rate, the audio thread's engine ([`synth`]), a
 //! host's blocks of any length realigned to the synth's grid ([`aligned`]), the audio device
 //! (`device`, feature `device`), the helper thread that lends the callback a second core
-//! ([`helper`]), real-time priority for both ([`priority`]) and WAV files.
+//! ([`helper`]) or a host's thread pool that does ([`host_pool`]), real-time priority
+//! ([`priority`]) and WAV files.
 
 pub mod aligned;
 pub mod clock;
@@ -9,6 +10,7 @@ pub mod decimate;
 #[cfg(feature = "device")]
 pub mod device;
 pub mod helper;
+pub mod host_pool;
 pub mod priority;
 pub mod radiate;
 pub mod synth;

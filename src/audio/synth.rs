@@ -226,9 +226,18 @@ impl<E: VoicePool> Synth<E> {
     /// Fill an interleaved block of `channels` channels: the left and right channels in the first
     /// two (the rest silent), or their mean in one (a mono piano's two channels are the same).
     pub fn process(&mut self, out: &mut [f32], channels: usize) {
+        self.process_on(out, channels, None);
+    }
+
+    /// [`Synth::process`] with `pair` lending the engine its second core for this block (a host's
+    /// thread pool, [`super::host_pool`]); where it declines ([`Pair::declines`]), the helper
+    /// thread, if any.
+    pub fn process_on(&mut self, out: &mut [f32], channels: usize, pair: Option<&dyn Pair>) {
         // SAFETY: as in `process_with`.
         unsafe {
-            no_denormals::no_denormals(|| self.render(out, channels.max(1), &mut |_, _| {}, false))
+            no_denormals::no_denormals(|| {
+                self.render(out, channels.max(1), &mut |_, _| {}, false, pair)
+            })
         }
     }
 
@@ -237,7 +246,9 @@ impl<E: VoicePool> Synth<E> {
     pub fn process_with(&mut self, out: &mut [f32], channels: usize, mut tap: impl FnMut(&E, u64)) {
         // SAFETY: flush-to-zero and denormals-are-zero only change how subnormal results are
         // rounded (to zero) for the duration of the block on this thread; the guard restores MXCSR.
-        unsafe { no_denormals::no_denormals(|| self.render(out, channels.max(1), &mut tap, true)) }
+        unsafe {
+            no_denormals::no_denormals(|| self.render(out, channels.max(1), &mut tap, true, None))
+        }
     }
 
     /// The decimation filter's delay, in output frames (0 when the engine runs at the output
@@ -297,6 +308,7 @@ impl<E: VoicePool> Synth<E> {
         channels: usize,
         tap: &mut impl FnMut(&E, u64),
         frame_by_frame: bool,
+        pair: Option<&dyn Pair>,
     ) {
         let started = Instant::now();
         let frames_out = (out.len() / channels) as u64;
@@ -344,8 +356,9 @@ impl<E: VoicePool> Synth<E> {
             let n = if frame_by_frame { 1 } else { left.min(until) };
             if self.running {
                 let helper = self.helper.as_ref().map(|h| h as &dyn Pair);
+                let cores = pair.filter(|p| !p.declines()).or(helper);
                 let inst = &mut self.piano.instrument;
-                inst.run(&mut self.volume[..n * ratio], helper);
+                inst.run(&mut self.volume[..n * ratio], cores);
             }
             let mut blown = false;
             let (mut clipped, mut peak) = (0, 0f32);

@@ -10,5 +10,11 @@ pub trait Pair {
     /// `true`), and return `true` when both have finished. When the other core
     /// cannot start `there` promptly, run neither and return `false`: the caller then does the
     /// work alone, so a late core costs one core's time, not a wait of unknown length.
-    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut()) -> bool;
+    fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut (dyn FnMut() + Send)) -> bool;
+
+    /// Whether every `join` would now return `false` at once (a host's thread pool that runs its
+    /// tasks one after another): the caller may ask another pair instead.
+    fn declines(&self) -> bool {
+        false
+    }
 }

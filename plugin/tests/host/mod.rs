@@ -12,13 +12,16 @@ use clack_extensions::params::{
     ParamRescanFlags, PluginParams,
 };
 use clack_extensions::state::PluginState;
+use clack_extensions::thread_pool::{HostThreadPool, HostThreadPoolImpl, PluginThreadPool};
 use clack_host::events::event_types::{
     MidiEvent, NoteChokeEvent, NoteOffEvent, NoteOnEvent, ParamValueEvent,
 };
 use clack_host::events::{Match, Pckn};
 use clack_host::factory::plugin::PluginFactory;
 use clack_host::prelude::*;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::thread::JoinHandle;
 
 pub struct Host;
 #[derive(Default)]
@@ -27,11 +30,150 @@ pub struct HostShared {
     pub rescans: AtomicU32,
     /// Main-thread callbacks the plugin asked for.
     pub callbacks: AtomicU32,
+    /// How this host runs the tasks the plugin asks its thread pool for (none: no pool).
+    pub threads: Threads,
+    /// The plugin's handle and its side of the thread pool, once it is initialised.
+    plugin: OnceLock<(PluginSharedHandle<'static>, PluginThreadPool)>,
+    pub pool: Arc<PoolStats>,
 }
 pub struct HostMain<'a> {
     shared: &'a HostShared,
 }
-pub struct HostAudio;
+pub struct HostAudio<'a> {
+    shared: &'a HostShared,
+    worker: Option<Worker>,
+}
+
+/// How the test host's thread pool runs a request's tasks.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Threads {
+    /// The host has no thread pool.
+    #[default]
+    None,
+    /// One after the other on the audio thread (a host whose workers are busy).
+    Serial,
+    /// Task 0 on the audio thread, task 1 on a worker thread at the same time.
+    Parallel,
+}
+
+/// What a task runs inside (the test's allocation checker), returning the allocations it saw.
+pub type Checker = fn(&mut dyn FnMut()) -> u32;
+
+/// What the host's thread pool saw.
+#[derive(Debug, Default)]
+pub struct PoolStats {
+    pub requests: AtomicU32,
+    pub tasks: AtomicU32,
+    /// Tasks inside the plugin now, and the most there were at once (2: the two halves ran
+    /// together).
+    inside: AtomicU32,
+    pub most_at_once: AtomicU32,
+    /// Tasks that came while the other was inside (blocks the halves ran together).
+    pub together: AtomicU32,
+    /// Allocations the worker's tasks made (under the test's checker).
+    pub worker_allocations: AtomicU32,
+    /// What each worker task runs inside (the test's allocation checker).
+    pub checker: OnceLock<Checker>,
+}
+
+impl PoolStats {
+    /// Task `i` of the plugin's request, counted.
+    fn run(&self, plugin: &(PluginSharedHandle<'static>, PluginThreadPool), i: u32) {
+        let now = self.inside.fetch_add(1, Ordering::AcqRel) + 1;
+        self.most_at_once.fetch_max(now, Ordering::Relaxed);
+        if now == 2 {
+            self.together.fetch_add(1, Ordering::Relaxed);
+        }
+        plugin.1.exec(&plugin.0, i);
+        self.inside.fetch_sub(1, Ordering::AcqRel);
+        self.tasks.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// The host's worker thread: runs task 1 of each request (rounds numbered from 1), spinning for
+/// 300 us after each, then parked until the next (spinning through every block, a real-time
+/// worker is throttled by the kernel; the plugin's helper thread rests for the same reason).
+struct Worker {
+    round: Arc<(AtomicU32, AtomicU32, AtomicBool)>,
+    thread: Option<JoinHandle<()>>,
+    posted: u32,
+}
+
+impl Worker {
+    fn spawn(
+        plugin: (PluginSharedHandle<'static>, PluginThreadPool),
+        stats: Arc<PoolStats>,
+    ) -> Worker {
+        let round = Arc::new((AtomicU32::new(0), AtomicU32::new(0), AtomicBool::new(false)));
+        let theirs = round.clone();
+        let thread = std::thread::spawn(move || {
+            // A host's audio workers run at real-time priority, as the plugin's helper asks to.
+            unacorda::audio::priority::Promotion::default().ask();
+            let (posted, done, quit) = (&theirs.0, &theirs.1, &theirs.2);
+            let mut idle = std::time::Instant::now();
+            let checker = *stats.checker.get().unwrap_or(&(unchecked as Checker));
+            while !quit.load(Ordering::Acquire) {
+                let n = posted.load(Ordering::Acquire);
+                if n != done.load(Ordering::Relaxed) {
+                    let allocations = checker(&mut || stats.run(&plugin, 1));
+                    stats
+                        .worker_allocations
+                        .fetch_add(allocations, Ordering::Relaxed);
+                    done.store(n, Ordering::Release);
+                    idle = std::time::Instant::now();
+                } else if idle.elapsed() > std::time::Duration::from_micros(300) {
+                    std::thread::park_timeout(std::time::Duration::from_millis(1));
+                } else {
+                    std::hint::spin_loop();
+                }
+            }
+        });
+        Worker {
+            round,
+            thread: Some(thread),
+            posted: 0,
+        }
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.round.2.store(true, Ordering::Release);
+        if let Some(thread) = self.thread.take() {
+            thread.thread().unpark();
+            let _ = thread.join();
+        }
+    }
+}
+
+impl HostThreadPoolImpl for HostAudio<'_> {
+    fn request_exec(&mut self, task_count: u32) -> Result<(), HostError> {
+        let plugin = self
+            .shared
+            .plugin
+            .get()
+            .ok_or(HostError::Message("no plugin"))?;
+        let stats = &self.shared.pool;
+        stats.requests.fetch_add(1, Ordering::Relaxed);
+        match (self.shared.threads, &mut self.worker) {
+            (Threads::Parallel, Some(worker)) if task_count >= 2 => {
+                worker.posted = worker.posted.wrapping_add(1).max(1);
+                worker.round.0.store(worker.posted, Ordering::Release);
+                if let Some(thread) = &worker.thread {
+                    thread.thread().unpark();
+                }
+                stats.run(plugin, 0);
+                while worker.round.1.load(Ordering::Acquire) != worker.posted {
+                    std::hint::spin_loop();
+                }
+                (2..task_count).for_each(|i| stats.run(plugin, i));
+            }
+            (Threads::None, _) => return Err(HostError::Message("no thread pool")),
+            _ => (0..task_count).for_each(|i| stats.run(plugin, i)),
+        }
+        Ok(())
+    }
+}
 
 impl<'a> SharedHandler<'a> for HostShared {
     fn request_restart(&self) {
@@ -42,8 +184,24 @@ impl<'a> SharedHandler<'a> for HostShared {
         self.callbacks.fetch_add(1, Ordering::Relaxed);
     }
 }
-impl<'a> MainThreadHandler<'a> for HostMain<'a> {}
-impl<'a> AudioProcessorHandler<'a> for HostAudio {}
+impl<'a> MainThreadHandler<'a> for HostMain<'a> {
+    fn initialized(&self, instance: InitializedPluginHandle<'a>) {
+        if self.shared.threads == Threads::None {
+            return;
+        }
+        if let Some(pool) = instance.get_extension::<PluginThreadPool>() {
+            // SAFETY: the handle is used only by the host's audio side and its worker, which end
+            // (deactivation joins the worker) before the instance does.
+            let handle = instance.access(|h| unsafe {
+                std::mem::transmute::<PluginSharedHandle<'_>, PluginSharedHandle<'static>>(h)
+            });
+            if let Some(handle) = handle {
+                let _ = self.shared.plugin.set((handle, pool));
+            }
+        }
+    }
+}
+impl<'a> AudioProcessorHandler<'a> for HostAudio<'a> {}
 impl HostParamsImplShared for HostShared {
     fn request_flush(&self) {}
 }
@@ -58,10 +216,13 @@ impl HostParamsImplMainThread for HostMain<'_> {
 impl HostHandlers for Host {
     type Shared<'a> = HostShared;
     type MainThread<'a> = HostMain<'a>;
-    type AudioProcessor<'a> = HostAudio;
+    type AudioProcessor<'a> = HostAudio<'a>;
 
-    fn declare_extensions(builder: &mut HostExtensions<Self>, _shared: &HostShared) {
+    fn declare_extensions(builder: &mut HostExtensions<Self>, shared: &HostShared) {
         builder.register::<HostParams>();
+        if shared.threads != Threads::None {
+            builder.register::<HostThreadPool>();
+        }
     }
 }
 
@@ -84,13 +245,27 @@ pub struct Instance {
 }
 
 pub fn instantiate(entry: &PluginEntry) -> Instance {
+    instantiate_with(entry, Threads::None, unchecked)
+}
+
+/// An instance in a host with a thread pool that runs tasks as `threads` says, each worker task
+/// inside `checker`.
+pub fn instantiate_with(entry: &PluginEntry, threads: Threads, checker: Checker) -> Instance {
     let info = HostInfo::new("unacorda tests", "unacorda", "", "0.1").unwrap();
     let factory = entry.get_factory::<PluginFactory>().unwrap();
     let descriptor = factory.plugin_descriptor(0).unwrap();
     let id = descriptor.id().unwrap();
     assert_eq!(id.to_bytes(), b"org.unacorda.piano");
     let instance = PluginInstance::<Host>::new(
-        |_| HostShared::default(),
+        |_| {
+            let pool = PoolStats::default();
+            let _ = pool.checker.set(checker);
+            HostShared {
+                threads,
+                pool: Arc::new(pool),
+                ..HostShared::default()
+            }
+        },
         |shared| HostMain { shared },
         entry,
         id,
@@ -156,6 +331,21 @@ pub fn load(instance: &mut Instance, bytes: &[u8]) -> Result<(), String> {
     state
         .load(&handle, &mut std::io::Cursor::new(bytes))
         .map_err(|e| e.to_string())
+}
+
+/// What the host's thread pool saw: (requests, tasks, most tasks inside the plugin at once,
+/// requests whose tasks were inside together, allocations on the worker).
+pub fn pool(instance: &mut Instance) -> (u32, u32, u32, u32, u32) {
+    instance.instance.access_shared_handler(|h| {
+        let p = &h.pool;
+        (
+            p.requests.load(Ordering::Relaxed),
+            p.tasks.load(Ordering::Relaxed),
+            p.most_at_once.load(Ordering::Relaxed),
+            p.together.load(Ordering::Relaxed),
+            p.worker_allocations.load(Ordering::Relaxed),
+        )
+    })
 }
 
 pub fn rescans(instance: &mut Instance) -> u32 {
@@ -231,7 +421,18 @@ pub fn activate(instance: &mut Instance, rate_hz: f64) -> Active {
     };
     let processor = instance
         .instance
-        .activate(|_, _| HostAudio, config)
+        .activate(
+            |shared, _| HostAudio {
+                shared,
+                worker: match (shared.threads, shared.plugin.get()) {
+                    (Threads::Parallel, Some(plugin)) => {
+                        Some(Worker::spawn(*plugin, shared.pool.clone()))
+                    }
+                    _ => None,
+                },
+            },
+            config,
+        )
         .unwrap()
         .start_processing()
         .unwrap();

@@ -388,7 +388,11 @@ fn step_work(keys: &[ExactKey], v: &Voice) -> usize {
 
 /// `there` and `here` on two cores through `pair` where it takes them, else both on this one. A
 /// panic on either side is raised again here once both have stopped.
-fn both(pair: Option<&dyn Pair>, there: &mut (dyn FnMut() + Send), here: &mut dyn FnMut()) {
+fn both(
+    pair: Option<&dyn Pair>,
+    there: &mut (dyn FnMut() + Send),
+    here: &mut (dyn FnMut() + Send),
+) {
     let joined = pair.is_some_and(|pair| {
         let mut panic = None;
         let mut guarded = || {
