@@ -9,7 +9,6 @@
 mod host;
 
 use clack_host::prelude::PluginEntry;
-use clack_plugin::entry::SinglePluginEntry;
 use host::{Play, Threads};
 use std::time::{Duration, Instant};
 use unacorda::measure::{paced_times_s, percentile};
@@ -22,8 +21,9 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(4.0);
+    // SAFETY: the plugin's own static entry (what hosts load), valid for the process's life.
     let entry =
-        PluginEntry::load_from_clack::<SinglePluginEntry<unacorda_clap::Unacorda>>(c"").unwrap();
+        unsafe { PluginEntry::load_from_raw(&unacorda_clap::entry::clap_entry, c"") }.unwrap();
     // The second core from the plugin's own helper thread (a host without a thread pool), and
     // from a host's thread pool whose worker runs one task while the audio thread runs the other.
     for (threads, second_core) in [

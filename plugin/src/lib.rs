@@ -5,6 +5,8 @@
 //! ([`unacorda::audio::Aligned`], reported as latency), so every sample is the one
 //! `unacorda render --offline --midi` gives for the same events, whatever the host's blocks.
 //!
+//! - [`entry`]: the entry point hosts load (clack's, `process` guarded against a malformed
+//!   transport),
 //! - [`params`]: the parameters and their shared values,
 //! - [`state`]: the saved state (versioned text, refused when foreign or newer),
 //! - [`prepare`]: the 88 keys prepared once per process, shared by instances and activations,
@@ -12,8 +14,8 @@
 //! - [`processor`]: the audio thread's side.
 
 use clack_extensions::audio_ports::{
-    AudioPortFlags, AudioPortInfo, AudioPortInfoWriter, AudioPortType, PluginAudioPorts,
-    PluginAudioPortsImpl,
+    AudioPortFlags, AudioPortInfo, AudioPortInfoWriter, AudioPortRescanFlags, AudioPortType,
+    HostAudioPorts, PluginAudioPorts, PluginAudioPortsImpl,
 };
 use clack_extensions::latency::{PluginLatency, PluginLatencyImpl};
 use clack_extensions::log::{HostLog, LogSeverity};
@@ -31,13 +33,16 @@ use clack_extensions::thread_pool::{PluginThreadPool, PluginThreadPoolImpl};
 use clack_plugin::events::spaces::CoreEventSpace;
 use clack_plugin::prelude::*;
 use clack_plugin::stream::{InputStream, OutputStream};
+use std::cell::Cell;
 use std::ffi::CStr;
 use std::fmt::Write as _;
 use std::io::{Read, Write as _};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Mutex;
 use unacorda::audio::host_pool::Rendezvous;
+use unacorda::config::scaling::Scaling;
 
+pub mod entry;
 pub mod params;
 pub mod prepare;
 pub mod processor;
@@ -82,6 +87,8 @@ impl PluginThreadPoolImpl for Shared {
 pub struct MainThread<'a> {
     shared: &'a Shared,
     host: HostMainThreadHandle<'a>,
+    /// The output port's channels as the host last read them (0: not yet read).
+    announced_channels: Cell<u32>,
 }
 
 impl<'a> PluginMainThread<'a, Shared> for MainThread<'a> {
@@ -93,6 +100,7 @@ impl<'a> PluginMainThread<'a, Shared> for MainThread<'a> {
             values.voices(),
             values.integrator(),
         );
+        self.follow_ports();
     }
 }
 
@@ -146,11 +154,55 @@ impl DefaultPluginFactory for Unacorda {
         host: HostMainThreadHandle<'a>,
         shared: &'a Shared,
     ) -> Result<MainThread<'a>, PluginError> {
-        Ok(MainThread { shared, host })
+        Ok(MainThread {
+            shared,
+            host,
+            announced_channels: Cell::new(0),
+        })
     }
 }
 
 impl MainThread<'_> {
+    /// The channels of the keyboard chosen: 2 for a stereo pair of listeners, 1 for one (a
+    /// keyboard that cannot be read plays silence: 2).
+    fn keyboard_channels(&self) -> u32 {
+        Scaling::resolve(self.shared.values.keyboard())
+            .map_or(2, |s| u32::from(s.output_settings().channels))
+    }
+
+    /// Where the keyboard chosen has another number of channels than the port the host read,
+    /// have the host read the port again — only while inactive, as CLAP allows a change of
+    /// channels. While active the output follows the engine whatever the port (a mono piano in
+    /// both channels of a stereo port, a stereo one mixed into a mono port) until the next
+    /// deactivation, which asks for a main-thread callback to come here.
+    fn follow_ports(&self) {
+        let announced = self.announced_channels.get();
+        if announced == 0 || self.shared.rebuild.active() || announced == self.keyboard_channels() {
+            return;
+        }
+        let Some(ports) = self.host.get_extension::<HostAudioPorts>() else {
+            return;
+        };
+        let flags = [
+            AudioPortRescanFlags::CHANNEL_COUNT | AudioPortRescanFlags::PORT_TYPE,
+            AudioPortRescanFlags::LIST,
+        ]
+        .into_iter()
+        .find(|&f| ports.is_rescan_flag_supported(&self.host, f));
+        if let Some(flags) = flags {
+            ports.rescan(&self.host, flags);
+        }
+    }
+
+    /// A main-thread callback, if the port has other channels than the keyboard chosen
+    /// ([`MainThread::follow_ports`]).
+    fn ask_to_follow_ports(&self) {
+        let announced = self.announced_channels.get();
+        if announced != 0 && announced != self.keyboard_channels() {
+            self.host.request_callback();
+        }
+    }
+
     /// Tell the host (its log, else standard error) something the user should know.
     fn warn(&self, message: &str) {
         match self.host.get_extension::<HostLog>() {
@@ -172,14 +224,20 @@ impl PluginAudioPortsImpl for MainThread<'_> {
         }
     }
 
+    /// One output, as many channels as the keyboard chosen has.
     fn get(&self, index: u32, is_input: bool, writer: &mut AudioPortInfoWriter) {
         if !is_input && index == 0 {
+            let channels = self.keyboard_channels();
+            self.announced_channels.set(channels);
             writer.set(&AudioPortInfo {
                 id: ClapId::new(0),
                 name: b"main",
-                channel_count: 2,
+                channel_count: channels,
                 flags: AudioPortFlags::IS_MAIN,
-                port_type: Some(AudioPortType::STEREO),
+                port_type: Some(match channels {
+                    1 => AudioPortType::MONO,
+                    _ => AudioPortType::STEREO,
+                }),
                 in_place_pair: None,
             });
         }
@@ -285,7 +343,7 @@ impl PluginMainThreadParams for MainThread<'_> {
 
     fn flush(&self, input: &InputEvents, _output: &mut OutputEvents) {
         // The processor is not active: values are only stored (a rebuild parameter's change is
-        // built at the next activation).
+        // built at the next activation; a keyboard with other channels rescans the port).
         for event in input {
             if let Some(CoreEventSpace::ParamValue(e)) = event.as_core_event() {
                 if let Some(i) = e.param_id().and_then(|id| params::index_of(id.get())) {
@@ -293,6 +351,7 @@ impl PluginMainThreadParams for MainThread<'_> {
                 }
             }
         }
+        self.follow_ports();
     }
 }
 
@@ -333,8 +392,7 @@ impl PluginStateImpl for MainThread<'_> {
             // builds it at its activation.
             self.host.shared().request_process();
         }
+        self.follow_ports();
         Ok(())
     }
 }
-
-clack_export_entry!(SinglePluginEntry<Unacorda>);

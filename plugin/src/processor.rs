@@ -177,8 +177,11 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         })
     }
 
-    fn deactivate(self, _main_thread: &MainThread<'a>) {
+    fn deactivate(self, main_thread: &MainThread<'a>) {
         self.shared.rebuild.deactivated();
+        // Inactive, the port may follow the keyboard's channels (in the callback, once the host
+        // has finished deactivating).
+        main_thread.ask_to_follow_ports();
     }
 
     fn process(

@@ -7,13 +7,11 @@ mod host;
 
 use assert_no_alloc::{assert_no_alloc, violation_count, AllocDisabler};
 use clack_host::prelude::PluginEntry;
-use clack_plugin::entry::SinglePluginEntry;
 use host::{Instance, Play, Threads};
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::midi::file::TimedEvent;
 use unacorda::midi::{Event, Pedal};
-use unacorda_clap::Unacorda;
 
 #[global_allocator]
 static ALLOCATOR: AllocDisabler = AllocDisabler;
@@ -29,8 +27,10 @@ const GAIN_DB: u32 = 4;
 const VELOCITY_CURVE: u32 = 5;
 const KEYBOARD: u32 = 6;
 
+/// The entry point the built library exports (`clap_entry`), as hosts load it.
 fn entry() -> PluginEntry {
-    PluginEntry::load_from_clack::<SinglePluginEntry<Unacorda>>(c"").unwrap()
+    // SAFETY: the plugin's own static entry, valid for the process's life.
+    unsafe { PluginEntry::load_from_raw(&unacorda_clap::entry::clap_entry, c"") }.unwrap()
 }
 
 fn instance() -> Instance {
@@ -303,6 +303,46 @@ fn a_hosts_thread_pool_lends_a_core_and_a_serial_one_gets_its_tasks_back() {
     }
 }
 
+/// A host that hands over a transport event with an empty header, as Qtractor does (it clears
+/// the event and fills in the fields only): the plugin plays on, as with a proper transport or
+/// none, the same samples in all three (clack alone panicked on every such block, and the plugin
+/// was silent in Qtractor).
+#[test]
+fn a_transport_with_an_empty_header_is_passed_over() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut plugin = instance();
+    let script = [(0, Play::On(60, 0.6))];
+    let mut heard = Vec::new();
+    // SAFETY: a transport event is integers and flags: all zeros is a value of it (Qtractor's).
+    let empty: clack_host::events::event_types::TransportEvent = unsafe { std::mem::zeroed() };
+    let mut proper = empty;
+    proper.header =
+        clack_host::events::EventHeader::new_core(0, clack_host::events::EventFlags::empty());
+    for (name, transport) in [
+        ("none", None),
+        ("proper", Some(proper)),
+        ("empty", Some(empty)),
+    ] {
+        let mut active = host::activate(&mut plugin, RATE_HZ);
+        active.transport = transport;
+        // `run` fails the test on a block that returns an error.
+        let h = active.run(4800, &[256], &script, checked);
+        println!(
+            "transport {name}: rms {:.4}, {} allocations",
+            host::rms(&h.left),
+            h.allocations
+        );
+        assert_eq!(h.allocations, 0, "process() allocated");
+        heard.push(h.left);
+        host::deactivate(&mut plugin, active);
+    }
+    assert!(host::rms(&heard[0]) > 0.0);
+    assert!(
+        heard[1] == heard[0] && heard[2] == heard[0],
+        "the same samples"
+    );
+}
+
 /// The integrator parameter (set by a state, before activation) plays the paper's RK4: the same
 /// events equal `render --offline --integrator rk4 --midi`'s, sample for sample, one grid cell
 /// late, without allocating; the latency reported adds the decimation filter's delay (RK4 runs
@@ -482,6 +522,7 @@ fn gain_curve_and_rebuild_parameters() {
     assert!(db(heard[2]) < -3.0, "a steeper curve strikes softer");
 
     let (restarts, callbacks) = (host::restarts(&mut plugin), host::callbacks(&mut plugin));
+    assert_eq!(host::ports(&mut plugin).1, 2, "concert's port: stereo");
     let t0 = active.frame;
     let script = [
         (t0, Play::Param(KEYBOARD, 1.0)),
@@ -533,6 +574,19 @@ fn gain_curve_and_rebuild_parameters() {
     );
     assert_eq!(host::callbacks(&mut plugin), callbacks + 1);
     host::deactivate(&mut plugin, active);
+    // Inactive, the port follows the mono keyboard: the deactivation asks for a callback, which
+    // has the host read the ports again (not before: active, the callback that started the build
+    // left the port as it was).
+    assert_eq!(host::callbacks(&mut plugin), callbacks + 2);
+    assert_eq!(host::port_rescans(&mut plugin), 0, "no rescan while active");
+    host::on_main_thread(&mut plugin);
+    let channels = host::ports(&mut plugin).1;
+    println!(
+        "after the restart, inactive: {} port rescan(s), {channels} channel(s)",
+        host::port_rescans(&mut plugin)
+    );
+    assert_eq!(host::port_rescans(&mut plugin), 1);
+    assert_eq!(channels, 1, "paper's port: mono");
 
     // The host restarts the plugin: the activation finds the paper keyboard built.
     let mut active = host::activate(&mut plugin, RATE_HZ);
@@ -544,4 +598,18 @@ fn gain_curve_and_rebuild_parameters() {
         "paper plays, mono"
     );
     host::deactivate(&mut plugin, active);
+    // Nothing to follow: no callback asked at this deactivation.
+    assert_eq!(host::callbacks(&mut plugin), callbacks + 2);
+
+    // A state choosing concert again, loaded while inactive: the port is read again at once.
+    let state = String::from_utf8(host::save(&mut plugin))
+        .unwrap()
+        .replace("keyboard = \"paper\"", "keyboard = \"concert\"");
+    host::load(&mut plugin, state.as_bytes()).unwrap();
+    assert_eq!(host::port_rescans(&mut plugin), 2);
+    assert_eq!(
+        host::ports(&mut plugin).1,
+        2,
+        "concert's port: stereo again"
+    );
 }

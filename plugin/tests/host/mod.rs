@@ -4,7 +4,9 @@
 
 #![allow(dead_code)]
 
-use clack_extensions::audio_ports::{AudioPortInfoBuffer, PluginAudioPorts};
+use clack_extensions::audio_ports::{
+    AudioPortInfoBuffer, AudioPortRescanFlags, HostAudioPorts, HostAudioPortsImpl, PluginAudioPorts,
+};
 use clack_extensions::latency::PluginLatency;
 use clack_extensions::note_ports::{NotePortInfoBuffer, PluginNotePorts};
 use clack_extensions::params::{
@@ -14,7 +16,7 @@ use clack_extensions::params::{
 use clack_extensions::state::PluginState;
 use clack_extensions::thread_pool::{HostThreadPool, HostThreadPoolImpl, PluginThreadPool};
 use clack_host::events::event_types::{
-    MidiEvent, NoteChokeEvent, NoteOffEvent, NoteOnEvent, ParamValueEvent,
+    MidiEvent, NoteChokeEvent, NoteOffEvent, NoteOnEvent, ParamValueEvent, TransportEvent,
 };
 use clack_host::events::{Match, Pckn};
 use clack_host::factory::plugin::PluginFactory;
@@ -28,6 +30,8 @@ pub struct Host;
 pub struct HostShared {
     pub restarts: AtomicU32,
     pub rescans: AtomicU32,
+    /// Rescans of the audio ports' channels the plugin asked for.
+    pub port_rescans: AtomicU32,
     /// Main-thread callbacks the plugin asked for.
     pub callbacks: AtomicU32,
     /// How this host runs the tasks the plugin asks its thread pool for (none: no pool).
@@ -202,6 +206,16 @@ impl<'a> MainThreadHandler<'a> for HostMain<'a> {
     }
 }
 impl<'a> AudioProcessorHandler<'a> for HostAudio<'a> {}
+impl HostAudioPortsImpl for HostMain<'_> {
+    fn is_rescan_flag_supported(&self, _flag: AudioPortRescanFlags) -> bool {
+        true
+    }
+    fn rescan(&self, flags: AudioPortRescanFlags) {
+        if flags.contains(AudioPortRescanFlags::CHANNEL_COUNT) {
+            self.shared.port_rescans.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
 impl HostParamsImplShared for HostShared {
     fn request_flush(&self) {}
 }
@@ -219,7 +233,9 @@ impl HostHandlers for Host {
     type AudioProcessor<'a> = HostAudio<'a>;
 
     fn declare_extensions(builder: &mut HostExtensions<Self>, shared: &HostShared) {
-        builder.register::<HostParams>();
+        builder
+            .register::<HostParams>()
+            .register::<HostAudioPorts>();
         if shared.threads != Threads::None {
             builder.register::<HostThreadPool>();
         }
@@ -348,6 +364,13 @@ pub fn pool(instance: &mut Instance) -> (u32, u32, u32, u32, u32) {
     })
 }
 
+/// How many times the plugin asked the host to read its ports' channels again.
+pub fn port_rescans(instance: &mut Instance) -> u32 {
+    instance
+        .instance
+        .access_shared_handler(|h| h.port_rescans.load(Ordering::Relaxed))
+}
+
 pub fn rescans(instance: &mut Instance) -> u32 {
     instance
         .instance
@@ -411,6 +434,8 @@ pub fn rms(x: &[f32]) -> f64 {
 pub struct Active {
     pub processor: StartedPluginAudioProcessor<Host>,
     pub frame: u64,
+    /// The transport event handed with every block (none by default).
+    pub transport: Option<TransportEvent>,
 }
 
 pub fn activate(instance: &mut Instance, rate_hz: f64) -> Active {
@@ -439,6 +464,7 @@ pub fn activate(instance: &mut Instance, rate_hz: f64) -> Active {
     Active {
         processor,
         frame: 0,
+        transport: None,
     }
 }
 
@@ -496,7 +522,7 @@ impl Active {
                     &events.as_input(),
                     &mut out_events.as_output(),
                     None,
-                    None,
+                    self.transport.as_ref(),
                 ));
             });
             if let Some(Ok(ProcessStatus::Sleep)) = status {
