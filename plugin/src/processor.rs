@@ -387,7 +387,10 @@ impl Processor<'_> {
         let host = std::cell::RefCell::new(&mut self.host);
         let pair = self.thread_pool.map(|pool| HostPool {
             rendezvous: &self.shared.pool,
-            request: move || pool.request_exec(&mut host.borrow_mut(), 2).is_ok(),
+            // A refused request runs no task: the rendezvous says the block was not split.
+            request: move || {
+                let _ = pool.request_exec(&mut host.borrow_mut(), 2);
+            },
         });
         let pair = pair.as_ref().map(|p| p as &dyn Pair);
         let mut start = range.start;

@@ -88,13 +88,14 @@ impl std::fmt::Debug for Rendezvous {
 
 impl Rendezvous {
     /// Run `there` and `here` at once as the two tasks of `request` (which asks the host to call
-    /// [`Rendezvous::exec`] twice and returns once both calls have returned; `false` if the host
-    /// refused). `true` when both ran to their end; `false` when neither ran.
+    /// [`Rendezvous::exec`] twice and returns once both calls have returned, or the host refused).
+    /// `true` when both ran to their end; `false` when neither ran. The tasks' meeting says which,
+    /// not the host's answer: a host that ran them and answered no still had them run.
     pub fn join(
         &self,
         there: &mut (dyn FnMut() + Send),
         here: &mut (dyn FnMut() + Send),
-        request: impl FnOnce() -> bool,
+        request: impl FnOnce(),
     ) -> bool {
         let erase = |job: &mut (dyn FnMut() + Send)| -> Job {
             let job: *mut (dyn FnMut() + Send + '_) = job;
@@ -108,7 +109,7 @@ impl Rendezvous {
             *self.jobs[1].get() = Some(erase(there));
         }
         self.state.store(POSTED, Ordering::Release);
-        let asked = request();
+        request();
         // Both tasks have returned (or were never called): nobody touches the slots any more.
         let state = self.state.swap(IDLE, Ordering::AcqRel);
         // SAFETY: as above.
@@ -116,7 +117,7 @@ impl Rendezvous {
             *self.jobs[0].get() = None;
             *self.jobs[1].get() = None;
         }
-        let joined = asked && state == BOTH;
+        let joined = state == BOTH;
         if joined {
             self.joined.fetch_add(1, Ordering::Relaxed);
             self.serial_in_a_row.store(0, Ordering::Relaxed);
@@ -228,13 +229,13 @@ fn this_thread() -> usize {
 }
 
 /// A host's thread pool as the engine's [`Pair`]: `request` asks the host to run two tasks of
-/// [`Rendezvous::exec`] and returns whether it did.
-pub struct HostPool<'r, R: Fn() -> bool> {
+/// [`Rendezvous::exec`].
+pub struct HostPool<'r, R: Fn()> {
     pub rendezvous: &'r Rendezvous,
     pub request: R,
 }
 
-impl<R: Fn() -> bool> Pair for HostPool<'_, R> {
+impl<R: Fn()> Pair for HostPool<'_, R> {
     /// No host is asked once it seems to run its tasks one after another.
     fn join(&self, there: &mut (dyn FnMut() + Send), here: &mut (dyn FnMut() + Send)) -> bool {
         !self.declines() && self.rendezvous.join(there, here, &self.request)
@@ -251,11 +252,10 @@ mod tests {
     use std::sync::atomic::AtomicBool;
 
     /// A host that runs the two tasks one after the other on the calling thread.
-    fn serial(r: &Rendezvous) -> impl Fn() -> bool + '_ {
+    fn serial(r: &Rendezvous) -> impl Fn() + '_ {
         move || {
             r.exec(0);
             r.exec(1);
-            true
         }
     }
 
@@ -322,7 +322,6 @@ mod tests {
                     while done.load(Ordering::Acquire) != round {
                         std::hint::spin_loop();
                     }
-                    true
                 };
                 // Each half waits for the other: only run at once do they finish. `here` is task
                 // 0's, on this thread, whichever task arrives first.
@@ -378,7 +377,6 @@ mod tests {
                 std::thread::scope(|s| {
                     s.spawn(|| r.exec(1));
                 });
-                true
             };
             assert!(!r.join(&mut || a += 1, &mut || b += 1, late));
         }
@@ -394,16 +392,13 @@ mod tests {
         let run = || {
             ran.fetch_add(1, Ordering::Relaxed);
         };
-        assert!(!r.join(&mut || run(), &mut || run(), || false));
+        // A host that refuses: no task comes.
+        assert!(!r.join(&mut || run(), &mut || run(), || {}));
         // A task called after its request has returned finds nothing.
         r.exec(0);
         r.exec(1);
-        // A host that says it ran the tasks but called only one.
-        let one = || {
-            r.exec(1);
-            true
-        };
-        assert!(!r.join(&mut || run(), &mut || run(), one));
+        // A host that calls only one of the two.
+        assert!(!r.join(&mut || run(), &mut || run(), || r.exec(1)));
         assert_eq!(ran.load(Ordering::Relaxed), 0);
         assert_eq!(r.missed_blocks(), 2);
     }
