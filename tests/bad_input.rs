@@ -121,6 +121,14 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
     assert!(
         e.contains("bad_keyboard_bass_octave.toml") && e.contains("line 4") && e.contains("`10:5`")
     );
+    let e = keyboard_error("bad_keyboard_damper_model.toml");
+    assert!(
+        e.contains("bad_keyboard_damper_model.toml")
+            && e.contains("line 4")
+            && e.contains("`implicit`")
+            && e.contains("`coupled`")
+            && e.contains("`modal`")
+    );
     // A listener the asset does not have, alone or in a stereo pair, is refused when the first
     // key is made, naming the asset's.
     for (file, field) in [

@@ -7,7 +7,7 @@
 use crate::board::BoardSpec;
 use crate::config::asset::{self, AssetError};
 use crate::engine::physics::contact::{hertz_stiffness_n_m, Contact};
-use crate::engine::physics::damper::DamperParams;
+use crate::engine::physics::damper::{DamperParams, FeltModel};
 use crate::engine::physics::hammer::HammerParams;
 use crate::engine::physics::soundboard::SoundboardModes;
 use crate::engine::physics::string::{ModeSet, StringParams};
@@ -160,6 +160,18 @@ pub struct DamperSection {
     /// Width of the felt along the string (m); 0 (the default) is a point.
     #[serde(default)]
     pub width_m: f64,
+    /// How the exact engine carries the felt: `coupled` (the default) or `modal`
+    /// ([`FeltModel`]).
+    #[serde(default, with = "FeltModelName")]
+    pub model: FeltModel,
+}
+
+/// [`FeltModel`] as a preset or keyboard names it.
+#[derive(Deserialize)]
+#[serde(remote = "FeltModel", rename_all = "lowercase")]
+pub(crate) enum FeltModelName {
+    Coupled,
+    Modal,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -597,6 +609,7 @@ impl LoadedPreset {
                 position_ratio: self.preset.damper.position_ratio,
                 damping_n_s_m: self.preset.damper.damping_n_s_m,
                 width_m: self.preset.damper.width_m,
+                model: self.preset.damper.model,
             }),
             contact: self.contact(),
             board: self.board.clone(),

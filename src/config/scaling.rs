@@ -8,11 +8,11 @@
 //! per-note [`Preset`] bridged at its own point of the soundboard.
 
 use crate::config::preset::{
-    bridge_point_index, heard, read_text, LoadedPreset, Preset, PresetError, RadiationSection,
-    StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA, MAX_HYSTERESIS_S, MIN_EXPONENT,
-    MIN_FULL_SCALE_PA,
+    bridge_point_index, heard, read_text, FeltModelName, LoadedPreset, Preset, PresetError,
+    RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA, MAX_HYSTERESIS_S,
+    MIN_EXPONENT, MIN_FULL_SCALE_PA,
 };
-use crate::engine::physics::damper::DamperParams;
+use crate::engine::physics::damper::{DamperParams, FeltModel};
 use crate::engine::physics::string::StringParams;
 use crate::engine::tuning::bridged_pitch_hz;
 use serde::Deserialize;
@@ -52,6 +52,9 @@ pub struct Scaling {
     pub strings: StringOverrides,
     pub losses: Vec<LossAnchor>,
     pub dampers: Vec<DamperAnchor>,
+    /// How the exact engine carries every key's damper felt (`damper_model`); `None`: the base
+    /// preset's.
+    pub damper_model: Option<FeltModel>,
     pub voicing: Vec<VoicingAnchor>,
     pub tuning: Tuning,
     /// The octave a stretched tuning reaches in the bass (`bass_octave`).
@@ -141,6 +144,8 @@ struct ScalingFile {
     full_scale_pa: Option<f64>,
     #[serde(default)]
     dampers: Vec<DamperAnchor>,
+    /// `coupled` or `modal` ([`FeltModel`]); inherited from the base keyboard when absent.
+    damper_model: Option<FeltModelField>,
     #[serde(default)]
     voicing: Vec<VoicingAnchor>,
     /// `equal` (the default) or `stretched`; inherited from the base keyboard when absent.
@@ -150,6 +155,11 @@ struct ScalingFile {
     /// 1–36 (default 20, E2); inherited from the base keyboard when absent.
     bass_octave_from_key: Option<usize>,
 }
+
+/// A [`FeltModel`] as a keyboard file names it.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(transparent)]
+struct FeltModelField(#[serde(with = "FeltModelName")] FeltModel);
 
 /// String settings of the base preset that a keyboard replaces on every key.
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
@@ -394,6 +404,10 @@ impl Scaling {
                 .or_else(|| base.as_ref().and_then(|b| b.full_scale_pa)),
             losses: inherit_points(file.losses, base.as_ref().map(|b| &b.losses)),
             dampers: inherit_points(file.dampers, base.as_ref().map(|b| &b.dampers)),
+            damper_model: file
+                .damper_model
+                .map(|m| m.0)
+                .or_else(|| base.as_ref().and_then(|b| b.damper_model)),
             voicing: inherit_points(file.voicing, base.as_ref().map(|b| &b.voicing)),
             base_preset: file
                 .base_preset
@@ -867,6 +881,7 @@ impl LoadedScaling {
                 position_ratio: at(|a| a.position_ratio),
                 damping_n_s_m: 0.0,
                 width_m: at(|a| a.width_m),
+                model: preset.damper.model,
             };
             felt.damping_n_s_m = felt.coefficient_for_t60(
                 at(|a| a.t60_s),
@@ -876,6 +891,9 @@ impl LoadedScaling {
             let d = &mut preset.damper;
             (d.position_ratio, d.width_m, d.damping_n_s_m) =
                 (felt.position_ratio, felt.width_m, felt.damping_n_s_m);
+        }
+        if let Some(model) = self.scaling.damper_model {
+            preset.damper.model = model;
         }
         let h = &mut preset.hammer;
         h.mass_kg = self.interpolate(key, |a| a.hammer_mass_kg);

@@ -236,7 +236,12 @@ pub trait Policy {
         let key = s.pending.map(|(key, _)| key).or(s.key);
         let has = key.is_some_and(|key| self.key_has_damper(key));
         self.state_mut(k).damper_down = down && has;
+        self.damper_moved(k);
     }
+
+    /// What an engine does once voice `k`'s damper has been lowered or lifted (between steps);
+    /// by default nothing, the engine reading `damper_down` as it steps.
+    fn damper_moved(&mut self, _k: usize) {}
 
     /// Stop simulating the voices that have fallen silent: strings and contact springs below
     /// `threshold_j`, no hammer, no fade, and either the damper down or no damper at all (strings

@@ -8,6 +8,7 @@ use std::sync::atomic::Ordering;
 use unacorda::config::preset::Preset;
 use unacorda::config::scaling::{LoadedScaling, Scaling, KEYS};
 use unacorda::engine::exact::ExactPool;
+use unacorda::engine::physics::damper::FeltModel;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::{
     block_times_s, core_meeting_s, denormal_tail_step_s, dense_real_time_factor, exact_speed,
@@ -37,7 +38,7 @@ struct Report {
     dense_real_time_factor: f64,
     denormal_step_us: Denormals,
     callbacks: Vec<CallbackFigure>,
-    damped: Option<DampedFigure>,
+    damped: Vec<DampedFigure>,
     startup: Vec<Startup>,
     memory: Vec<Memory>,
 }
@@ -76,9 +77,11 @@ struct CallbackFigure {
 }
 
 /// The exact engine's callback with the same voices held (dampers lifted) and released (the
-/// felt's two contact points on every string): median block times as fractions of the deadline.
+/// felt on every string, carried as `model` says: `coupled` or `modal`): median block times as
+/// fractions of the deadline.
 #[derive(Serialize)]
 struct DampedFigure {
+    model: &'static str,
     voices: usize,
     held_median_x_deadline: f64,
     damped_median_x_deadline: f64,
@@ -165,7 +168,10 @@ pub fn bench(
         } else {
             keyboard
         };
-        report.damped = Some(damped(damped_keyboard, seconds, max_voices.min(32))?);
+        for model in [FeltModel::Modal, FeltModel::Coupled] {
+            let figure = damped(damped_keyboard, model, seconds, max_voices.min(32))?;
+            report.damped.push(figure);
+        }
     }
     if let Some(path) = json {
         let text = serde_json::to_string_pretty(&report).expect("plain data serialises");
@@ -311,15 +317,20 @@ fn callback<E: VoicePool>(
     Ok(())
 }
 
-/// Voices whose dampers are down cost more than held ones (the felt's channels enter each step):
-/// `voices` keys of `keyboard` spread over those with dampers (A0–F6), struck and held,
-/// then struck and released, their felts set to a T60 of 60 s so that they keep sounding while
-/// timed.
-fn damped(keyboard: &str, seconds: f64, voices: usize) -> Result<DampedFigure> {
+/// What voices whose dampers are down cost beside held ones, their felts carried as `model`
+/// says (a coupled felt's channels enter each step; a modal one moves the modes' decay alone):
+/// `voices` keys of `keyboard` spread over those with dampers (A0–F6), struck and held, then
+/// struck and released, their felts set to a T60 of 60 s so that they keep sounding while timed.
+fn damped(keyboard: &str, model: FeltModel, seconds: f64, voices: usize) -> Result<DampedFigure> {
     use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
     use unacorda::midi::Event;
     // The keyboard's felts (place, width), their decay lengthened.
     let mut scaling = Scaling::resolve(keyboard)?;
+    scaling.scaling.damper_model = Some(model);
+    let model = match model {
+        FeltModel::Modal => "modal",
+        FeltModel::Coupled => "coupled",
+    };
     for felt in &mut scaling.scaling.dampers {
         felt.t60_s = 60.0;
     }
@@ -355,13 +366,14 @@ fn damped(keyboard: &str, seconds: f64, voices: usize) -> Result<DampedFigure> {
         *median = percentile(&t, 0.5) / deadline;
     }
     println!(
-        "dampers down (exact, one core, {voices} voices of the {} keyboard, {BLOCK}-frame blocks): median {:.3} × deadline held, {:.3} × released (the felt on every string): {:.2} ×",
+        "dampers down (exact, one core, {voices} voices of the {} keyboard, {BLOCK}-frame blocks, {model} felt): median {:.3} × deadline held, {:.3} × released (the felt on every string): {:.2} ×",
         scaling.scaling.name,
         medians[0],
         medians[1],
         medians[1] / medians[0]
     );
     Ok(DampedFigure {
+        model,
         voices,
         held_median_x_deadline: medians[0],
         damped_median_x_deadline: medians[1],

@@ -167,7 +167,7 @@ pub(crate) fn begin(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
         let (true, Some(key)) = (v.in_block, v.state.key) else {
             continue;
         };
-        let key = &cx.keys[key];
+        let key = v.face(&cx.keys[key]);
         match (v.damped(key), &key.damper) {
             (true, Some(damper)) => {
                 for (j, to) in damper.to.iter().enumerate() {
@@ -198,7 +198,7 @@ pub(crate) fn begin(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
 pub(crate) fn end(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
     for v in voices.iter_mut() {
         if let (true, Some(key)) = (v.in_block, v.state.key) {
-            let key = &cx.keys[key];
+            let key = v.face(&cx.keys[key]);
             match (v.damped(key), &key.damper) {
                 (true, Some(damper)) => {
                     fold_block(cx.simd, &damper.block, &mut v.w, &v.block_inputs, len);
@@ -230,7 +230,7 @@ fn known(cx: &Context<'_>, voices: &mut [Voice], half: &mut Half, t: usize) {
         let (true, Some(k)) = (v.state.active, v.state.key) else {
             continue;
         };
-        let key = &cx.keys[k];
+        let key = v.face(&cx.keys[k]);
         if v.in_block {
             v.pre_block_step(key, t, cx.simd);
         } else {
@@ -261,7 +261,7 @@ fn finish(cx: &Context<'_>, voices: &mut [Voice], part: &BoardState) -> [f64; CH
             continue;
         };
         let next = cx.board.at(part, &cx.points[k], cx.simd);
-        v.post_step(&cx.keys[k], next);
+        v.post_step(v.face(&cx.keys[k]), next);
         for (t, &r) in total.iter_mut().zip(&SOUND_READS) {
             *t += v.read[r];
         }

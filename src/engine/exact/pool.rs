@@ -148,14 +148,20 @@ impl ExactPool {
     /// or taken out, a rank-3 update each ([`SharedBoard::update`]).
     fn sync_loads(&mut self) {
         for v in self.voices.iter_mut() {
+            if let Some(key) = v.state.key {
+                v.follow_damper(&self.keys[key]);
+            }
             let want = match (v.state.active, v.state.key) {
-                (true, Some(key)) => Some((key, v.damped(&self.keys[key]))),
+                (true, Some(key)) => Some((key, v.state.damper_down)),
                 _ => None,
             };
             if want == v.loads {
                 continue;
             }
-            let settle = |(key, damped): (usize, bool)| self.keys[key].settle_for(damped).force;
+            let settle = |(key, down): (usize, bool)| {
+                let face = self.keys[key].face_for(down);
+                face.settle_for(down).force
+            };
             match (v.loads, want) {
                 (Some(old), Some(new)) if old.0 == new.0 => {
                     let (a, b) = (settle(old), settle(new));
@@ -209,7 +215,7 @@ impl ExactPool {
         // be even, not only its total.
         let pass_work = |v: &Voice| match (v.in_block, v.state.key) {
             (true, Some(key)) => {
-                let key = &self.keys[key];
+                let key = v.face(&self.keys[key]);
                 key.n_modes() * if v.damped(key) { 3 } else { 1 }
             }
             _ => 0,
@@ -251,7 +257,7 @@ impl ExactPool {
         let (true, Some(key_index)) = (v.state.active, v.state.key) else {
             return Observation::default();
         };
-        let key = &self.keys[key_index];
+        let key = v.face(&self.keys[key_index]);
         let mut obs = Observation {
             volume_velocity_m3_s: v.read[0],
             hammer_force_n: v.hammer_force_n(key),
@@ -334,7 +340,7 @@ impl ExactPool {
             .voices
             .iter()
             .map(|v| match (v.state.active, v.state.key) {
-                (true, Some(key)) => v.energies_j(&self.keys[key], self.simd)[1],
+                (true, Some(key)) => v.energies_j(v.face(&self.keys[key]), self.simd)[1],
                 _ => 0.0,
             });
         keys.sum::<f64>() + self.board_energy_j()
@@ -378,7 +384,7 @@ fn step_work(keys: &[ExactKey], v: &Voice) -> usize {
     let (true, Some(key)) = (v.state.active, v.state.key) else {
         return 0;
     };
-    let key = &keys[key];
+    let key = v.face(&keys[key]);
     match (v.in_block, v.damped(key)) {
         (true, false) => 16,
         (true, true) => 64,
@@ -430,7 +436,7 @@ impl ExactPool {
         let kept: Vec<_> = self
             .voices
             .iter()
-            .filter_map(|v| Some((v, v.energies?, &self.keys[v.state.key?])))
+            .filter_map(|v| Some((v, v.energies?, v.face(&self.keys[v.state.key?]))))
             .collect();
         let stale = kept
             .iter()
@@ -471,7 +477,16 @@ impl Policy for ExactPool {
     }
 
     fn key_has_damper(&self, key: usize) -> bool {
-        self.keys[key].damper.is_some()
+        self.keys[key].has_damper()
+    }
+
+    /// The voice steps with its key's face with the modal felt down from now on, or no longer
+    /// ([`Voice::follow_damper`]).
+    fn damper_moved(&mut self, k: usize) {
+        let v = &mut self.voices[k];
+        if let Some(key) = v.state.key {
+            v.follow_damper(&self.keys[key]);
+        }
     }
 
     /// The voice's coefficients are its key's (an index); its state starts at rest.
@@ -490,7 +505,7 @@ impl Policy for ExactPool {
         let Some(key) = v.state.key else {
             return;
         };
-        let (point, key) = (&self.points[key], &self.keys[key]);
+        let (point, key) = (&self.points[key], v.face(&self.keys[key]));
         let part = &mut self.steps.part;
         let now = self.board.at(part, point, self.simd);
         v.energies = None;
@@ -515,9 +530,9 @@ impl Policy for ExactPool {
 
     fn strike_contact_m(&self, k: usize, struck: usize) -> f64 {
         let v = &self.voices[k];
-        v.state
-            .key
-            .map_or(0.0, |key| v.strike_contact_m(&self.keys[key], struck))
+        v.state.key.map_or(0.0, |key| {
+            v.strike_contact_m(v.face(&self.keys[key]), struck)
+        })
     }
 
     fn set_hammer(&mut self, k: usize, position_m: f64, velocity_m_s: f64) {
@@ -533,7 +548,7 @@ impl Policy for ExactPool {
     fn voice_energy_j(&self, k: usize) -> f64 {
         let v = &self.voices[k];
         match (v.state.active, v.state.key) {
-            (true, Some(key)) => v.energies_j(&self.keys[key], self.simd)[0],
+            (true, Some(key)) => v.energies_j(v.face(&self.keys[key]), self.simd)[0],
             _ => 0.0,
         }
     }
@@ -639,6 +654,62 @@ mod tests {
             kept >= checks,
             "the energies are kept: {kept} in {checks} checks"
         );
+    }
+
+    /// A modal felt that falls or rises changes the face a voice steps with, not its strings:
+    /// at that instant every force and velocity of the voice at its bridge and its energy are
+    /// what they were (the shifted state `w = z - a D` takes the new face's `a`; left as it was,
+    /// they move by 2e-3 of themselves). Not its energy about the static deflection by `D`: the
+    /// felt's first order moves each mode's static response `-g/lambda` a little.
+    #[test]
+    fn a_modal_felt_falling_or_rising_moves_nothing_at_that_instant() {
+        let scaling = Scaling::resolve("concert").unwrap();
+        let specs: Vec<UnisonSpec> = ["C2", "C3"]
+            .iter()
+            .map(|k| {
+                let spec = scaling.key_preset(parse_key(k).unwrap()).unwrap();
+                spec.unison_spec()
+            })
+            .collect();
+        let rate = scaling.base.output_rate_hz();
+        let mut pool = ExactPool::build_pool(&specs, 2, rate).unwrap();
+        for k in 0..2 {
+            assert!(pool.keys[k].modal_felt.is_some() && pool.keys[k].damper.is_none());
+            pool.assign(k, k);
+            pool.set_active(k, true);
+        }
+        pool.strike_voice(
+            0,
+            Strike {
+                velocity_m_s: 3.0,
+                una_corda: false,
+            },
+        );
+        let mut out = vec![[0.0; CHANNELS]; (0.2 * rate) as usize];
+        pool.run(&mut out, None);
+        let seen = |pool: &ExactPool, k: usize| -> Vec<f64> {
+            let obs = pool.observe_voice(k);
+            let mut x = obs.bridge_velocity_m_s.to_vec();
+            x.extend(obs.bridge_force_n.iter().flatten());
+            let v = &pool.voices[k];
+            x.push(v.energy_j(v.face(&pool.keys[k]), pool.simd));
+            x
+        };
+        for (k, name) in [(0, "C2"), (1, "C3")] {
+            let mut worst = 0f64;
+            for down in [true, false] {
+                let before = seen(&pool, k);
+                pool.set_damper_voice(k, down);
+                assert_eq!(pool.voices[k].modal_felt, down);
+                let after = seen(&pool, k);
+                for (a, b) in before.iter().zip(&after) {
+                    worst = worst.max((a - b).abs() / a.abs().max(1e-30));
+                }
+                pool.run(&mut out[..100], None);
+            }
+            println!("{name}: damper down, then up: forces, velocities and energy move by {worst:.1e} of themselves");
+            assert!(worst < 1e-9, "{name}: {worst:e}");
+        }
     }
 
     #[test]

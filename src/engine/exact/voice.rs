@@ -17,8 +17,12 @@ use crate::engine::spec::MAX_STRINGS;
 pub(crate) struct Voice {
     pub(crate) state: VoiceState,
     /// Modal amplitudes in the shifted state `w = z - a D` ([`super::key`]; sized for the largest
-    /// key, the key's first `n_modes` used).
+    /// key, the key's first `n_modes` used), `a` that of the key's face in `modal_felt`.
     pub(crate) w: Split,
+    /// Whether `w` is stepped with the key's face with its modal felt down
+    /// ([`ExactKey::face_for`]), as of the last time the pool followed the damper
+    /// ([`Voice::follow_damper`]).
+    pub(crate) modal_felt: bool,
     pub(crate) hammer_y: f64,
     pub(crate) hammer_v: f64,
     /// The shared board's displacement at the bridge point after the last step and the one
@@ -61,6 +65,7 @@ impl Voice {
         Voice {
             state: VoiceState::default(),
             w: Split::zeros(modes),
+            modal_felt: false,
             hammer_y: 0.0,
             hammer_v: 0.0,
             d: [0.0; 3],
@@ -85,9 +90,31 @@ impl Voice {
         !self.state.hammer_on && self.state.fade_left == 0
     }
 
-    /// Whether the damper felt is on the strings.
+    /// Whether a coupled damper felt is on the strings of `key` (the face it steps with).
     pub(crate) fn damped(&self, key: &ExactKey) -> bool {
         self.state.damper_down && key.damper.is_some()
+    }
+
+    /// The face of `key` this voice steps with ([`Voice::modal_felt`]).
+    pub(crate) fn face<'a>(&self, key: &'a ExactKey) -> &'a ExactKey {
+        key.face_for(self.modal_felt)
+    }
+
+    /// Step with the face of `key` its damper asks for from now on: a modal felt that has
+    /// fallen or risen since the last step changes the face, and `w = z - a D` takes the new
+    /// face's `a` (`z`, the modes' state, is both faces'). Between steps only.
+    pub(crate) fn follow_damper(&mut self, key: &ExactKey) {
+        let want = self.state.damper_down && key.modal_felt.is_some();
+        if want == self.modal_felt {
+            return;
+        }
+        let (from, to) = (key.face_for(self.modal_felt), key.face_for(want));
+        for d in 0..DIRECTIONS {
+            from.settle[d].add_to(&mut self.w, self.d[d]);
+            to.settle[d].add_to(&mut self.w, -self.d[d]);
+        }
+        self.modal_felt = want;
+        self.energies = None;
     }
 
     /// `Re(r z)` of a row `r` whose `Re(r a_d)` is `settle`: `z = w + a D`.

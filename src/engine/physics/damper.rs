@@ -12,6 +12,23 @@ use std::f64::consts::PI;
 /// Contact points of a felt with a width: its two ends.
 pub const FELT_POINTS: usize = 2;
 
+/// How the exact engine carries the felt (RK4 always carries it in full).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FeltModel {
+    /// Coupled to the key's modes in full: the felt's force on each of its channels solved
+    /// every step. Exact at any strength, a felt that pins the string too; a damped voice then
+    /// reads and drives its channels beside the key's rows (5.7-6.2 times a held voice's cost on
+    /// the concert keyboard's keys).
+    #[default]
+    Coupled,
+    /// On each mode's decay alone, to first order (its eigenvalue moved by the diagonal of the
+    /// felt's feedback in the modes): a damped voice costs what a held one does. Exact for a
+    /// light felt only: the concert keyboard's releases within 0.4 dB of the coupled felt's;
+    /// the paper keyboard's 6 N s/m point, which pins the strings from C2 up, 3-13 dB too fast
+    /// in the first 0.1 s.
+    Modal,
+}
+
 /// Damper parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DamperParams {
@@ -21,6 +38,8 @@ pub struct DamperParams {
     pub damping_n_s_m: f64,
     /// Distance between the felt's two contact points along the string (m); 0 is a point.
     pub width_m: f64,
+    /// How the exact engine carries it.
+    pub model: FeltModel,
 }
 
 impl DamperParams {
@@ -75,6 +94,7 @@ mod tests {
                 position_ratio: 0.155,
                 damping_n_s_m: 0.0,
                 width_m,
+                model: FeltModel::Coupled,
             };
             let c = felt.coefficient_for_t60(0.5, l, mu);
             let (points, n) = felt.felt_points(l);
