@@ -51,6 +51,34 @@ pub fn run_job(job: &mut dyn FnMut()) {
     job()
 }
 
+/// A job posted to another thread: a closure whose lifetime is erased ([`post`]).
+pub(super) type Job = *mut (dyn FnMut() + Send);
+
+/// `job` as a [`Job`] another thread may run.
+///
+/// # Safety
+/// Only the lifetime is erased: the poster must keep the closure alive and untouched until the
+/// other thread has finished with it, and not return (or unwind) before that.
+pub(super) unsafe fn post(job: &mut (dyn FnMut() + Send)) -> Job {
+    let job: *mut (dyn FnMut() + Send + '_) = job;
+    // SAFETY: the same pointer, its lifetime the caller's to keep (above).
+    unsafe { std::mem::transmute(job) }
+}
+
+/// Run a posted job on this thread inside `wrap`, as the audio thread runs its own part:
+/// flush-to-zero and denormals-are-zero (the guard restores MXCSR), and a panic caught — it must
+/// not cross a thread that is not the caller's; the engine's halves catch their own and tell the
+/// other half to stop waiting.
+///
+/// # Safety
+/// `job` is alive and this thread's alone until this returns ([`post`]).
+pub(super) unsafe fn run_posted(job: Job, wrap: JobWrapper) {
+    // SAFETY: as the caller promises.
+    let run = std::panic::AssertUnwindSafe(|| wrap(&mut || unsafe { (*job)() }));
+    // SAFETY: the guard restores the caller's MXCSR.
+    let _ = unsafe { no_denormals::no_denormals(|| std::panic::catch_unwind(run)) };
+}
+
 const IDLE: u32 = 0;
 const POSTED: u32 = 1;
 const DONE: u32 = 2;
@@ -64,7 +92,7 @@ struct Shared {
     joined: AtomicU64,
     late: AtomicU64,
     /// Written by the caller before `POSTED`, taken by the helper after it sees `POSTED`.
-    job: UnsafeCell<Option<*mut (dyn FnMut() + Send)>>,
+    job: UnsafeCell<Option<Job>>,
     /// Whether the helper should ask for real-time priority (set by its owner), and what it got.
     wanted: AtomicBool,
     priority: Promotion,
@@ -180,10 +208,7 @@ fn work(shared: &Shared, wrap: JobWrapper) {
                 if let Some(job) = job {
                     // SAFETY: the caller of `join` keeps the closure alive and untouched until it
                     // sees `DONE`; a panic is caught so that `DONE` is always reported.
-                    let run = std::panic::AssertUnwindSafe(|| wrap(&mut || unsafe { (*job)() }));
-                    // SAFETY: flush-to-zero and denormals-are-zero for the job, as on the audio
-                    // thread (the guard restores MXCSR).
-                    let _ = unsafe { no_denormals::no_denormals(|| std::panic::catch_unwind(run)) };
+                    unsafe { run_posted(job, wrap) };
                 }
                 shared.state.store(DONE, Ordering::Release);
                 awake_since = Instant::now();
@@ -228,10 +253,9 @@ impl Pair for Helper {
         let Some(thread) = &self.thread else {
             return false;
         };
-        let job: *mut (dyn FnMut() + Send + '_) = there;
-        // SAFETY: only the lifetime is erased; this function does not return (or unwind) before
-        // the helper reports `DONE`, after which it never touches the closure again.
-        let job: *mut (dyn FnMut() + Send + 'static) = unsafe { std::mem::transmute(job) };
+        // SAFETY: this function does not return (or unwind) before the helper reports `DONE`,
+        // after which it never touches the closure again.
+        let job = unsafe { post(there) };
         // SAFETY: the slot is this thread's while the state is not `POSTED`.
         unsafe { *self.shared.job.get() = Some(job) };
         self.shared.state.store(POSTED, Ordering::Release);

@@ -17,6 +17,7 @@
 //! Nothing here locks, allocates or makes a system call: the jobs are handed over through one
 //! atomic state word, as in [`super::helper`].
 
+use super::helper::{post, run_job, run_posted, Job};
 use crate::engine::Pair;
 use std::cell::UnsafeCell;
 use std::sync::atomic::{AtomicU32, AtomicU64, AtomicUsize, Ordering};
@@ -36,8 +37,6 @@ const POSTED: u32 = 1;
 const ONE: [u32; 2] = [2, 3];
 const BOTH: u32 = 4;
 const GIVEN_UP: u32 = 5;
-
-type Job = *mut (dyn FnMut() + Send);
 
 /// The two halves of a block and who runs them (shared by the audio thread and the host's
 /// workers; lives as long as the plugin instance).
@@ -97,16 +96,12 @@ impl Rendezvous {
         here: &mut (dyn FnMut() + Send),
         request: impl FnOnce(),
     ) -> bool {
-        let erase = |job: &mut (dyn FnMut() + Send)| -> Job {
-            let job: *mut (dyn FnMut() + Send + '_) = job;
-            // SAFETY: only the lifetime is erased; the pointers are dropped below, before this
-            // function returns, and a task dereferences one only inside `request`.
-            unsafe { std::mem::transmute(job) }
-        };
-        // SAFETY: the slots are this thread's while the state is `IDLE`.
+        // SAFETY: the slots are this thread's while the state is `IDLE`; the pointers are
+        // dropped below, before this function returns, and a task dereferences one only inside
+        // `request`.
         unsafe {
-            *self.jobs[0].get() = Some(erase(here));
-            *self.jobs[1].get() = Some(erase(there));
+            *self.jobs[0].get() = Some(post(here));
+            *self.jobs[1].get() = Some(post(there));
         }
         self.state.store(POSTED, Ordering::Release);
         request();
@@ -190,13 +185,8 @@ impl Rendezvous {
         // request returns (see `Rendezvous`).
         let job = unsafe { *self.jobs[mine].get() };
         if let Some(job) = job {
-            // A panic must not cross the host's thread; the engine's halves catch their own and
-            // tell the other half to stop waiting.
             // SAFETY: `join` keeps the closure alive and untouched until the request returns.
-            let run = std::panic::AssertUnwindSafe(|| unsafe { (*job)() });
-            // SAFETY: flush-to-zero and denormals-are-zero for the job, as on the audio thread
-            // (the guard restores MXCSR).
-            let _ = unsafe { no_denormals::no_denormals(|| std::panic::catch_unwind(run)) };
+            unsafe { run_posted(job, run_job) };
         }
     }
 
@@ -315,7 +305,11 @@ mod tests {
                     std::hint::spin_loop();
                 }
             });
-            for round in 1..=500u32 {
+            // 500 rounds, and on a machine so loaded that the worker missed every one of them
+            // (it must arrive within `CLAIM`), more until one meets: at most 50 000.
+            let mut round = 0u32;
+            while round < 500 || (joined == 0 && round < 50_000) {
+                round += 1;
                 let request = || {
                     go.store(round, Ordering::Release);
                     r.exec(0);
@@ -350,12 +344,13 @@ mod tests {
             }
             quit.store(true, Ordering::Release);
         });
+        let rounds = joined + r.missed_blocks();
         println!(
-            "host pool with a spinning worker: {joined} of 500 blocks on two cores, {} missed",
+            "host pool with a spinning worker: {joined} of {rounds} blocks on two cores, {} missed",
             r.missed_blocks()
         );
         assert_eq!(joined, r.joined_blocks());
-        assert_eq!(joined + r.missed_blocks(), 500);
+        assert!(rounds >= 500);
         assert_eq!(
             crossed.load(Ordering::Relaxed),
             0,

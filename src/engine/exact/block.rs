@@ -10,7 +10,7 @@
 
 use super::interface::{BoardState, SharedBoard};
 use super::kernels::{
-    fold_block, free_block, Reversed, Simd, Split, BLOCK, DIRECTIONS, READS, SOUND_READS,
+    fold_block, free_block, Reversed, Simd, BLOCK, DIRECTIONS, READS, SOUND_READS,
 };
 use super::key::ExactKey;
 use super::voice::Voice;
@@ -46,12 +46,11 @@ pub(crate) struct Steps {
     pub(crate) volume: [[f64; CHANNELS]; BLOCK],
 }
 
-/// One half of the voices' working values within the steps: the stage states of a hammer step,
-/// the half's known modal force this sample (and, on two cores, the other half's as received,
+/// One half of the voices' working values within the steps: the half's known modal force this
+/// sample (and, on two cores, the other half's as received,
 /// and their sum), each sample's volume velocity of the half's voices and of the board.
 #[derive(Debug, Clone)]
 pub(crate) struct Half {
-    stages: [Split; 3],
     known: Vec<f64>,
     other: Vec<f64>,
     sum: Vec<f64>,
@@ -60,10 +59,9 @@ pub(crate) struct Half {
 }
 
 impl Steps {
-    pub(crate) fn new(modes: usize, board: &SharedBoard) -> Steps {
+    pub(crate) fn new(board: &SharedBoard) -> Steps {
         let m = board.modes();
         let half = Half {
-            stages: std::array::from_fn(|_| Split::zeros(modes)),
             known: vec![0.0; m],
             other: vec![0.0; m],
             sum: vec![0.0; m],
@@ -244,7 +242,7 @@ fn known(cx: &Context<'_>, voices: &mut [Voice], half: &mut Half, t: usize) {
                 };
                 v.w.scale(ratio);
             }
-            v.pre_step(key, &mut half.stages, cx.simd);
+            v.pre_step(key, cx.simd);
         }
         let f = [v.known[1], v.known[2], v.known[3]];
         cx.board

@@ -194,29 +194,190 @@ fn pass<const FMA: bool, const PROPAGATE: bool, const INPUT: bool>(
     acc.map(|a| a.iter().sum())
 }
 
-/// `z <- e ⊙ z` (complex, per mode) on the first `e.len()` modes.
-pub(crate) fn propagate(e: &Split, z: &mut Split) {
-    for m in 0..e.len() {
-        let (a, b) = (z.re[m], z.im[m]);
-        z.re[m] = e.re[m] * a - e.im[m] * b;
-        z.im[m] = e.re[m] * b + e.im[m] * a;
+/// Most rows a hammer's felt reads: each string's striking-point displacement and velocity.
+pub(crate) const FELT_ROWS: usize = 2 * MAX_STRINGS;
+
+/// `[Re r z, Re r (e ⊙ z), Re r (e ⊙ e ⊙ z)]` of each of `rows` (at most [`FELT_ROWS`]), in
+/// one pass over the modes (ETDRK4's stages are linear in `z` and the felt's forces, so what a
+/// stage reads follows from these: [`super::voice`]).
+pub(crate) fn powers_read(
+    fast: bool,
+    e: &Split,
+    z: &Split,
+    rows: &[&Split],
+) -> [[f64; 3]; FELT_ROWS] {
+    #[cfg(target_arch = "x86_64")]
+    if fast {
+        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
+        return unsafe { powers_read_avx2(e, z, rows) };
+    }
+    let _ = fast;
+    powers_by_count::<false>(e, z, rows)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn powers_read_avx2(e: &Split, z: &Split, rows: &[&Split]) -> [[f64; 3]; FELT_ROWS] {
+    powers_by_count::<true>(e, z, rows)
+}
+
+/// [`powers`] with its row count known to the compiler (its loops then unrolled).
+#[inline(always)]
+fn powers_by_count<const FMA: bool>(
+    e: &Split,
+    z: &Split,
+    rows: &[&Split],
+) -> [[f64; 3]; FELT_ROWS] {
+    match rows.len() {
+        1 => powers::<FMA, 1>(e, z, rows),
+        2 => powers::<FMA, 2>(e, z, rows),
+        3 => powers::<FMA, 3>(e, z, rows),
+        4 => powers::<FMA, 4>(e, z, rows),
+        5 => powers::<FMA, 5>(e, z, rows),
+        _ => powers::<FMA, FELT_ROWS>(e, z, rows),
     }
 }
 
-/// `out = e2 ⊙ from + sum_s q_s u_s` over the struck strings' inputs (zero forces add nothing).
-pub(crate) fn stage(out: &mut Split, e2: &Split, from: &Split, q: &[Split], u: &[f64]) {
-    for m in 0..e2.len() {
-        let (a, b) = (from.re[m], from.im[m]);
-        out.re[m] = e2.re[m] * a - e2.im[m] * b;
-        out.im[m] = e2.re[m] * b + e2.im[m] * a;
+#[inline(always)]
+fn powers<const FMA: bool, const R: usize>(
+    e: &Split,
+    z: &Split,
+    rows: &[&Split],
+) -> [[f64; 3]; FELT_ROWS] {
+    let n = e.len();
+    let (er, ei) = (&e.re[..n], &e.im[..n]);
+    let (zr, zi) = (&z.re[..n], &z.im[..n]);
+    let rr: [&[f64]; R] = std::array::from_fn(|i| &rows[i].re[..n]);
+    let ri: [&[f64]; R] = std::array::from_fn(|i| &rows[i].im[..n]);
+    let mut acc = [[[0.0; LANES]; 3]; R];
+    for m in 0..n {
+        let lane = m % LANES;
+        let z = [zr[m], zi[m]];
+        let a = [
+            fma::<FMA>(er[m], z[0], -ei[m] * z[1]),
+            fma::<FMA>(er[m], z[1], ei[m] * z[0]),
+        ];
+        let b = [
+            fma::<FMA>(er[m], a[0], -ei[m] * a[1]),
+            fma::<FMA>(er[m], a[1], ei[m] * a[0]),
+        ];
+        for i in 0..R {
+            for (k, x) in [z, a, b].iter().enumerate() {
+                acc[i][k][lane] =
+                    fma::<FMA>(rr[i][m], x[0], fma::<FMA>(-ri[i][m], x[1], acc[i][k][lane]));
+            }
+        }
     }
-    for (s, q) in q.iter().enumerate() {
-        if u[s] != 0.0 {
-            q.add_to(out, u[s]);
+    let mut out = [[0.0; 3]; FELT_ROWS];
+    for (out, acc) in out.iter_mut().zip(&acc) {
+        *out = acc.map(|a| a.iter().sum());
+    }
+    out
+}
+
+/// `z += sum_d a_d u_d` over the modes of `e` (three directions' inputs, in one pass).
+pub(crate) fn add_directions(
+    fast: bool,
+    e: &Split,
+    z: &mut Split,
+    a: &[Split; DIRECTIONS],
+    u: &[f64; DIRECTIONS],
+) {
+    let a: [&Split; DIRECTIONS] = std::array::from_fn(|d| &a[d]);
+    #[cfg(target_arch = "x86_64")]
+    if fast {
+        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
+        return unsafe { add_directions_avx2(e, z, &a, u) };
+    }
+    let _ = fast;
+    drive_pass::<false, false, DIRECTIONS>(e, z, &a, u)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn add_directions_avx2(
+    e: &Split,
+    z: &mut Split,
+    a: &[&Split; DIRECTIONS],
+    u: &[f64; DIRECTIONS],
+) {
+    drive_pass::<true, false, DIRECTIONS>(e, z, a, u)
+}
+
+/// Most inputs a hammer's step drives: ETDRK4's three per string.
+pub(crate) const FELT_INPUTS: usize = 3 * MAX_STRINGS;
+
+/// `z = e ⊙ z + sum_k g_k u_k` (at most [`FELT_INPUTS`] inputs) in one pass over the modes.
+pub(crate) fn drive(fast: bool, e: &Split, z: &mut Split, g: &[&Split], u: &[f64]) {
+    #[cfg(target_arch = "x86_64")]
+    if fast {
+        // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
+        return unsafe { drive_avx2(e, z, g, u) };
+    }
+    let _ = fast;
+    drive_by_count::<false>(e, z, g, u)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn drive_avx2(e: &Split, z: &mut Split, g: &[&Split], u: &[f64]) {
+    drive_by_count::<true>(e, z, g, u)
+}
+
+/// [`drive_with`] with its input count known to the compiler: one string's three, two's or
+/// three's.
+#[inline(always)]
+fn drive_by_count<const FMA: bool>(e: &Split, z: &mut Split, g: &[&Split], u: &[f64]) {
+    match g.len() {
+        3 => drive_with::<FMA, 3>(e, z, g, u),
+        6 => drive_with::<FMA, 6>(e, z, g, u),
+        9 => drive_with::<FMA, 9>(e, z, g, u),
+        _ => {
+            drive_with::<FMA, 0>(e, z, &[], &[]);
+            for (g, &u) in g.iter().zip(u) {
+                g.add_to(z, u);
+            }
         }
     }
 }
 
+#[inline(always)]
+fn drive_with<const FMA: bool, const K: usize>(e: &Split, z: &mut Split, g: &[&Split], u: &[f64]) {
+    drive_pass::<FMA, true, K>(e, z, g, u)
+}
+
+/// `z = e ⊙ z + sum_k g_k u_k`, or without `e` unless `PROPAGATE`.
+#[inline(always)]
+fn drive_pass<const FMA: bool, const PROPAGATE: bool, const K: usize>(
+    e: &Split,
+    z: &mut Split,
+    g: &[&Split],
+    u: &[f64],
+) {
+    let n = e.len();
+    let (er, ei) = (&e.re[..n], &e.im[..n]);
+    let (zr, zi) = (&mut z.re[..n], &mut z.im[..n]);
+    let gr: [&[f64]; K] = std::array::from_fn(|k| &g[k].re[..n]);
+    let gi: [&[f64]; K] = std::array::from_fn(|k| &g[k].im[..n]);
+    let u: [f64; K] = std::array::from_fn(|k| u[k]);
+    for m in 0..n {
+        let (a, b) = (zr[m], zi[m]);
+        let (mut re, mut im) = if PROPAGATE {
+            (
+                fma::<FMA>(er[m], a, -ei[m] * b),
+                fma::<FMA>(er[m], b, ei[m] * a),
+            )
+        } else {
+            (a, b)
+        };
+        for k in 0..K {
+            re = fma::<FMA>(gr[k][m], u[k], re);
+            im = fma::<FMA>(gi[k][m], u[k], im);
+        }
+        zr[m] = re;
+        zi[m] = im;
+    }
+}
 /// Longest block advanced mode by mode ([`free_block`], [`fold_block`]). Its reads' inputs are
 /// convolved step by step ([`scatter`]: on average `BLOCK / 2` taps each), its coefficients
 /// loaded once: 32 balances the two (64: the convolution 30 % of the work; 16: the block's own

@@ -14,8 +14,8 @@
 use super::interface::SHARED_BELOW_HZ;
 pub(crate) use super::kernels::DAMPER_CHANNELS;
 use super::kernels::{
-    BlockCoefficients, Split, Taps, BLOCK, DAMPED_INPUTS, DAMPED_READS, DIRECTIONS, READS,
-    SOUND_READS,
+    BlockCoefficients, Split, Taps, BLOCK, DAMPED_INPUTS, DAMPED_READS, DIRECTIONS, FELT_ROWS,
+    READS, SOUND_READS,
 };
 use crate::engine::modal::{input_weights, Modal};
 use crate::engine::physics::damper::FeltModel;
@@ -487,9 +487,15 @@ pub struct ExactKey {
     /// `e^{lambda h/2}`, `e^{lambda h}`.
     pub(crate) eh: Split,
     pub(crate) ef: Split,
-    /// Per string, the felt force's input through ETDRK4's `Q`, `f1`, `f2`, `f3`.
-    pub(crate) drive_q: Vec<Split>,
+    /// Per string, the felt force's input through ETDRK4's `f1`, `f2`, `f3` (through its `Q`,
+    /// only as the stages read it: `stage_q`, `stage_eq`).
     pub(crate) drive_f: Vec<[Split; 3]>,
+    /// What the felt reads at ETDRK4's stages: per row it reads (each string's striking-point
+    /// displacement, then each string's velocity there) and per string, what a unit of the felt's
+    /// force on that string adds through `Q` to the read at stages `a`, `b`, `c` (`Re(r Q_s)`),
+    /// and through `e^{lambda h/2} Q` at stage `c` (`Re(r e_h Q_s)`).
+    pub(crate) stage_q: [[f64; MAX_STRINGS]; FELT_ROWS],
+    pub(crate) stage_eq: [[f64; MAX_STRINGS]; FELT_ROWS],
     /// Read after every step: the key's board modes' radiating source of the left channel, the
     /// total contact force per direction T, L, P relative to them (the force on the shared board
     /// is this less `feed_k D + feed_c Ddot`), the right channel's source ([`SOUND_READS`]).
@@ -567,7 +573,7 @@ impl ExactKey {
             .map(|&l| crate::engine::modal::etd_weights(l, h))
             .collect();
         let weights: Vec<[c64; 2]> = modes.lambda.iter().map(|&l| input_weights(l, h)).collect();
-        let drive_q = modes
+        let drive_q: Vec<Split> = modes
             .strike_input
             .iter()
             .map(|g| Split::weighted_by(g, |m| etd[m][0]))
@@ -667,6 +673,25 @@ impl ExactKey {
             .map(|r| Split::weighted_by(r, |m| modes.lambda[m]))
             .collect();
         let strike_velocity_settle = strike_velocity_row.iter().map(reads_of).collect();
+        let felt_rows: Vec<&Split> = modes
+            .strike_row
+            .iter()
+            .chain(&strike_velocity_row)
+            .collect();
+        let eh_q: Vec<Split> = drive_q
+            .iter()
+            .map(|q| Split::weighted_by(q, |m| eh[m]))
+            .collect();
+        let (mut stage_q, mut stage_eq) = (
+            [[0.0; MAX_STRINGS]; FELT_ROWS],
+            [[0.0; MAX_STRINGS]; FELT_ROWS],
+        );
+        for (i, row) in felt_rows.iter().enumerate() {
+            for (s, (q, eq)) in drive_q.iter().zip(&eh_q).enumerate() {
+                stage_q[i][s] = row.read(q);
+                stage_eq[i][s] = row.read(eq);
+            }
+        }
         let force_settle = modes
             .force_row
             .iter()
@@ -688,8 +713,9 @@ impl ExactKey {
             h,
             eh: Split::new(&eh),
             ef,
-            drive_q,
             drive_f,
+            stage_q,
+            stage_eq,
             reads,
             feed_k,
             feed_c,
@@ -747,10 +773,10 @@ impl ExactKey {
         let split = 16 * self.n_modes();
         let damper = self.damper.as_ref().map_or(0, |d| 3 * d.channels * split)
             + self.modal_felt.as_ref().map_or(0, |f| f.bytes());
-        // eh, ef; per string the strike row, drive_q and drive_f, three force rows; reads, settle,
+        // eh, ef; per string the strike row, drive_f, three force rows; reads, settle,
         // beta, hold, follow, the bridge velocity rows; the block's f32 copies and e^BLOCK; the
         // Markov taps; the energy; the stored modes (a dozen rows more).
-        (2 + self.n_strings * 8 + READS + 4 * DIRECTIONS + 3 + 12) * split
+        (2 + self.n_strings * 7 + READS + 4 * DIRECTIONS + 3 + 12) * split
             + (1 + READS + DIRECTIONS) * split / 2
             + split
             + 8 * BLOCK * READS * DIRECTIONS

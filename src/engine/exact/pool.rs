@@ -76,7 +76,7 @@ impl ExactPool {
             voice_of_key: vec![None; keys.len()],
             voices: vec![Voice::new(modes); voices],
             keys,
-            steps: Steps::new(modes, &board),
+            steps: Steps::new(&board),
             board,
             h,
             fade_steps: ((STEAL_FADE_S / h).round() as u32).max(1),

@@ -4,8 +4,8 @@
 //! what is known (`D^n`), [`Voice::post_step`] adds what `D^{n+1}` brings.
 
 use super::kernels::{
-    self, advance, propagate, scatter, stage, Pending, Reversed, Simd, Split, BLOCK, DAMPED_INPUTS,
-    DAMPED_READS, DIRECTIONS, READS, SOUND_READS,
+    self, advance, scatter, Pending, Reversed, Simd, Split, BLOCK, DAMPED_INPUTS, DAMPED_READS,
+    DIRECTIONS, FELT_INPUTS, FELT_ROWS, READS, SOUND_READS,
 };
 use super::key::{ExactKey, DAMPER_CHANNELS};
 use crate::engine::pool::VoiceState;
@@ -187,25 +187,6 @@ impl Voice {
         )
     }
 
-    /// The felt force on each string (Eq. 8) with the hammer at `y` moving at `v` and the modes
-    /// at `z` (the strings' velocity under the hammer read only for a hysteretic felt).
-    fn felt(&self, key: &ExactKey, z: &Split, y: f64, v: f64) -> [f64; MAX_STRINGS] {
-        let hysteretic = key.hammer.is_hysteretic();
-        std::array::from_fn(|s| {
-            if s < key.n_strings && self.state.struck[s] {
-                let ve = if hysteretic {
-                    key.strike_velocity_row[s].read(z)
-                } else {
-                    0.0
-                };
-                key.hammer
-                    .felt_force_n(y - key.modes.strike_row[s].read(z), v - ve)
-            } else {
-                0.0
-            }
-        })
-    }
-
     /// String `s`'s displacement at the striking point (m).
     fn strike_point_m(&self, key: &ExactKey, s: usize) -> f64 {
         self.read_z(&key.modes.strike_row[s], &key.strike_settle[s])
@@ -237,18 +218,16 @@ impl Voice {
             .fold(f64::NEG_INFINITY, f64::max)
     }
 
-    /// The step up to the interface (`scratch`: three stage states): the hammer by ETDRK4 while
-    /// it touches, the modes exactly with `D^n` entering, the damper's known part. Fills
-    /// `self.known` (the reads less `Z D^{n+1}`).
-    pub(crate) fn pre_step(&mut self, key: &ExactKey, scratch: &mut [Split; 3], simd: Simd) {
+    /// The step up to the interface: the hammer by ETDRK4 while it touches, the modes exactly
+    /// with `D^n` entering, the damper's known part. Fills `self.known` (the reads less
+    /// `Z D^{n+1}`).
+    pub(crate) fn pre_step(&mut self, key: &ExactKey, simd: Simd) {
         let fast = simd.avx2();
         let dn = self.d;
         let mut read = if self.state.hammer_on {
             // The contact step is taken on z^n = w + a D^n; what D^n adds over it then follows.
-            for (d, a) in key.settle.iter().enumerate() {
-                a.add_to(&mut self.w, dn[d]);
-            }
-            self.contact_step(key, scratch);
+            kernels::add_directions(fast, &key.ef, &mut self.w, &key.settle, &dn);
+            self.contact_step(key, fast);
             advance(
                 fast,
                 false,
@@ -397,33 +376,70 @@ impl Voice {
     /// ETDRK4 (Cox & Matthews) on `z` (held in `w`): `a = E_2 u + Q N(u)`, `b = E_2 u + Q N(a)`,
     /// `c = E_2 a + Q (2 N(b) - N(u))`, `u' = E u + f1 N(u) + f2 (N(a) + N(b)) + f3 N(c)`, the
     /// felt force `N` entering the modes through each struck string's input, and the hammer's
-    /// own linear part zero (its stages are classical RK4).
-    fn contact_step(&mut self, key: &ExactKey, scratch: &mut [Split; 3]) {
+    /// own linear part zero (its stages are classical RK4). The stages are linear in `u` and the
+    /// forces, and the felt reads only its rows of them: those follow from the rows' reads of
+    /// `u`, `E_2 u` and `E_2^2 u` (one pass over the modes) and the key's `Re(r Q)`,
+    /// `Re(r E_2 Q)`; the modes are then advanced in one more pass — not four stages formed.
+    fn contact_step(&mut self, key: &ExactKey, fast: bool) {
         let (h, m_h) = (key.h, key.hammer.mass_kg);
         let (y, v) = (self.hammer_y, self.hammer_v);
         let accel = |f: &[f64; MAX_STRINGS]| -> f64 { -f.iter().sum::<f64>() / m_h };
-        let [za, zb, zc] = scratch;
-        let fu = self.felt(key, &self.w, y, v);
-        stage(za, &key.eh, &self.w, &key.drive_q, &fu);
+        let ns = key.n_strings;
+        let hysteretic = key.hammer.is_hysteretic();
+        // The rows the felt reads: each string's displacement at the striking point, then (a
+        // hysteretic felt) its velocity there, as in `ExactKey::stage_q`.
+        let mut rows: [&Split; FELT_ROWS] = [&key.eh; FELT_ROWS];
+        for s in 0..ns {
+            rows[s] = &key.modes.strike_row[s];
+            rows[ns + s] = &key.strike_velocity_row[s];
+        }
+        let count = if hysteretic { 2 * ns } else { ns };
+        let p = kernels::powers_read(fast, &key.eh, &self.w, &rows[..count]);
+        // Row `i` at a stage: `power` of `E_2` on `u`, with forces `fq` through `Q` and `feq`
+        // through `E_2 Q`.
+        let at = |i: usize, power: usize, fq: &[f64; MAX_STRINGS], feq: &[f64; MAX_STRINGS]| {
+            p[i][power]
+                + (0..ns)
+                    .map(|s| key.stage_q[i][s] * fq[s] + key.stage_eq[i][s] * feq[s])
+                    .sum::<f64>()
+        };
+        let struck = self.state.struck;
+        let felt = |power, fq: &[f64; MAX_STRINGS], feq: &[f64; MAX_STRINGS], y: f64, v: f64| {
+            std::array::from_fn(|s| {
+                if s < ns && struck[s] {
+                    let ve = if hysteretic {
+                        at(ns + s, power, fq, feq)
+                    } else {
+                        0.0
+                    };
+                    key.hammer.felt_force_n(y - at(s, power, fq, feq), v - ve)
+                } else {
+                    0.0
+                }
+            })
+        };
+        let none = [0.0; MAX_STRINGS];
+        let fu: [f64; MAX_STRINGS] = felt(0, &none, &none, y, v);
         let (ya, va) = (y + 0.5 * h * v, v + 0.5 * h * accel(&fu));
-        let fa = self.felt(key, za, ya, va);
-        stage(zb, &key.eh, &self.w, &key.drive_q, &fa);
+        let fa = felt(1, &fu, &none, ya, va);
         let (yb, vb) = (y + 0.5 * h * va, v + 0.5 * h * accel(&fa));
-        let fb = self.felt(key, zb, yb, vb);
+        let fb = felt(1, &fa, &none, yb, vb);
         let mixed: [f64; MAX_STRINGS] = std::array::from_fn(|s| 2.0 * fb[s] - fu[s]);
-        stage(zc, &key.eh, za, &key.drive_q, &mixed);
         let (yc, vc) = (
             ya + 0.5 * h * (2.0 * vb - v),
             va + 0.5 * h * (2.0 * accel(&fb) - accel(&fu)),
         );
-        let fc = self.felt(key, zc, yc, vc);
-        propagate(&key.ef, &mut self.w);
-        for s in (0..key.n_strings).filter(|&s| self.state.struck[s]) {
-            let [g1, g2, g3] = &key.drive_f[s];
-            g1.add_to(&mut self.w, fu[s]);
-            g2.add_to(&mut self.w, fa[s] + fb[s]);
-            g3.add_to(&mut self.w, fc[s]);
+        let fc = felt(2, &mixed, &fu, yc, vc);
+        let mut inputs: [&Split; FELT_INPUTS] = [&key.ef; FELT_INPUTS];
+        let mut forces = [0.0; FELT_INPUTS];
+        let mut k = 0;
+        for s in (0..ns).filter(|&s| struck[s]) {
+            for (g, f) in key.drive_f[s].iter().zip([fu[s], fa[s] + fb[s], fc[s]]) {
+                (inputs[k], forces[k]) = (g, f);
+                k += 1;
+            }
         }
+        kernels::drive(fast, &key.ef, &mut self.w, &inputs[..k], &forces[..k]);
         self.hammer_y = y + h / 6.0 * v + h / 3.0 * (va + vb) + h / 6.0 * vc;
         self.hammer_v =
             v + h / 6.0 * accel(&fu) + h / 3.0 * (accel(&fa) + accel(&fb)) + h / 6.0 * accel(&fc);
