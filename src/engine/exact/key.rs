@@ -157,6 +157,32 @@ fn contact_vector(
     w
 }
 
+/// The damper felt's channels as vectors over `q` (none without a damper): at each of the
+/// felt's points, T and P of each string, its shape there weighted by the point's share
+/// ([`crate::engine::physics::damper::DamperParams::felt_points`]); `C_damper = c sum_j v_j v_j^T`.
+fn felt_vectors(spec: &UnisonSpec, layout: &Layout) -> Vec<Vec<f64>> {
+    let Some(damper) = spec.damper else {
+        return vec![];
+    };
+    let (points, count) = damper.felt_points(spec.strings[0].speaking_length_m);
+    let mut felt = vec![];
+    for &(x, a) in &points[..count] {
+        for (s, string) in spec.strings.iter().enumerate() {
+            for dir in [Direction::T, Direction::P] {
+                felt.push(
+                    layout.vector(
+                        layout.strings[s][dir.index()]
+                            .clone()
+                            .enumerate()
+                            .map(|(j, i)| (i, a * string.mode_shape(j + 1, x))),
+                    ),
+                );
+            }
+        }
+    }
+    felt
+}
+
 /// A key's coupled system in complex modes: the eigenvalues and every row and input a voice
 /// reads or drives — the costly part of preparing a key (an eigen-decomposition of order
 /// `2 × modes`), kept between runs ([`super::bytes`]). Everything else is derived from it.
@@ -244,25 +270,12 @@ impl KeyModes {
             [spec.contact.stiffness_n_m[d], spec.contact.damping_n_s_m[d]]
                 .map(|g| Split::new(&modal.input(&w.iter().map(|x| x * g).collect::<Vec<_>>())))
         });
-        let (mut damper_row, mut damper_input) = (vec![], vec![]);
-        if let Some(damper) = spec.damper {
-            let (points, count) = damper.felt_points(s0.speaking_length_m);
-            for &(x, a) in &points[..count] {
-                for s in 0..ns {
-                    let string = &spec.strings[s];
-                    for dir in [Direction::T, Direction::P] {
-                        let v = layout.vector(
-                            layout.strings[s][dir.index()]
-                                .clone()
-                                .enumerate()
-                                .map(|(j, i)| (i, a * string.mode_shape(j + 1, x))),
-                        );
-                        damper_row.push(Split::new(&modal.row(&v, true)));
-                        damper_input.push(Split::new(&modal.input(&v)));
-                    }
-                }
-            }
-        }
+        let felt = felt_vectors(spec, &layout);
+        let damper_row = felt
+            .iter()
+            .map(|v| Split::new(&modal.row(v, true)))
+            .collect();
+        let damper_input = felt.iter().map(|v| Split::new(&modal.input(v))).collect();
         let mut energy = modal.energy(&k);
         energy.truncate(modal.keep.len());
         Ok(KeyModes {
@@ -875,22 +888,11 @@ mod tests {
             let modal_felt = modes.with_felt(felt.damping_n_s_m);
             // The felt's channels as `KeyModes::new` forms them, into C.
             let s0 = &spec.strings[0];
-            let (points, count) = felt.felt_points(s0.speaking_length_m);
             let mut damped_c = c.clone();
-            for &(x, a) in &points[..count] {
-                for (s, string) in spec.strings.iter().enumerate() {
-                    for dir in [Direction::T, Direction::P] {
-                        let v = layout.vector(
-                            layout.strings[s][dir.index()]
-                                .clone()
-                                .enumerate()
-                                .map(|(j, i)| (i, a * string.mode_shape(j + 1, x))),
-                        );
-                        for i in 0..n {
-                            for j in 0..n {
-                                damped_c[i * n + j] += felt.damping_n_s_m * v[i] * v[j];
-                            }
-                        }
+            for v in felt_vectors(&spec, &layout) {
+                for i in 0..n {
+                    for j in 0..n {
+                        damped_c[i * n + j] += felt.damping_n_s_m * v[i] * v[j];
                     }
                 }
             }

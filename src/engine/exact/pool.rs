@@ -581,7 +581,12 @@ mod tests {
 
     /// The `grand` keyboard's specs of `names`, and its output rate.
     fn grand_keys(names: &[&str]) -> (Vec<UnisonSpec>, f64) {
-        let scaling = Scaling::resolve("paper").unwrap();
+        keyboard_keys("paper", names)
+    }
+
+    /// `keyboard`'s specs of `names`, and its output rate.
+    fn keyboard_keys(keyboard: &str, names: &[&str]) -> (Vec<UnisonSpec>, f64) {
+        let scaling = Scaling::resolve(keyboard).unwrap();
         let specs = names
             .iter()
             .map(|k| {
@@ -663,15 +668,7 @@ mod tests {
     /// felt's first order moves each mode's static response `-g/lambda` a little.
     #[test]
     fn a_modal_felt_falling_or_rising_moves_nothing_at_that_instant() {
-        let scaling = Scaling::resolve("concert").unwrap();
-        let specs: Vec<UnisonSpec> = ["C2", "C3"]
-            .iter()
-            .map(|k| {
-                let spec = scaling.key_preset(parse_key(k).unwrap()).unwrap();
-                spec.unison_spec()
-            })
-            .collect();
-        let rate = scaling.base.output_rate_hz();
+        let (specs, rate) = keyboard_keys("concert", &["C2", "C3"]);
         let mut pool = ExactPool::build_pool(&specs, 2, rate).unwrap();
         for k in 0..2 {
             assert!(pool.keys[k].modal_felt.is_some() && pool.keys[k].damper.is_none());
