@@ -324,26 +324,21 @@ unsafe fn drive_avx2(e: &Split, z: &mut Split, g: &[&Split], u: &[f64]) {
     drive_by_count::<true>(e, z, g, u)
 }
 
-/// [`drive_with`] with its input count known to the compiler: one string's three, two's or
+/// [`drive_pass`] with its input count known to the compiler: one string's three, two's or
 /// three's.
 #[inline(always)]
 fn drive_by_count<const FMA: bool>(e: &Split, z: &mut Split, g: &[&Split], u: &[f64]) {
     match g.len() {
-        3 => drive_with::<FMA, 3>(e, z, g, u),
-        6 => drive_with::<FMA, 6>(e, z, g, u),
-        9 => drive_with::<FMA, 9>(e, z, g, u),
+        3 => drive_pass::<FMA, true, 3>(e, z, g, u),
+        6 => drive_pass::<FMA, true, 6>(e, z, g, u),
+        9 => drive_pass::<FMA, true, 9>(e, z, g, u),
         _ => {
-            drive_with::<FMA, 0>(e, z, &[], &[]);
+            drive_pass::<FMA, true, 0>(e, z, &[], &[]);
             for (g, &u) in g.iter().zip(u) {
                 g.add_to(z, u);
             }
         }
     }
-}
-
-#[inline(always)]
-fn drive_with<const FMA: bool, const K: usize>(e: &Split, z: &mut Split, g: &[&Split], u: &[f64]) {
-    drive_pass::<FMA, true, K>(e, z, g, u)
 }
 
 /// `z = e ⊙ z + sum_k g_k u_k`, or without `e` unless `PROPAGATE`.
