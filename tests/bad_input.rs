@@ -156,6 +156,18 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
             && e.contains("`layout.max_mode_freq_hz` = 30000")
             && e.contains("24000 Hz")
     );
+    let e = keyboard_error("bad_keyboard_mode_limit.toml");
+    assert!(
+        e.contains("bad_keyboard_mode_limit.toml")
+            && e.contains("`mode_limits.max_mode_freq_hz` = 30000 (from key 80)")
+            && e.contains("24000 Hz")
+    );
+    let e = keyboard_error("bad_keyboard_mode_limit_keys.toml");
+    assert!(
+        e.contains("bad_keyboard_mode_limit_keys.toml")
+            && e.contains("`mode_limits.from_key` = [86, 40]")
+            && e.contains("increasing keys")
+    );
     // A device that never ends is refused after 1 MiB, not read forever.
     let e = Scaling::resolve("/dev/zero").unwrap_err().to_string();
     println!("/dev/zero: {e}");

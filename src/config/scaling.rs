@@ -56,6 +56,9 @@ pub struct Scaling {
     /// preset's.
     pub damper_model: Option<FeltModel>,
     pub voicing: Vec<VoicingAnchor>,
+    /// Registers whose string modes reach another frequency than `layout.max_mode_freq_hz`
+    /// (`mode_limits`), in increasing keys.
+    pub mode_limits: Vec<ModeLimit>,
     pub tuning: Tuning,
     /// The octave a stretched tuning reaches in the bass (`bass_octave`).
     pub bass_octave: BassOctave,
@@ -148,6 +151,8 @@ struct ScalingFile {
     damper_model: Option<FeltModelField>,
     #[serde(default)]
     voicing: Vec<VoicingAnchor>,
+    #[serde(default)]
+    mode_limits: Vec<ModeLimit>,
     /// `equal` (the default) or `stretched`; inherited from the base keyboard when absent.
     tuning: Option<Tuning>,
     /// `4:2` (the default), `6:3`, `8:4` or `10:5`; inherited from the base keyboard when absent.
@@ -214,6 +219,18 @@ pub struct VoicingAnchor {
     /// force at [`VOICING_COMPRESSION_M`] is the anchors' felt's times `felt_stiffness_factor`.
     /// Given at every voicing point or at none (then the anchors').
     pub felt_exponent: Option<f64>,
+}
+
+/// The string modes a register keeps: from `from_key` up to the next limit's key (or C8), modes
+/// below `max_mode_freq_hz` in place of `layout.max_mode_freq_hz` (still at most
+/// `layout.max_modes_t` and `max_modes_l`). The exact engine advances every mode at the output
+/// rate, so the limit is at most half of it; the keys below the first limit keep the layout's.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModeLimit {
+    pub from_key: usize,
+    /// Modes of the register's strings are kept below this frequency (Hz).
+    pub max_mode_freq_hz: f64,
 }
 
 /// An optional field of a voicing point.
@@ -313,16 +330,32 @@ impl Scaling {
         // output's band edge would fold back into the audible band (tests/bad_input.rs). The
         // lower bound is `validate`'s; this one needs the base preset's output rate.
         let edge_hz = 0.5 * base.output_rate_hz();
-        let max_hz = self.layout.max_mode_freq_hz;
-        if max_hz > edge_hz {
-            return Err(PresetError::Range {
-                path: source,
-                field: "layout.max_mode_freq_hz",
-                value: max_hz.to_string(),
-                allowed: format!(
-                    "a frequency above 100 Hz and at most half the output rate ({edge_hz} Hz), where a mode would fold back"
-                ),
-            });
+        let limits = std::iter::once((
+            "layout.max_mode_freq_hz",
+            None,
+            self.layout.max_mode_freq_hz,
+        ))
+        .chain(self.mode_limits.iter().map(|m| {
+            (
+                "mode_limits.max_mode_freq_hz",
+                Some(m.from_key),
+                m.max_mode_freq_hz,
+            )
+        }));
+        for (field, from_key, max_hz) in limits {
+            if max_hz > edge_hz {
+                return Err(PresetError::Range {
+                    path: source,
+                    field,
+                    value: match from_key {
+                        Some(k) => format!("{max_hz} (from key {k})"),
+                        None => max_hz.to_string(),
+                    },
+                    allowed: format!(
+                        "a frequency above 100 Hz and at most half the output rate ({edge_hz} Hz), where a mode would fold back"
+                    ),
+                });
+            }
         }
         Ok(LoadedScaling {
             scaling: self,
@@ -409,6 +442,7 @@ impl Scaling {
                 .map(|m| m.0)
                 .or_else(|| base.as_ref().and_then(|b| b.damper_model)),
             voicing: inherit_points(file.voicing, base.as_ref().map(|b| &b.voicing)),
+            mode_limits: inherit_points(file.mode_limits, base.as_ref().map(|b| &b.mode_limits)),
             base_preset: file
                 .base_preset
                 .or_else(|| base.as_ref().map(|b| b.base_preset.clone()))
@@ -601,6 +635,23 @@ impl Scaling {
                 "a frequency above 100 Hz",
             ));
         }
+        let from: Vec<usize> = self.mode_limits.iter().map(|m| m.from_key).collect();
+        if !(from.iter().all(|k| (1..=KEYS).contains(k)) && from.windows(2).all(|w| w[0] < w[1])) {
+            return Err(bad(
+                "mode_limits.from_key",
+                format!("{from:?}"),
+                "increasing keys from 1 (A0) to 88 (C8)",
+            ));
+        }
+        for m in &self.mode_limits {
+            if !(m.max_mode_freq_hz.is_finite() && m.max_mode_freq_hz > 100.0) {
+                return Err(bad(
+                    "mode_limits.max_mode_freq_hz",
+                    format!("{} (from key {})", m.max_mode_freq_hz, m.from_key),
+                    "a frequency above 100 Hz",
+                ));
+            }
+        }
         Ok(())
     }
 }
@@ -789,6 +840,17 @@ impl LoadedScaling {
         equal_tempered_hz(key) * 2f64.powf(self.stretch_cents(key) / 1200.0)
     }
 
+    /// The frequency below which `key`'s string modes are kept (Hz): its register's
+    /// `mode_limits`, or `layout.max_mode_freq_hz` below the first.
+    pub fn max_mode_freq_hz(&self, key: usize) -> f64 {
+        let s = &self.scaling;
+        s.mode_limits
+            .iter()
+            .rev()
+            .find(|m| m.from_key <= key)
+            .map_or(s.layout.max_mode_freq_hz, |m| m.max_mode_freq_hz)
+    }
+
     /// The per-note preset of `key` (1–88), bridged at its own soundboard point.
     pub fn key_preset(&self, key: usize) -> Result<LoadedPreset, PresetError> {
         let l = &self.scaling.layout;
@@ -818,7 +880,7 @@ impl LoadedScaling {
         // paper's counts.
         let mut string = s.nominal_string();
         let sharpest = s.mistuning_cents.iter().copied().fold(0.0, f64::max);
-        let f_lim = 2.0 * PI * l.max_mode_freq_hz;
+        let f_lim = 2.0 * PI * self.max_mode_freq_hz(key);
         let count_modes = |string: &StringParams| {
             let top = string.detuned(sharpest);
             let t = (1..=l.max_modes_t)
