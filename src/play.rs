@@ -2,7 +2,7 @@
 //! one soundboard, with the pedals' logic and the voice pool's allocation. A key struck again is
 //! struck in its current motion; a key without a voice takes a free one, or steals the quietest.
 
-use crate::engine::{Strike, VoicePool};
+use crate::engine::{Strike, UnisonSpec, VoicePool};
 use crate::midi::{hammer_speed_m_s, piano_key, Event, Pedal};
 
 /// The performer's state: which keys are down and what the pedals do.
@@ -223,17 +223,34 @@ impl<E: VoicePool> Piano<E> {
         cache: Option<&crate::keycache::KeyCache>,
     ) -> Result<Piano<E>, PianoError> {
         let rate_hz = scaling.base.output_rate_hz();
-        let (specs, prepared): (Vec<_>, Vec<_>) = crate::cores::map_on_cores(keys, |&k| {
-            let spec = scaling.key_preset(k)?.unison_spec();
-            let spec = E::at_engine_rate(spec, rate_hz);
-            let key = match cache {
-                Some(cache) => cache.key(&spec, E::prepare_key)?,
-                None => E::prepare_key(&spec)?,
-            };
-            Ok::<_, PianoError>((spec, key))
-        })?
-        .into_iter()
-        .unzip();
+        let specs = crate::cores::map_on_cores(keys, |&k| {
+            Ok::<_, PianoError>(scaling.key_preset(k)?.unison_spec())
+        })?;
+        // The keys of one instrument step together, at the keyboard's rate whichever keys are
+        // built ([`LoadedScaling::internal_rate_hz`]: RK4 runs the concert keyboard at 240 kHz,
+        // where Bb7-C8 keep their modes to 20 kHz), or at the output rate (the exact engine).
+        //
+        // [`LoadedScaling::internal_rate_hz`]: crate::config::scaling::LoadedScaling::internal_rate_hz
+        let common_hz = specs
+            .iter()
+            .map(|s| s.sample_rate_hz)
+            .fold(scaling.internal_rate_hz(), f64::max);
+        let specs: Vec<_> = specs
+            .into_iter()
+            .map(|spec| {
+                let spec = UnisonSpec {
+                    sample_rate_hz: common_hz,
+                    ..spec
+                };
+                E::at_engine_rate(spec, rate_hz)
+            })
+            .collect();
+        let prepared = crate::cores::map_on_cores(&specs, |spec| {
+            Ok::<_, PianoError>(match cache {
+                Some(cache) => cache.key(spec, E::prepare_key)?,
+                None => E::prepare_key(spec)?,
+            })
+        })?;
         Ok(Piano {
             instrument: E::from_keys(&specs, prepared, voices)?,
             player: Player::new(keys),

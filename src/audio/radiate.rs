@@ -1,44 +1,82 @@
 //! From the board to the listener (DESIGN.md §1.7): the engines read the board's radiating source
 //! `Q` — its net volume velocity, or the monopole at 1 m equivalent to its modes' Rayleigh
 //! integrals at a listener ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`])
-//! — and the sound pressure at distance `r` is `p = rho0 / (4 pi r) dQ/dt`; what goes out is
+//! — and the sound pressure at distance `r` is `p = rho0 / (4 pi r) dQ/dt` ([`Monopole`]); what goes out is
 //! bounded by a soft clipper. Used live ([`super::synth`]) and offline (`render::strike`) alike.
 
-/// The monopole: `Q` sampled at the engine's rate, differentiated step to step.
+use crate::engine::fir::FIT_BAND;
+
+/// Taps of the pressure's differentiator. With 10 (a delay of 4.5 samples) its gain is within
+/// 0.02 % of `i ω` to 0.1 × the rate (5 kHz at 48 kHz), 0.24 % at 0.375 × and 0.7 % at 0.417 ×;
+/// the step-to-step difference it replaced was 1.8 % under at 5 kHz and 26 % (2.6 dB) at
+/// 20 kHz. With 8 taps (and the fit taking the exact engine's board source as it then was) the
+/// low band's error was 0.9 %, RK4 and the exact engine 0.8 % apart on C2.
+const TAPS: usize = 10;
+
+/// The monopole: `Q` sampled at the engine's rate, differentiated by a short linear-phase FIR
+/// fitted to `i ω` over the audible band.
 #[derive(Debug, Clone)]
 pub struct Monopole {
     /// `rho0 / (4 pi r)` (kg/m^4).
     gain: f64,
-    rate_hz: f64,
-    last_m3_s: f64,
+    /// The differentiator's taps (1/s), on the newest source first.
+    taps: [f64; TAPS],
+    /// The last `TAPS` sources (m^3/s), newest first.
+    history: [f64; TAPS],
 }
 
 impl Monopole {
     /// Air of density `air_density_kg_m3`, a listener at `distance_m`, `Q` sampled at `rate_hz`.
+    /// Designs the differentiator (allocates: not on the audio thread).
     pub fn new(air_density_kg_m3: f64, distance_m: f64, rate_hz: f64) -> Monopole {
         Monopole {
             gain: air_density_kg_m3 / (4.0 * std::f64::consts::PI * distance_m),
-            rate_hz,
-            last_m3_s: 0.0,
+            taps: differentiator_taps(rate_hz),
+            history: [0.0; TAPS],
         }
     }
 
-    /// The pressure (Pa) of the step that brought `Q` to `volume_velocity_m3_s`.
+    /// The pressure (Pa) of the step that brought `Q` to `volume_velocity_m3_s`, as it was
+    /// [`Monopole::delay_samples`] steps before.
     pub fn pressure_pa(&mut self, volume_velocity_m3_s: f64) -> f64 {
-        let dq = (volume_velocity_m3_s - self.last_m3_s) * self.rate_hz;
-        self.last_m3_s = volume_velocity_m3_s;
+        self.history.copy_within(0..TAPS - 1, 1);
+        self.history[0] = volume_velocity_m3_s;
+        let dq: f64 = self
+            .taps
+            .iter()
+            .zip(&self.history)
+            .map(|(t, q)| t * q)
+            .sum();
         self.gain * dq
+    }
+
+    /// The differentiator's delay (steps): linear phase, `(TAPS - 1) / 2`.
+    pub fn delay_samples(&self) -> f64 {
+        (TAPS - 1) as f64 / 2.0
     }
 
     /// Start again from `Q` = `volume_velocity_m3_s` (after a reset, a new piano).
     pub fn restart(&mut self, volume_velocity_m3_s: f64) {
-        self.last_m3_s = volume_velocity_m3_s;
+        self.history = [volume_velocity_m3_s; TAPS];
     }
 
     /// Whether the last `Q` was finite.
     pub fn is_finite(&self) -> bool {
-        self.last_m3_s.is_finite()
+        self.history[0].is_finite()
     }
+}
+
+/// The taps (1/s) of a linear-phase FIR whose response is `i ω` delayed by `(TAPS - 1) / 2`
+/// samples: least squares in relative error over the band up to `FIT_BAND` × `rate_hz`, the
+/// low band weighted up to 21 times (`1 + 20 (1 - f / f_band)^4`: where the partials' energy is).
+/// The problem depends on `ω h` alone, so it is as well conditioned at every rate.
+fn differentiator_taps(rate_hz: f64) -> [f64; TAPS] {
+    let delay = (TAPS - 1) as f64 / 2.0;
+    let taps = crate::engine::fir::least_squares_fir::<TAPS>(FIT_BAND, |wh| {
+        // i ω h e^{-i ω h delay}.
+        (wh * (wh * delay).sin(), wh * (wh * delay).cos())
+    });
+    taps.map(|t| t * rate_hz)
 }
 
 /// Output level from which the soft clipper bends the signal towards ±1.

@@ -840,6 +840,22 @@ impl LoadedScaling {
         equal_tempered_hz(key) * 2f64.powf(self.stretch_cents(key) / 1200.0)
     }
 
+    /// The rate every key of an instrument on this keyboard steps at with RK4 (Hz): the paper's
+    /// `min_rate_over_fmax` times the highest frequency any register keeps, a whole multiple of
+    /// the output rate (96 kHz for the paper keyboard; 240 kHz for the concert one, whose
+    /// Bb7-C8 keep their modes to 20 kHz). One key rendered alone steps at its own.
+    pub fn internal_rate_hz(&self) -> f64 {
+        let s = &self.scaling;
+        let f_max = s
+            .mode_limits
+            .iter()
+            .map(|m| m.max_mode_freq_hz)
+            .fold(s.layout.max_mode_freq_hz, f64::max);
+        let out_hz = self.base.output_rate_hz();
+        let needed_hz = self.base.preset.simulation.min_rate_over_fmax * f_max;
+        (needed_hz / out_hz).ceil().max(1.0) * out_hz
+    }
+
     /// The frequency below which `key`'s string modes are kept (Hz): its register's
     /// `mode_limits`, or `layout.max_mode_freq_hz` below the first.
     pub fn max_mode_freq_hz(&self, key: usize) -> f64 {

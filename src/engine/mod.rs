@@ -12,6 +12,7 @@
 //! - [`tuning`]: the coupled first partial, from the undamped linear system.
 
 pub mod exact;
+pub mod fir;
 pub mod kernels;
 pub(crate) mod modal;
 pub mod parallel;
@@ -204,6 +205,11 @@ pub trait Engine {
     fn set_damper(&mut self, down: bool);
     /// Internal step (s).
     fn step_s(&self) -> f64;
+    /// How many steps the radiating source lags the state (the exact engine's correction of its
+    /// shared board's source, [`exact::ExactPool::source_delay_steps`]).
+    fn source_delay_steps(&self) -> usize {
+        0
+    }
 }
 
 impl Engine for Rk4Pool {
@@ -245,6 +251,9 @@ impl Engine for exact::ExactUnison {
     }
     fn step_s(&self) -> f64 {
         exact::ExactUnison::step_s(self)
+    }
+    fn source_delay_steps(&self) -> usize {
+        exact::ExactPool::source_delay_steps()
     }
 }
 

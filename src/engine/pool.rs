@@ -298,7 +298,12 @@ pub trait Policy {
             self.rest_voice(k);
         }
         self.rest_board();
+        self.forget_radiation();
     }
+
+    /// Forget what the pool radiated before now (an engine whose radiating source is filtered
+    /// keeps some of it: the exact engine's board source). By default nothing is kept.
+    fn forget_radiation(&mut self) {}
 
     /// Voice `k` at rest: its strings and hammer still, out of the simulation, its fade and the
     /// key waiting for it dropped (its own key kept).

@@ -136,6 +136,13 @@ impl<E: Engine> Renderer<E> {
         self.decimator.delay_out_samples()
     }
 
+    /// Delay of the pressure (output samples) on top of the filter's: the engine's source's and
+    /// the differentiator's.
+    pub fn radiation_delay_samples(&self) -> f64 {
+        let steps = self.instrument.source_delay_steps() as f64 + self.radiation[0].delay_samples();
+        steps / self.decimator.ratio() as f64
+    }
+
     pub fn strike(&mut self, strike: Strike) {
         self.instrument.strike(strike);
     }
@@ -166,6 +173,10 @@ pub struct Recording {
     /// Group delay of the anti-alias filter (s): frame `k` shows the system at
     /// `(k + 1) / rate_hz - delay_s` ([`Recording::time_s`]).
     pub delay_s: f64,
+    /// The pressure's delay (s): the filter's, the engine's source's
+    /// ([`crate::engine::Engine::source_delay_steps`]) and the differentiator's
+    /// ([`crate::audio::radiate::Monopole::delay_samples`]).
+    pub pressure_delay_s: f64,
     pub frames: Vec<Frame>,
 }
 
@@ -248,6 +259,8 @@ fn record<E: Engine>(
     Ok(Recording {
         rate_hz: r.output_rate_hz(),
         delay_s: r.filter_delay_samples() / r.output_rate_hz(),
+        pressure_delay_s: (r.filter_delay_samples() + r.radiation_delay_samples())
+            / r.output_rate_hz(),
         frames,
     })
 }

@@ -34,8 +34,9 @@ pub(crate) struct Context<'a> {
 }
 
 /// The steps' working values: per half of the voices ([`Half`]), the shared board's state (and
-/// the second core's copy of it), the meeting of the two cores, and the volume velocity of each
-/// sample of the block. Touched by the thread that steps the pool (and, within a block on two
+/// the second core's copy of it), the meeting of the two cores, and the radiating source of each
+/// sample of the block: the voices' and the shared board's apart
+/// ([`super::interface::HeardSource`] hears them). Touched by the thread that steps the pool (and, within a block on two
 /// cores, `halves[1]`, `copy` and `exchange` by the second core).
 #[derive(Debug)]
 pub(crate) struct Steps {
@@ -44,6 +45,7 @@ pub(crate) struct Steps {
     copy: BoardState,
     exchange: Exchange,
     pub(crate) volume: [[f64; CHANNELS]; BLOCK],
+    pub(crate) board_volume: [[f64; CHANNELS]; BLOCK],
 }
 
 /// One half of the voices' working values within the steps: the half's known modal force this
@@ -74,6 +76,7 @@ impl Steps {
             copy: board.state(),
             exchange: Exchange::new(m),
             volume: [[0.0; CHANNELS]; BLOCK],
+            board_volume: [[0.0; CHANNELS]; BLOCK],
         }
     }
 }
@@ -88,6 +91,7 @@ impl Clone for Steps {
             copy: self.copy.clone(),
             exchange: Exchange::new(self.part.modes()),
             volume: self.volume,
+            board_volume: self.board_volume,
         }
     }
 }
@@ -276,8 +280,8 @@ fn sum(first: &[f64], second: &[f64], total: &mut [f64]) {
 }
 
 /// `len` samples of every voice (both halves) and the shared board on this core (the block
-/// passes of the voices in the block done before and after: [`begin`], [`end`]); the volume
-/// velocity of each in `steps.volume`.
+/// passes of the voices in the block done before and after: [`begin`], [`end`]); the radiating
+/// source of the voices in `steps.volume`, of the board in `steps.board_volume`.
 pub(crate) fn run(cx: &Context<'_>, voices: [&mut [Voice]; 2], steps: &mut Steps, len: usize) {
     let [v0, v1] = voices;
     let [h0, h1] = &mut steps.halves;
@@ -287,7 +291,8 @@ pub(crate) fn run(cx: &Context<'_>, voices: [&mut [Voice]; 2], steps: &mut Steps
         sum(&h0.known, &h1.known, &mut h0.sum);
         let board = cx.board.step(&mut steps.part, &h0.sum, cx.simd);
         let (first, second) = (finish(cx, v0, &steps.part), finish(cx, v1, &steps.part));
-        steps.volume[t] = std::array::from_fn(|c| first[c] + second[c] + board[c]);
+        steps.volume[t] = std::array::from_fn(|c| first[c] + second[c]);
+        steps.board_volume[t] = board;
     }
 }
 
@@ -346,6 +351,7 @@ pub(crate) fn run_on_two(
         copy,
         exchange,
         volume,
+        board_volume,
     } = steps;
     copy.copy_from(part);
     exchange.reset();
@@ -362,9 +368,9 @@ pub(crate) fn run_on_two(
         resume_unwind(e);
     }
     for t in 0..len {
-        volume[t] =
-            std::array::from_fn(|c| h0.volume[t][c] + h1.volume[t][c] + h0.board_volume[t][c]);
+        volume[t] = std::array::from_fn(|c| h0.volume[t][c] + h1.volume[t][c]);
     }
+    board_volume[..len].copy_from_slice(&h0.board_volume[..len]);
     true
 }
 

@@ -3,7 +3,7 @@
 //! fade, strike in the current motion, dampers, silent voices retired, runaways reset).
 
 use super::block::{begin, end, run, run_on_two, Context, Steps};
-use super::interface::SharedBoard;
+use super::interface::{HeardSource, SharedBoard, SOURCE_DELAY_STEPS};
 use super::kernels::{Simd, BLOCK};
 use super::key::ExactKey;
 use super::voice::Voice;
@@ -31,7 +31,9 @@ pub struct ExactPool {
     h: f64,
     fade_steps: u32,
     simd: Simd,
-    /// The board's radiating source of each channel after the last step (m^3/s).
+    /// The voices' and the board's radiating source as heard ([`HeardSource`]).
+    heard: HeardSource,
+    /// The board's radiating source of each channel after the last step, as heard (m^3/s).
     radiated_m3_s: [f64; CHANNELS],
 }
 
@@ -81,12 +83,18 @@ impl ExactPool {
             h,
             fade_steps: ((STEAL_FADE_S / h).round() as u32).max(1),
             simd: Simd::detect(),
+            heard: HeardSource::new(),
             radiated_m3_s: [0.0; CHANNELS],
         })
     }
 
     pub fn step_s(&self) -> f64 {
         self.h
+    }
+
+    /// How many steps the radiating source lags the state ([`HeardSource`]).
+    pub fn source_delay_steps() -> usize {
+        SOURCE_DELAY_STEPS
     }
 
     /// Modes of the shared board (padded to whole lanes).
@@ -110,7 +118,9 @@ impl ExactPool {
             keep_energies: false,
         };
         run(&cx, [&mut self.voices, &mut []], &mut self.steps, 1);
-        self.radiated_m3_s = self.steps.volume[0];
+        self.radiated_m3_s = self
+            .heard
+            .next(self.steps.volume[0], self.steps.board_volume[0]);
         self.finish_fades();
     }
 
@@ -236,7 +246,11 @@ impl ExactPool {
         }
         let (v0, v1) = self.voices.split_at_mut(passes);
         both(split, &mut || end(&cx, v1, len), &mut || end(&cx, v0, len));
-        out.copy_from_slice(&self.steps.volume[..len]);
+        for (t, out) in out.iter_mut().enumerate() {
+            *out = self
+                .heard
+                .next(self.steps.volume[t], self.steps.board_volume[t]);
+        }
         self.radiated_m3_s = out[len - 1];
     }
 
@@ -331,6 +345,7 @@ impl ExactPool {
         }
         let m = 3 * self.board.modes();
         self.steps.part.set_values(take(m));
+        self.heard.clear();
     }
 
     /// Mechanical energy of every active key's modes about their static deflection by the board
@@ -352,6 +367,8 @@ impl ExactPool {
             self.leave(k);
         }
         self.voices[k].rest();
+        // A runaway's non-finite source is forgotten with it.
+        self.heard.forget_non_finite();
     }
 }
 
@@ -561,8 +578,13 @@ impl Policy for ExactPool {
     /// deflection by the board's new position under them, as a voice joining one), their forces
     /// on it its terms again — a board set at rest under strings that still feel it where it was
     /// would jolt them through their contact springs.
+    fn forget_radiation(&mut self) {
+        self.heard.clear();
+    }
+
     fn rest_board(&mut self) {
         self.steps.part.rest();
+        self.heard.clear_board();
         for k in 0..self.voices.len() {
             let v = &mut self.voices[k];
             v.force_n = [0.0; 3];
