@@ -148,6 +148,7 @@ pub trait Policy {
         s.key = Some(key);
         (s.active, s.hammer_on, s.damper_down) = (false, false, false);
         (s.coupling, s.fade_left, s.pending) = (1.0, 0, None);
+        self.damper_moved(k);
     }
 
     /// Hand sounding voice `k` to `key`: over [`super::STEAL_FADE_S`] its contact forces fall to
@@ -178,6 +179,7 @@ pub trait Policy {
         }
         s.pending = Some((key, strike));
         s.damper_down = false;
+        self.damper_moved(k);
     }
 
     /// Once voice `k`'s fade has ended, give it the key that follows and strike it.
@@ -239,8 +241,9 @@ pub trait Policy {
         self.damper_moved(k);
     }
 
-    /// What an engine does once voice `k`'s damper has been lowered or lifted (between steps);
-    /// by default nothing, the engine reading `damper_down` as it steps.
+    /// What an engine does once voice `k`'s damper has been lowered or lifted (between steps):
+    /// every write of `damper_down` is followed by it. By default nothing, the engine reading
+    /// `damper_down` as it steps.
     fn damper_moved(&mut self, _k: usize) {}
 
     /// Stop simulating the voices that have fallen silent: strings and contact springs below

@@ -158,9 +158,6 @@ impl ExactPool {
     /// or taken out, a rank-3 update each ([`SharedBoard::update`]).
     fn sync_loads(&mut self) {
         for v in self.voices.iter_mut() {
-            if let Some(key) = v.state.key {
-                v.follow_damper(&self.keys[key]);
-            }
             let want = match (v.state.active, v.state.key) {
                 (true, Some(key)) => Some((key, v.state.damper_down)),
                 _ => None,
@@ -729,6 +726,36 @@ mod tests {
             println!("{name}: damper down, then up: forces, velocities and energy move by {worst:.1e} of themselves");
             assert!(worst < 1e-9, "{name}: {worst:e}");
         }
+        // A steal lifts a sounding voice's damper for its fade, and an assignment for its next
+        // key: the face follows at once (the pool's policy writes `damper_down` there too).
+        pool.set_damper_voice(0, true);
+        let before = seen(&pool, 0);
+        pool.steal(
+            0,
+            1,
+            Strike {
+                velocity_m_s: 1.0,
+                una_corda: false,
+            },
+        );
+        assert!(
+            !pool.voices[0].modal_felt,
+            "the stolen voice's felt is lifted"
+        );
+        let after = seen(&pool, 0);
+        let moved = before
+            .iter()
+            .zip(&after)
+            .map(|(a, b)| (a - b).abs() / a.abs().max(1e-30))
+            .fold(0f64, f64::max);
+        println!("C2 stolen with its damper down: its state moves by {moved:.1e} of itself");
+        assert!(moved < 1e-9, "{moved:e}");
+        pool.set_damper_voice(1, true);
+        pool.assign(1, 0);
+        assert!(
+            !pool.voices[1].modal_felt,
+            "an assigned voice's felt is lifted"
+        );
     }
 
     #[test]
