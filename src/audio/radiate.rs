@@ -1,8 +1,9 @@
 //! From the board to the listener (DESIGN.md §1.7): the engines read the board's radiating source
 //! `Q` — its net volume velocity, or the monopole at 1 m equivalent to its modes' Rayleigh
 //! integrals at a listener ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`])
-//! — and the sound pressure at distance `r` is `p = rho0 / (4 pi r) dQ/dt` ([`Monopole`]); what goes out is
-//! bounded by a soft clipper. Used live ([`super::synth`]) and offline (`render::strike`) alike.
+//! — and the sound pressure at distance `r` is `p = rho0 / (4 pi r) dQ/dt` ([`Monopole`]); what
+//! goes out is bounded by a soft clipper. Used live ([`super::synth`]) and offline
+//! (`render::strike`) alike.
 
 use crate::engine::fir::FIT_BAND;
 

@@ -36,8 +36,8 @@ pub(crate) struct Context<'a> {
 /// The steps' working values: per half of the voices ([`Half`]), the shared board's state (and
 /// the second core's copy of it), the meeting of the two cores, and the radiating source of each
 /// sample of the block: the voices' and the shared board's apart
-/// ([`super::interface::HeardSource`] hears them). Touched by the thread that steps the pool (and, within a block on two
-/// cores, `halves[1]`, `copy` and `exchange` by the second core).
+/// ([`super::interface::HeardSource`] hears them). Touched by the thread that steps the pool
+/// (and, within a block on two cores, `halves[1]`, `copy` and `exchange` by the second core).
 #[derive(Debug)]
 pub(crate) struct Steps {
     pub(crate) halves: [Half; 2],

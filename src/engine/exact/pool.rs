@@ -571,14 +571,15 @@ impl Policy for ExactPool {
         self.board.energy_j(&self.steps.part)
     }
 
-    /// The shared board at rest; each sounding voice's strings moved with it (to their static
-    /// deflection by the board's new position under them, as a voice joining one), their forces
-    /// on it its terms again — a board set at rest under strings that still feel it where it was
-    /// would jolt them through their contact springs.
+    /// The radiating source's filtered past forgotten ([`HeardSource::clear`]).
     fn forget_radiation(&mut self) {
         self.heard.clear();
     }
 
+    /// The shared board at rest; each sounding voice's strings moved with it (to their static
+    /// deflection by the board's new position under them, as a voice joining one), their forces
+    /// on it its terms again — a board set at rest under strings that still feel it where it was
+    /// would jolt them through their contact springs.
     fn rest_board(&mut self) {
         self.steps.part.rest();
         self.heard.clear_board();
