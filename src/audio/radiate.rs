@@ -5,7 +5,7 @@
 //! goes out is bounded by a soft clipper. Used live ([`super::synth`]) and offline
 //! (`render::strike`) alike.
 
-use crate::engine::fir::FIT_BAND;
+use crate::engine::fir::{Fir, FIT_BAND};
 
 /// Taps of the pressure's differentiator. With 10 (a delay of 4.5 samples) its gain is within
 /// 0.02 % of `i ω` to 0.1 × the rate (5 kHz at 48 kHz), 0.24 % at 0.375 × and 0.7 % at 0.417 ×;
@@ -20,10 +20,8 @@ const TAPS: usize = 10;
 pub struct Monopole {
     /// `rho0 / (4 pi r)` (kg/m^4).
     gain: f64,
-    /// The differentiator's taps (1/s), on the newest source first.
-    taps: [f64; TAPS],
-    /// The last `TAPS` sources (m^3/s), newest first.
-    history: [f64; TAPS],
+    /// The differentiator (taps in 1/s) on the sources (m^3/s).
+    differentiator: Fir<TAPS>,
 }
 
 impl Monopole {
@@ -32,23 +30,14 @@ impl Monopole {
     pub fn new(air_density_kg_m3: f64, distance_m: f64, rate_hz: f64) -> Monopole {
         Monopole {
             gain: air_density_kg_m3 / (4.0 * std::f64::consts::PI * distance_m),
-            taps: differentiator_taps(rate_hz),
-            history: [0.0; TAPS],
+            differentiator: Fir::new(differentiator_taps(rate_hz)),
         }
     }
 
     /// The pressure (Pa) of the step that brought `Q` to `volume_velocity_m3_s`, as it was
     /// [`Monopole::delay_samples`] steps before.
     pub fn pressure_pa(&mut self, volume_velocity_m3_s: f64) -> f64 {
-        self.history.copy_within(0..TAPS - 1, 1);
-        self.history[0] = volume_velocity_m3_s;
-        let dq: f64 = self
-            .taps
-            .iter()
-            .zip(&self.history)
-            .map(|(t, q)| t * q)
-            .sum();
-        self.gain * dq
+        self.gain * self.differentiator.push(volume_velocity_m3_s)
     }
 
     /// The differentiator's delay (steps): linear phase, `(TAPS - 1) / 2`.
@@ -58,12 +47,12 @@ impl Monopole {
 
     /// Start again from `Q` = `volume_velocity_m3_s` (after a reset, a new piano).
     pub fn restart(&mut self, volume_velocity_m3_s: f64) {
-        self.history = [volume_velocity_m3_s; TAPS];
+        self.differentiator.fill(volume_velocity_m3_s);
     }
 
     /// Whether the last `Q` was finite.
     pub fn is_finite(&self) -> bool {
-        self.history[0].is_finite()
+        self.differentiator.is_finite()
     }
 }
 

@@ -639,9 +639,15 @@ impl LoadedPreset {
         self.preset.radiation.output_settings(self.output_rate_hz())
     }
 
-    /// Internal steps per output sample.
+    /// Internal steps per output sample for `spec`'s modes ([`LoadedPreset::oversampling_for`]).
     pub fn oversampling(&self, spec: &UnisonSpec) -> usize {
-        let needed = self.preset.simulation.min_rate_over_fmax * spec.max_mode_freq_hz();
+        self.oversampling_for(spec.max_mode_freq_hz())
+    }
+
+    /// Internal steps per output sample for modes up to `max_mode_freq_hz`: the rate RK4 needs,
+    /// `min_rate_over_fmax` times it, rounded up to a whole multiple of the output rate.
+    pub fn oversampling_for(&self, max_mode_freq_hz: f64) -> usize {
+        let needed = self.preset.simulation.min_rate_over_fmax * max_mode_freq_hz;
         (needed / self.output_rate_hz()).ceil().max(1.0) as usize
     }
 }

@@ -851,9 +851,7 @@ impl LoadedScaling {
             .iter()
             .map(|m| m.max_mode_freq_hz)
             .fold(s.layout.max_mode_freq_hz, f64::max);
-        let out_hz = self.base.output_rate_hz();
-        let needed_hz = self.base.preset.simulation.min_rate_over_fmax * f_max;
-        (needed_hz / out_hz).ceil().max(1.0) * out_hz
+        self.base.oversampling_for(f_max) as f64 * self.base.output_rate_hz()
     }
 
     /// The frequency below which `key`'s string modes are kept (Hz): its register's

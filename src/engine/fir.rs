@@ -1,6 +1,7 @@
 //! Short FIR filters fitted by least squares to a frequency response: how the output undoes what
 //! sampling does to a continuous quantity (the pressure's derivative, `audio::radiate`; the exact
-//! engine's shared board driven by forces linear over a step, [`super::exact`]).
+//! engine's shared board driven by forces linear over a step, [`super::exact`]), and the delay
+//! line that applies them ([`Fir`]).
 
 use faer::linalg::solvers::SolveLstsq;
 
@@ -38,4 +39,77 @@ pub fn least_squares_fir<const N: usize>(
     }
     let x = a.qr().solve_lstsq(&b);
     std::array::from_fn(|k| x[(k, 0)])
+}
+
+/// A short FIR applied sample by sample: `N` taps on the last `N` inputs. Allocation-free: safe
+/// on the audio thread. Touched by the thread that owns its stage.
+#[derive(Debug, Clone)]
+pub struct Fir<const N: usize> {
+    /// The taps, on the newest input first.
+    taps: [f64; N],
+    /// The last `N` inputs, newest first.
+    history: [f64; N],
+}
+
+impl<const N: usize> Fir<N> {
+    /// A filter of `taps` (newest input first), its past at rest.
+    pub fn new(taps: [f64; N]) -> Fir<N> {
+        Fir {
+            taps,
+            history: [0.0; N],
+        }
+    }
+
+    /// The output after `x` comes in.
+    pub fn push(&mut self, x: f64) -> f64 {
+        self.history.copy_within(0..N - 1, 1);
+        self.history[0] = x;
+        self.taps
+            .iter()
+            .zip(&self.history)
+            .map(|(t, h)| t * h)
+            .sum()
+    }
+
+    /// The past set to `x` throughout, as if `x` had always come in (0: at rest).
+    pub fn fill(&mut self, x: f64) {
+        self.history = [x; N];
+    }
+
+    /// Whether the newest input was finite.
+    pub fn is_finite(&self) -> bool {
+        self.history[0].is_finite()
+    }
+
+    /// Non-finite inputs in the past set to 0, the rest kept: clearing it all would make the
+    /// output jump.
+    pub fn forget_non_finite(&mut self) {
+        for h in &mut self.history {
+            if !h.is_finite() {
+                *h = 0.0;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Fir;
+
+    /// An impulse reads the taps out in order; a constant input gives the taps' sum; a non-finite
+    /// input is forgotten without touching the rest of the past.
+    #[test]
+    fn the_delay_line_applies_its_taps_newest_first() {
+        let taps = [0.5, -0.25, 2.0];
+        let mut fir = Fir::new(taps);
+        let impulse: Vec<f64> = [1.0, 0.0, 0.0, 0.0].map(|x| fir.push(x)).to_vec();
+        println!("impulse response {impulse:?}");
+        assert_eq!(impulse, [0.5, -0.25, 2.0, 0.0]);
+        fir.fill(4.0);
+        assert_eq!(fir.push(4.0), 4.0 * 2.25);
+        fir.push(f64::NAN);
+        assert!(!fir.is_finite());
+        fir.forget_non_finite();
+        assert_eq!(fir.push(1.0), 0.5 + 2.0 * 4.0);
+    }
 }

@@ -28,6 +28,7 @@
 //! chord and of the 23 stiffest keys stays inside the unit circle (`tests/stability.rs`).
 
 use super::kernels::{fma, Simd, Split, LANES};
+use crate::engine::fir::{least_squares_fir, Fir, FIT_BAND};
 use crate::engine::modal::input_weights;
 use crate::engine::physics::soundboard::SoundboardModes;
 use crate::engine::spec::CHANNELS;
@@ -58,10 +59,10 @@ pub(crate) const SOURCE_DELAY_STEPS: usize = (SOURCE_TAPS - 1) / 2;
 /// steps the pool.
 #[derive(Debug, Clone)]
 pub(crate) struct HeardSource {
-    taps: [f64; SOURCE_TAPS],
-    /// The board's part of the last `SOURCE_TAPS` steps, newest first.
-    board: [[f64; CHANNELS]; SOURCE_TAPS],
-    /// The voices' part of the last `SOURCE_DELAY_STEPS + 1` steps, newest first.
+    /// The board's part, per channel, through the correction.
+    board: [Fir<SOURCE_TAPS>; CHANNELS],
+    /// The voices' part of the last `SOURCE_DELAY_STEPS + 1` steps, newest first (a plain delay
+    /// line: a non-finite value stays where it is rather than spreading over taps).
     voices: [[f64; CHANNELS]; SOURCE_DELAY_STEPS + 1],
 }
 
@@ -69,14 +70,13 @@ impl HeardSource {
     /// Designs the correction (allocates: not on the audio thread).
     pub(crate) fn new() -> HeardSource {
         let delay = SOURCE_DELAY_STEPS as f64;
-        let taps = crate::engine::fir::least_squares_fir(crate::engine::fir::FIT_BAND, |wh| {
+        let taps = least_squares_fir(FIT_BAND, |wh| {
             let x = 0.5 * wh;
             let gain = (x / x.sin()).powi(2);
             (gain * (wh * delay).cos(), -gain * (wh * delay).sin())
         });
         HeardSource {
-            taps,
-            board: [[0.0; CHANNELS]; SOURCE_TAPS],
+            board: std::array::from_fn(|_| Fir::new(taps)),
             voices: [[0.0; CHANNELS]; SOURCE_DELAY_STEPS + 1],
         }
     }
@@ -88,19 +88,9 @@ impl HeardSource {
         voices: [f64; CHANNELS],
         board: [f64; CHANNELS],
     ) -> [f64; CHANNELS] {
-        self.board.copy_within(0..SOURCE_TAPS - 1, 1);
-        self.board[0] = board;
         self.voices.copy_within(0..SOURCE_DELAY_STEPS, 1);
         self.voices[0] = voices;
-        std::array::from_fn(|c| {
-            let board: f64 = self
-                .taps
-                .iter()
-                .zip(&self.board)
-                .map(|(t, b)| t * b[c])
-                .sum();
-            self.voices[SOURCE_DELAY_STEPS][c] + board
-        })
+        std::array::from_fn(|c| self.voices[SOURCE_DELAY_STEPS][c] + self.board[c].push(board[c]))
     }
 
     /// Forget the past (the pool set to a new state).
@@ -111,18 +101,18 @@ impl HeardSource {
 
     /// Forget the board's past (the board set at rest).
     pub(crate) fn clear_board(&mut self) {
-        self.board = [[0.0; CHANNELS]; SOURCE_TAPS];
+        for fir in &mut self.board {
+            fir.fill(0.0);
+        }
     }
 
     /// Forget what was not finite (a runaway voice's source, the voice set at rest), keeping the
     /// rest: clearing it all would make the source jump.
     pub(crate) fn forget_non_finite(&mut self) {
-        for x in self
-            .board
-            .iter_mut()
-            .chain(self.voices.iter_mut())
-            .flatten()
-        {
+        for fir in &mut self.board {
+            fir.forget_non_finite();
+        }
+        for x in self.voices.iter_mut().flatten() {
             if !x.is_finite() {
                 *x = 0.0;
             }
