@@ -113,6 +113,13 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
     assert!(e.contains("`voicing.felt_hysteresis_s` = 1 (key 88)") && e.contains("[0, 0.005]"));
     let e = keyboard_error("bad_keyboard_exponent.toml");
     assert!(e.contains("`voicing.felt_exponent` = 9 (key 1)") && e.contains("[1, 6]"));
+    let e = keyboard_error("bad_keyboard_hammer_mass.toml");
+    assert!(e.contains("`voicing.hammer_mass_kg` = 0.5 (key 88)") && e.contains("[0.0001, 0.1]"));
+    let e = keyboard_error("bad_keyboard_hammer_mass_points.toml");
+    assert!(
+        e.contains("`voicing.hammer_mass_kg` = given at 1 of 2 points")
+            && e.contains("at every voicing point or at none")
+    );
     let e = keyboard_error("bad_keyboard_full_scale.toml");
     assert!(e.contains("`full_scale_pa` = 1000000000") && e.contains("[1e-6, 1e4] Pa"));
     let e = keyboard_error("bad_keyboard_bass_octave_key.toml");

@@ -27,9 +27,9 @@ fn c2_key_is_the_c2_preset() {
 
 #[test]
 fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
-    // `concert` names `paper` as its base keyboard: the same strings, hammers, layout and board on
+    // `concert` names `paper` as its base keyboard: the same strings, striking points, layout and board on
     // every key; only the strings' losses, the duplex felt, the dampers, the tuning (stretched),
-    // the top hammers' voicing and the listener differ.
+    // the hammers' voicing (masses and felts) and the listener differ.
     let paper = Scaling::resolve("paper").unwrap();
     let concert = Scaling::resolve("concert").unwrap();
     println!("key  c_d paper/concert  zeta_T paper/concert  b1 1/s   b3 s");
@@ -100,16 +100,19 @@ fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
             );
         }
         // The same hammers but for the voicing: every felt's exponent 4.5, its force at 1 mm of
-        // compression the paper's felt's times 0.5 at A0 and C4, 2 at C6, 0.7 at C7, 0.5 at F#7,
-        // 4 at A7, 60 at C8, log-linear in key number between (docs/parameters.md).
-        let points: [(usize, f64); 7] = [
-            (1, 0.5),
-            (40, 0.5),
-            (64, 2.0),
-            (76, 0.7),
-            (82, 0.5),
-            (85, 4.0),
-            (88, 60.0),
+        // compression the paper's felt's times 0.5 at A0, 2 at C2 and C4, 4 at C6, 0.7 at C7, 0.5
+        // at F#7, 4 at A7, 60 at C8; the hammers' masses 11.5 g at A0, 6.5 at C2, 6.1 at C4, 4.5
+        // at C6, 2.2 at C7, 2.1 at F#7, 2.05 at A7, 2.0 at C8; both log-linear in key number
+        // between (docs/parameters.md).
+        let points: [(usize, f64, f64); 8] = [
+            (1, 0.5, 11.5e-3),
+            (16, 2.0, 6.5e-3),
+            (40, 2.0, 6.1e-3),
+            (64, 4.0, 4.5e-3),
+            (76, 0.7, 2.2e-3),
+            (82, 0.5, 2.1e-3),
+            (85, 4.0, 2.05e-3),
+            (88, 60.0, 2.0e-3),
         ];
         let (a, b) = points
             .windows(2)
@@ -117,7 +120,8 @@ fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
             .find(|(a, b)| (a.0..=b.0).contains(&k))
             .unwrap();
         let t = (k - a.0) as f64 / (b.0 - a.0) as f64;
-        let voiced = (a.1.ln() * (1.0 - t) + b.1.ln() * t).exp();
+        let geometric = |x: f64, y: f64| (x.ln() * (1.0 - t) + y.ln() * t).exp();
+        let (voiced, mass_kg) = (geometric(a.1, b.1), geometric(a.2, b.2));
         let force_at_mm_n = |h: &unacorda::config::preset::HammerSection| {
             h.stiffness_n_m_p * 1e-3f64.powf(h.exponent)
         };
@@ -127,9 +131,15 @@ fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
             (ratio / voiced - 1.0).abs() < 1e-9,
             "key {k}: voiced {ratio}"
         );
+        assert!(
+            (c.hammer.mass_kg / mass_kg - 1.0).abs() < 1e-12,
+            "key {k}: mass {} kg",
+            c.hammer.mass_kg
+        );
         let unvoiced = unacorda::config::preset::HammerSection {
             stiffness_n_m_p: p.hammer.stiffness_n_m_p,
             exponent: p.hammer.exponent,
+            mass_kg: p.hammer.mass_kg,
             ..c.hammer.clone()
         };
         assert_eq!(p.hammer, unvoiced, "key {k}");

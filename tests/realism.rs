@@ -396,6 +396,89 @@ fn the_concert_treble_carries_as_the_recorded_grands_does() {
 }
 
 #[test]
+fn the_concert_hammers_leave_the_strings_when_measured_hammers_do() {
+    // The felt's contact with the strings at MIDI velocity 80 (2.37 m/s, the exact engine), beside
+    // Askenfelt & Jansson's at mezzoforte (Five Lectures on the Acoustics of the Piano, 1990,
+    // Fig. 7: C2 3.0, C3 2.8, C4 2.1, C5 1.45, C6 1.1 ms; docs/realism-sources.md §4), within 15 %.
+    // With the paper keyboard's hammer masses (Chaigne & Askenfelt's, 2.97 g at C4) C4 and C6
+    // leave after 1.62 and 0.88 ms, 23 and 20 % early (C2 after 3.52 ms, 17 % late), and this
+    // fails.
+    use unacorda::engine::{Integrator, Strike};
+    let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
+    let keyboard = Scaling::resolve("concert").unwrap();
+    for (key, measured_ms) in [(16, 3.0), (28, 2.8), (40, 2.1), (52, 1.45), (64, 1.1)] {
+        let preset = keyboard.key_preset(key).unwrap();
+        let strike = Strike {
+            velocity_m_s: speed,
+            una_corda: false,
+        };
+        let rec = unacorda::render::strike::simulate_with(
+            &preset,
+            Integrator::Exact,
+            strike,
+            None,
+            0.02,
+            |_| {},
+        )
+        .unwrap();
+        let touching = rec
+            .frames
+            .iter()
+            .filter(|f| f.obs.hammer_force_n.iter().sum::<f64>() > 0.0)
+            .count();
+        let contact_ms = 1e3 * touching as f64 / rec.rate_hz;
+        println!(
+            "{}: the felt on the strings {contact_ms:.2} ms (measured at mezzoforte {measured_ms} ms), hammer {:.2} g",
+            unacorda::board::key_name(key),
+            1e3 * preset.preset.hammer.mass_kg
+        );
+        assert!(
+            (contact_ms / measured_ms - 1.0).abs() <= 0.15,
+            "key {key}: {contact_ms:.2} ms"
+        );
+    }
+}
+
+#[test]
+fn the_middle_registers_fundamental_is_nearer_the_recorded_grands() {
+    // Partial 1 re partial 2 (first 0.3 s, MIDI velocity 80, heard at the listener) of the 16
+    // recorded keys from D#2 to C6, against the recorded grand's. Issue 17 asks the fundamental
+    // to be no weaker against partial 2 than the recording's; it is still weaker, by a median of
+    // 6.8 dB (D#3 24 dB: its partial 1 on a board mode, docs/realism.md). Held here: the median
+    // within 8 dB. With the paper keyboard's hammers (Chaigne & Askenfelt's masses, 2.97 g at C4:
+    // contacts 20-30 % shorter than measured) the median is 9.0 dB and this fails.
+    use unacorda::analysis::recorded::recorded_key;
+    use unacorda::analysis::struck::{pressure, StruckKey};
+    let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
+    let keyboard = Scaling::resolve("concert").unwrap();
+    let keys: Vec<usize> = (19..=64).step_by(3).collect();
+    let ours = unacorda::cores::map_on_cores(&keys, |&key| {
+        let preset = keyboard.key_preset(key)?;
+        let (fs, x) = pressure(&preset, speed, 0.5, None)?;
+        let b = preset.unison_spec().strings[0].speaking_inharmonicity();
+        let heard = StruckKey::measure(&x, fs, keyboard.target_hz(key), b);
+        Ok::<_, anyhow::Error>(heard.fundamental_re_second_db)
+    })
+    .unwrap();
+    let mut short_db: Vec<f64> = keys
+        .iter()
+        .zip(&ours)
+        .map(|(&key, &db)| {
+            let theirs = recorded_key(key).unwrap().fundamental_re_second_db.unwrap();
+            println!(
+                "{}: partial 1 re 2 {db:+.1} dB (recorded {theirs:+.1})",
+                unacorda::board::key_name(key)
+            );
+            theirs - db
+        })
+        .collect();
+    short_db.sort_by(f64::total_cmp);
+    let median_db = 0.5 * (short_db[7] + short_db[8]);
+    println!("partial 1 re 2 short of the recording's: median {median_db:.1} dB (limit 8)");
+    assert!(median_db <= 8.0);
+}
+
+#[test]
 fn the_concert_keyboard_grows_louder_and_brighter_with_velocity_as_the_recorded_grand() {
     // C2, F#3, C4, A4 and C6 struck at MIDI velocity 30 and 127 (the exact engine, 0.5 s), heard
     // by the stereo pair mixed to mono as the recorded grand's pair is measured, beside its layers

@@ -35,6 +35,10 @@ pub const MAX_FULL_SCALE_PA: f64 = 1e4;
 /// 20 kB; a larger file, or a device that never ends (`/dev/zero`), is refused, not read forever.
 pub const MAX_TEXT_BYTES: u64 = 1 << 20;
 
+/// The range of a hammer's mass (kg).
+pub const MIN_HAMMER_MASS_KG: f64 = 1e-4;
+pub const MAX_HAMMER_MASS_KG: f64 = 0.1;
+
 /// The felt's exponent `p` a file may set (Eq. 8; measured hammers: 2.1–5).
 pub const MIN_EXPONENT: f64 = 1.0;
 pub const MAX_EXPONENT: f64 = 6.0;
@@ -387,7 +391,12 @@ impl Preset {
             1e4,
         )?;
         let h = &self.hammer;
-        range("hammer.mass_kg", h.mass_kg, 1e-4, 0.1)?;
+        range(
+            "hammer.mass_kg",
+            h.mass_kg,
+            MIN_HAMMER_MASS_KG,
+            MAX_HAMMER_MASS_KG,
+        )?;
         range("hammer.exponent", h.exponent, MIN_EXPONENT, MAX_EXPONENT)?;
         // K's unit depends on p: what is bounded is the force at 1 mm of compression.
         let force_at_mm_n = h.stiffness_n_m_p * 1e-3f64.powf(h.exponent);

@@ -9,8 +9,8 @@
 
 use crate::config::preset::{
     bridge_point_index, heard, read_text, FeltModelName, LoadedPreset, Preset, PresetError,
-    RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA, MAX_HYSTERESIS_S,
-    MIN_EXPONENT, MIN_FULL_SCALE_PA,
+    RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA, MAX_HAMMER_MASS_KG,
+    MAX_HYSTERESIS_S, MIN_EXPONENT, MIN_FULL_SCALE_PA, MIN_HAMMER_MASS_KG,
 };
 use crate::engine::physics::damper::{DamperParams, FeltModel};
 use crate::engine::physics::string::StringParams;
@@ -219,6 +219,9 @@ pub struct VoicingAnchor {
     /// force at [`VOICING_COMPRESSION_M`] is the anchors' felt's times `felt_stiffness_factor`.
     /// Given at every voicing point or at none (then the anchors').
     pub felt_exponent: Option<f64>,
+    /// The hammer's mass as the string feels it (kg), interpolated geometrically like the
+    /// anchors'; given at every voicing point or at none (then the anchors').
+    pub hammer_mass_kg: Option<f64>,
 }
 
 /// The string modes a register keeps: from `from_key` up to the next limit's key (or C8), modes
@@ -538,7 +541,7 @@ impl Scaling {
         optional("dampers.key", self.dampers.iter().map(|a| a.key).collect())?;
         optional("voicing.key", self.voicing.iter().map(|a| a.key).collect())?;
         // The voicing's optional fields are given at every point or at none.
-        let optional_fields: [(&str, OptionalField, f64, f64); 2] = [
+        let optional_fields: [(&str, OptionalField, f64, f64); 3] = [
             (
                 "voicing.felt_hysteresis_s",
                 |a| a.felt_hysteresis_s,
@@ -550,6 +553,12 @@ impl Scaling {
                 |a| a.felt_exponent,
                 MIN_EXPONENT,
                 MAX_EXPONENT,
+            ),
+            (
+                "voicing.hammer_mass_kg",
+                |a| a.hammer_mass_kg,
+                MIN_HAMMER_MASS_KG,
+                MAX_HAMMER_MASS_KG,
             ),
         ];
         for (field, get, lo, hi) in optional_fields {
@@ -991,6 +1000,14 @@ impl LoadedScaling {
             if let Some(p) = given(|a| a.felt_exponent) {
                 h.stiffness_n_m_p *= VOICING_COMPRESSION_M.powf(h.exponent - p);
                 h.exponent = p;
+            }
+            if voicing.iter().all(|a| a.hammer_mass_kg.is_some()) {
+                h.mass_kg = log_linear(
+                    voicing,
+                    |a| a.key,
+                    key,
+                    |a| a.hammer_mass_kg.unwrap_or_default(),
+                );
             }
         }
         h.strike_ratio = self.interpolate(key, |a| a.strike_ratio);
