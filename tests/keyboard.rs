@@ -147,7 +147,7 @@ fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
         assert_eq!(p.radiation.listener, None, "key {k}");
         assert_eq!(c.radiation.listener.as_deref(), Some("above"), "key {k}");
         // In stereo by the close pair over the two ends of the bridges, bass on the left, 0 dBFS
-        // at 14 Pa (the paper's: c2's 2 Pa).
+        // at 20 Pa (the paper's: c2's 2 Pa).
         assert_eq!(p.radiation.stereo, None, "key {k}");
         let pair = c.radiation.stereo.clone().map(|lr| lr.map(String::from));
         assert_eq!(
@@ -157,7 +157,7 @@ fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
         );
         assert_eq!(
             (p.radiation.full_scale_pa, c.radiation.full_scale_pa),
-            (2.0, 14.0),
+            (2.0, 20.0),
             "key {k}"
         );
         // The same keys have dampers; the paper's is c2's point felt on every key, the concert's
