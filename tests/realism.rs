@@ -397,36 +397,18 @@ fn the_concert_treble_carries_as_the_recorded_grands_does() {
 
 #[test]
 fn the_concert_hammers_leave_the_strings_when_measured_hammers_do() {
-    // The felt's contact with the strings at MIDI velocity 80 (2.37 m/s, the exact engine), beside
-    // Askenfelt & Jansson's at mezzoforte (Five Lectures on the Acoustics of the Piano, 1990,
-    // Fig. 7: C2 3.0, C3 2.8, C4 2.1, C5 1.45, C6 1.1 ms; docs/realism-sources.md §4), within 15 %.
-    // With the paper keyboard's hammer masses (Chaigne & Askenfelt's, 2.97 g at C4) C4 and C6
-    // leave after 1.62 and 0.88 ms, 23 and 20 % early (C2 after 3.52 ms, 17 % late), and this
-    // fails.
-    use unacorda::engine::{Integrator, Strike};
+    // The felt's contact with the strings at MIDI velocity 80 (2.37 m/s, the exact engine,
+    // `analysis::struck::contact_s`), beside Askenfelt & Jansson's at mezzoforte (Five Lectures on
+    // the Acoustics of the Piano, 1990, Fig. 7: C2 3.0, C3 2.8, C4 2.1, C5 1.45, C6 1.1 ms;
+    // docs/realism-sources.md §4), within 15 %. With the paper keyboard's hammer masses (Chaigne &
+    // Askenfelt's, 2.97 g at C4) C4 and C6 leave after 1.62 and 0.88 ms, 23 and 20 % early (C2
+    // after 3.52 ms, 17 % late), and this fails.
+    use unacorda::analysis::struck::contact_s;
     let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();
     for (key, measured_ms) in [(16, 3.0), (28, 2.8), (40, 2.1), (52, 1.45), (64, 1.1)] {
         let preset = keyboard.key_preset(key).unwrap();
-        let strike = Strike {
-            velocity_m_s: speed,
-            una_corda: false,
-        };
-        let rec = unacorda::render::strike::simulate_with(
-            &preset,
-            Integrator::Exact,
-            strike,
-            None,
-            0.02,
-            |_| {},
-        )
-        .unwrap();
-        let touching = rec
-            .frames
-            .iter()
-            .filter(|f| f.obs.hammer_force_n.iter().sum::<f64>() > 0.0)
-            .count();
-        let contact_ms = 1e3 * touching as f64 / rec.rate_hz;
+        let contact_ms = 1e3 * contact_s(&preset, speed).unwrap();
         println!(
             "{}: the felt on the strings {contact_ms:.2} ms (measured at mezzoforte {measured_ms} ms), hammer {:.2} g",
             unacorda::board::key_name(key),

@@ -86,6 +86,35 @@ pub fn pressure_heard(
     Ok((rec.rate_hz, rec.channel(mix)))
 }
 
+/// The stretch over which [`contact_s`] watches the felt (s): longer than any key's contact
+/// (A0's, the longest, about 5 ms at velocity 80).
+pub const CONTACT_WINDOW_S: f64 = 0.02;
+
+/// How long the felt stays on the strings when `preset`'s key is struck at `velocity_m_s` (s): the
+/// steps of the exact engine at the output rate in which it presses on any string (Eq. 8's force
+/// above zero), over the first [`CONTACT_WINDOW_S`]. Askenfelt & Jansson measured 3.0 ms at C2 down
+/// to 0.6 ms at C7 at mezzoforte (docs/realism-sources.md §4).
+pub fn contact_s(preset: &LoadedPreset, velocity_m_s: f64) -> Result<f64, BuildError> {
+    let strike = Strike {
+        velocity_m_s,
+        una_corda: false,
+    };
+    let rec = simulate_with(
+        preset,
+        Integrator::Exact,
+        strike,
+        None,
+        CONTACT_WINDOW_S,
+        |_| {},
+    )?;
+    let pressing = rec
+        .frames
+        .iter()
+        .filter(|f| f.obs.hammer_force_n.iter().sum::<f64>() > 0.0)
+        .count();
+    Ok(pressing as f64 / rec.rate_hz)
+}
+
 /// One struck key's figures.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StruckKey {

@@ -326,12 +326,17 @@ fn strike_preset(
     Ok(struck::pressure(preset, speed, seconds, release_s)?)
 }
 
-/// [`StruckKey`] of `key` at [`VELOCITY`], the key prepared once.
-fn struck_key(scaling: &LoadedScaling, key: usize) -> Result<StruckKey> {
+/// [`StruckKey`] of `key` at [`VELOCITY`], and how long its felt stays on the strings (s), the key
+/// prepared once.
+fn struck_key(scaling: &LoadedScaling, key: usize) -> Result<(StruckKey, f64)> {
     let preset = scaling.key_preset(key)?;
     let (fs, x) = strike_preset(&preset, VELOCITY, struck::LATE_S.1, None)?;
     let b = preset.unison_spec().strings[0].speaking_inharmonicity();
-    Ok(StruckKey::measure(&x, fs, scaling.target_hz(key), b))
+    let speed = unacorda::midi::hammer_speed_m_s(VELOCITY).context("a MIDI velocity 1–127")?;
+    Ok((
+        StruckKey::measure(&x, fs, scaling.target_hz(key), b),
+        struck::contact_s(&preset, speed)?,
+    ))
 }
 
 /// The rows of issue 17's table that need the sound: each key struck and heard at the listener,
@@ -341,7 +346,8 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
     all.sort_unstable();
     all.dedup();
     let heard = unacorda::cores::map_on_cores(&all, |&k| struck_key(scaling, k))?;
-    let of = |k: usize| &heard[all.binary_search(&k).expect("rendered")];
+    let of = |k: usize| &heard[all.binary_search(&k).expect("rendered")].0;
+    let contact_ms = |k: usize| 1e3 * heard[all.binary_search(&k).expect("rendered")].1;
     let middle_db = MIDDLE.iter().map(|&k| of(k).a_level_db).sum::<f64>() / MIDDLE.len() as f64;
     let rec = |x: Option<f64>| x.map_or("-".into(), |x| format!("{x:+.1}"));
     let _ = writeln!(
@@ -350,7 +356,7 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
     );
     let _ = writeln!(
         out,
-        "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>9}",
+        "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>9} {:>11}",
         "key",
         "name",
         "level re A3–A4 dB",
@@ -358,7 +364,8 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
         "4–8 kHz late dB",
         "partials 60dB",
         "partial1 re 2 dB",
-        "boom dB"
+        "boom dB",
+        "contact ms"
     );
     for &k in keys {
         let h = of(k);
@@ -369,7 +376,7 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
         };
         let _ = writeln!(
             out,
-            "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>9.1}",
+            "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>9.1} {:>11.2}",
             k,
             key_name(k),
             pair(
@@ -393,6 +400,7 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
                 r.as_ref().and_then(|r| r.fundamental_re_second_db)
             ),
             h.boom_db,
+            contact_ms(k),
         );
     }
     // Balance over the keys heard.
