@@ -202,8 +202,8 @@ pub struct DamperAnchor {
 }
 
 /// The hammers' voicing at one key: how much harder its felt is than the anchors' (a technician
-/// hardens the top hammers so that the treble carries), interpolated between such keys like the
-/// anchors.
+/// hardens the top hammers so that the treble carries), and optionally the felt's exponent and
+/// hysteresis and the hammer's mass, interpolated between such keys like the anchors.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct VoicingAnchor {
