@@ -364,11 +364,10 @@ fn struck_at_listener(
     key: usize,
     velocity_m_s: f64,
 ) -> unacorda::analysis::struck::StruckKey {
-    use unacorda::analysis::struck::{pressure, StruckKey};
     let preset = keyboard.key_preset(key).unwrap();
-    let (fs, x) = pressure(&preset, velocity_m_s, 0.5, None).unwrap();
-    let b = preset.unison_spec().strings[0].speaking_inharmonicity();
-    StruckKey::measure(&x, fs, keyboard.target_hz(key), b)
+    unacorda::analysis::struck::struck_key(&preset, keyboard.target_hz(key), velocity_m_s, 0.5)
+        .unwrap()
+        .0
 }
 
 #[test]

@@ -11,7 +11,7 @@ use crate::config::preset::LoadedPreset;
 use crate::engine::tuning::stiff_string_hz;
 use crate::engine::{BuildError, Integrator, Strike};
 use crate::midi::hammer_speed_m_s;
-use crate::render::simulate_with;
+use crate::render::{simulate_with, Recording};
 
 /// The two upper bands whose fade issue 17 measures (Hz), at [`LATE_S`] re [`ATTACK_S`].
 pub const UPPER_BANDS_HZ: [(f64, f64); 2] = [(2000.0, 4000.0), (4000.0, 8000.0)];
@@ -63,6 +63,20 @@ pub fn pressure_heard(
     release_s: Option<f64>,
     hearing: Hearing,
 ) -> Result<(f64, Vec<f64>), BuildError> {
+    let rec = record(preset, velocity_m_s, seconds, release_s, hearing)?;
+    Ok((rec.rate_hz, heard(&rec, hearing)))
+}
+
+/// `preset`'s key struck at `velocity_m_s` on the exact engine at the output rate, recorded for
+/// `seconds` (the key released after `release_s`), mono at `radiation.listener` when `hearing`
+/// is [`Hearing::Listener`].
+fn record(
+    preset: &LoadedPreset,
+    velocity_m_s: f64,
+    seconds: f64,
+    release_s: Option<f64>,
+    hearing: Hearing,
+) -> Result<Recording, BuildError> {
     let strike = Strike {
         velocity_m_s,
         una_corda: false,
@@ -71,23 +85,26 @@ pub fn pressure_heard(
     if hearing == Hearing::Listener {
         preset.make_mono();
     }
-    let rec = simulate_with(
+    simulate_with(
         &preset,
         Integrator::Exact,
         strike,
         release_s,
         seconds,
         |_| {},
-    )?;
-    let mix = |f: &crate::render::strike::Frame| match hearing {
+    )
+}
+
+/// The pressure (Pa) of `rec` as `hearing` hears it.
+fn heard(rec: &Recording, hearing: Hearing) -> Vec<f64> {
+    rec.channel(|f| match hearing {
         Hearing::Listener => f.pressure_pa,
         Hearing::PairMix => 0.5 * (f.pressure_pa + f.pressure_right_pa),
-    };
-    Ok((rec.rate_hz, rec.channel(mix)))
+    })
 }
 
 /// The stretch over which [`contact_s`] watches the felt (s): longer than any key's contact
-/// (A0's, the longest, about 5 ms at velocity 80).
+/// (A0's, the longest, 7.5 ms at velocity 80).
 pub const CONTACT_WINDOW_S: f64 = 0.02;
 
 /// How long the felt stays on the strings when `preset`'s key is struck at `velocity_m_s` (s): the
@@ -95,24 +112,43 @@ pub const CONTACT_WINDOW_S: f64 = 0.02;
 /// above zero), over the first [`CONTACT_WINDOW_S`]. Askenfelt & Jansson measured 3.0 ms at C2 down
 /// to 0.6 ms at C7 at mezzoforte (docs/realism-sources.md §4).
 pub fn contact_s(preset: &LoadedPreset, velocity_m_s: f64) -> Result<f64, BuildError> {
-    let strike = Strike {
-        velocity_m_s,
-        una_corda: false,
-    };
-    let rec = simulate_with(
+    let rec = record(
         preset,
-        Integrator::Exact,
-        strike,
-        None,
+        velocity_m_s,
         CONTACT_WINDOW_S,
-        |_| {},
+        None,
+        Hearing::Listener,
     )?;
+    Ok(pressing_s(&rec))
+}
+
+/// [`contact_s`] read off a recording of the strike (at least [`CONTACT_WINDOW_S`] long).
+fn pressing_s(rec: &Recording) -> f64 {
     let pressing = rec
         .frames
         .iter()
+        .take((CONTACT_WINDOW_S * rec.rate_hz).round() as usize)
         .filter(|f| f.obs.hammer_force_n.iter().sum::<f64>() > 0.0)
         .count();
-    Ok(pressing as f64 / rec.rate_hz)
+    pressing as f64 / rec.rate_hz
+}
+
+/// `preset`'s key struck at `velocity_m_s` and heard at the listener for `seconds`, measured as
+/// [`StruckKey`] (its first partial on `target_hz`), and how long its felt stayed on the strings
+/// (s, as [`contact_s`] counts), both from the one recording.
+pub fn struck_key(
+    preset: &LoadedPreset,
+    target_hz: f64,
+    velocity_m_s: f64,
+    seconds: f64,
+) -> Result<(StruckKey, f64), BuildError> {
+    let rec = record(preset, velocity_m_s, seconds, None, Hearing::Listener)?;
+    let b = preset.unison_spec().strings[0].speaking_inharmonicity();
+    let x = heard(&rec, Hearing::Listener);
+    Ok((
+        StruckKey::measure(&x, rec.rate_hz, target_hz, b),
+        pressing_s(&rec),
+    ))
 }
 
 /// One struck key's figures.

@@ -13,7 +13,6 @@ use unacorda::analysis::partials::{cents, KeyPartials, Partial};
 use unacorda::analysis::struck::{self, Hearing, StruckKey, Touch};
 use unacorda::analysis::{listening, recorded};
 use unacorda::board::key_name;
-use unacorda::config::preset::LoadedPreset;
 use unacorda::config::scaling::{equal_tempered_hz, parse_key, LoadedScaling, Scaling, KEYS};
 
 /// Partials looked for on each key.
@@ -312,31 +311,24 @@ fn strike(
     seconds: f64,
     release_s: Option<f64>,
 ) -> Result<(f64, Vec<f64>)> {
-    strike_preset(&scaling.key_preset(key)?, velocity, seconds, release_s)
-}
-
-/// [`strike`] of a key already prepared (its tension tuned).
-fn strike_preset(
-    preset: &LoadedPreset,
-    velocity: u8,
-    seconds: f64,
-    release_s: Option<f64>,
-) -> Result<(f64, Vec<f64>)> {
     let speed = unacorda::midi::hammer_speed_m_s(velocity).context("a MIDI velocity 1–127")?;
-    Ok(struck::pressure(preset, speed, seconds, release_s)?)
+    Ok(struck::pressure(
+        &scaling.key_preset(key)?,
+        speed,
+        seconds,
+        release_s,
+    )?)
 }
 
-/// [`StruckKey`] of `key` at [`VELOCITY`], and how long its felt stays on the strings (s), the key
-/// prepared once.
+/// [`StruckKey`] of `key` at [`VELOCITY`], and how long its felt stays on the strings (s).
 fn struck_key(scaling: &LoadedScaling, key: usize) -> Result<(StruckKey, f64)> {
-    let preset = scaling.key_preset(key)?;
-    let (fs, x) = strike_preset(&preset, VELOCITY, struck::LATE_S.1, None)?;
-    let b = preset.unison_spec().strings[0].speaking_inharmonicity();
     let speed = unacorda::midi::hammer_speed_m_s(VELOCITY).context("a MIDI velocity 1–127")?;
-    Ok((
-        StruckKey::measure(&x, fs, scaling.target_hz(key), b),
-        struck::contact_s(&preset, speed)?,
-    ))
+    Ok(struck::struck_key(
+        &scaling.key_preset(key)?,
+        scaling.target_hz(key),
+        speed,
+        struck::LATE_S.1,
+    )?)
 }
 
 /// The rows of issue 17's table that need the sound: each key struck and heard at the listener,
