@@ -367,7 +367,7 @@ fn struck_at_listener(
     let preset = keyboard.key_preset(key).unwrap();
     unacorda::analysis::struck::struck_key(&preset, keyboard.target_hz(key), velocity_m_s, 0.5)
         .unwrap()
-        .0
+        .heard
 }
 
 #[test]

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use unacorda::analysis::duplex::felt_effect;
 use unacorda::analysis::modes::LinearMode;
 use unacorda::analysis::partials::{cents, KeyPartials, Partial};
-use unacorda::analysis::struck::{self, Hearing, StruckKey, Touch};
+use unacorda::analysis::struck::{self, Hearing, Touch};
 use unacorda::analysis::{listening, recorded};
 use unacorda::board::key_name;
 use unacorda::config::scaling::{equal_tempered_hz, parse_key, LoadedScaling, Scaling, KEYS};
@@ -320,8 +320,8 @@ fn strike(
     )?)
 }
 
-/// [`StruckKey`] of `key` at [`VELOCITY`], and how long its felt stays on the strings (s).
-fn struck_key(scaling: &LoadedScaling, key: usize) -> Result<(StruckKey, f64)> {
+/// `key` struck at [`VELOCITY`] and measured ([`struck::Struck`]).
+fn struck_key(scaling: &LoadedScaling, key: usize) -> Result<struck::Struck> {
     let speed = unacorda::midi::hammer_speed_m_s(VELOCITY).context("a MIDI velocity 1–127")?;
     Ok(struck::struck_key(
         &scaling.key_preset(key)?,
@@ -338,17 +338,17 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
     all.sort_unstable();
     all.dedup();
     let heard = unacorda::cores::map_on_cores(&all, |&k| struck_key(scaling, k))?;
-    let of = |k: usize| &heard[all.binary_search(&k).expect("rendered")].0;
-    let contact_ms = |k: usize| 1e3 * heard[all.binary_search(&k).expect("rendered")].1;
+    let struck_at = |k: usize| &heard[all.binary_search(&k).expect("rendered")];
+    let of = |k: usize| &struck_at(k).heard;
     let middle_db = MIDDLE.iter().map(|&k| of(k).a_level_db).sum::<f64>() / MIDDLE.len() as f64;
     let rec = |x: Option<f64>| x.map_or("-".into(), |x| format!("{x:+.1}"));
     let _ = writeln!(
         out,
-        "struck at MIDI velocity {VELOCITY} (the exact engine), heard at the listener; in brackets the recorded grand (Salamander, Yamaha C5, docs/data/recorded_grand.csv) where it has the key"
+        "struck at MIDI velocity {VELOCITY} (the exact engine), heard at the listener; in brackets the recorded grand (Salamander, Yamaha C5, docs/data/recorded_grand.csv) where it has the key; partial 1 re 2 also in the felt's force on the strings and in the strings' force on the bridge"
     );
     let _ = writeln!(
         out,
-        "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>9} {:>11}",
+        "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>6} {:>6} {:>9} {:>11}",
         "key",
         "name",
         "level re A3–A4 dB",
@@ -356,6 +356,8 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
         "4–8 kHz late dB",
         "partials 60dB",
         "partial1 re 2 dB",
+        "felt",
+        "bridge",
         "boom dB",
         "contact ms"
     );
@@ -368,7 +370,7 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
         };
         let _ = writeln!(
             out,
-            "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>9.1} {:>11.2}",
+            "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>+6.1} {:>+6.1} {:>9.1} {:>11.2}",
             k,
             key_name(k),
             pair(
@@ -391,8 +393,10 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
                 h.fundamental_re_second_db,
                 r.as_ref().and_then(|r| r.fundamental_re_second_db)
             ),
+            struck_at(k).felt_fundamental_re_second_db,
+            struck_at(k).bridge_fundamental_re_second_db,
             h.boom_db,
-            contact_ms(k),
+            1e3 * struck_at(k).contact_s,
         );
     }
     // Balance over the keys heard.
