@@ -530,3 +530,54 @@ fn a_reduction_point_must_be_a_key() {
         assert!(e.contains("`reduction.radiation_fit_below_hz`") && e.contains(allowed));
     }
 }
+
+/// A rim held as a clamped edge (`[[rims]]`, a penalty on the deflection and on the slope across
+/// it) straight across a clamped isotropic 1.4 × 1 m plate at x = 1 m leaves a clamped 1 m square
+/// beside a 0.4 m strip: the plate's first five modes are the square's, Leissa's 35.99, 73.39
+/// (twice), 108.2 and 131.9 (Table 4.23; the strip's first is near 140). A rim outside the plate
+/// is refused, naming the field.
+#[test]
+fn a_rim_cuts_a_clamped_square_out_of_a_rectangle() {
+    let mut spec = grand();
+    let (e, nu) = (12.7e9, 0.3);
+    spec.plate = unacorda::board::PlateSpec {
+        width_m: 1.4,
+        length_m: 1.0,
+        e1_pa: e,
+        e2_pa: e,
+        nu12: nu,
+        g12_pa: e / (2.0 * (1.0 + nu)),
+        edges: Edges::Clamped,
+        ..spec.plate
+    };
+    spec.ribs = None;
+    spec.bridges.clear();
+    spec.rims = vec![unacorda::board::RimSpec {
+        curve_m: [[1.0, 0.0], [1.0, 0.5], [1.0, 1.0]],
+        stiffness_n_m2: 1e10,
+        rotational_stiffness_n: 1e7,
+    }];
+    spec.basis.terms_x = 40;
+    spec.basis.terms_y = 30;
+    spec.reduction.f_min_hz = 1.0;
+    let solved = spec.solve().unwrap();
+    let p = &spec.plate;
+    let d = e * p.thickness_m.powi(3) / (12.0 * (1.0 - nu * nu));
+    let scale = 2.0 * PI * (p.density_kg_m3 * p.thickness_m / d).sqrt();
+    let mut worst: f64 = 0.0;
+    for (k, l) in [35.99, 73.39, 73.39, 108.2, 131.9].iter().enumerate() {
+        let lambda = solved.modes.freq_hz[k] * scale;
+        let err = 100.0 * (lambda / l - 1.0);
+        worst = worst.max(err.abs());
+        println!(
+            "  rim-cut square, mode {}: lambda {lambda:.3} vs Leissa {l} ({err:+.2} %)",
+            k + 1
+        );
+    }
+    println!("  worst {worst:.2} % (limit 1 %)");
+    assert!(worst < 1.0);
+    spec.rims[0].curve_m[2] = [1.5, 1.0];
+    let e = spec.solve().map(|_| ()).unwrap_err().to_string();
+    println!("{e}");
+    assert!(e.contains("`rims.curve_m (x)`") && e.contains("1.5"));
+}
