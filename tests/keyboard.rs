@@ -435,3 +435,59 @@ fn a_keyboards_felt_hysteresis_runs_linearly_between_its_voicing_points() {
         );
     }
 }
+
+#[test]
+fn a_keyboard_stands_its_keys_on_the_soundboard_it_names() {
+    // `soundboard_asset`, relative to the keyboard file: a copy of the built-in board whose modes
+    // are damped at zeta 0.01 (the concert keyboard's: 0.03) carries every key, bridge point and
+    // listener alike; a file that is not there is refused, naming it.
+    let dir = std::env::temp_dir().join(format!("unacorda-asset-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let grand = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/assets/soundboard_modes/grand.txt"
+    ))
+    .unwrap();
+    let damped: String = grand
+        .lines()
+        .map(|l| match l.split_once(' ') {
+            Some((f, rest)) if f.parse::<f64>().is_ok() => {
+                let (_, after) = rest.split_once(' ').unwrap();
+                format!("{f} 0.0100 {after}\n")
+            }
+            _ => format!("{l}\n"),
+        })
+        .collect();
+    std::fs::write(dir.join("lighter.txt"), damped).unwrap();
+    let keyboard = |asset: &str| {
+        let path = dir.join(format!("{asset}.toml"));
+        let text = format!(
+            "name = \"on {asset}\"\nbase_keyboard = \"concert\"\nsoundboard_asset = \"{asset}.txt\"\n"
+        );
+        std::fs::write(&path, text).unwrap();
+        Scaling::resolve(path.to_str().unwrap())
+    };
+    let concert = Scaling::resolve("concert").unwrap();
+    let lighter = keyboard("lighter").unwrap();
+    for k in [1, 40, 88] {
+        let (ours, theirs) = (
+            lighter.key_preset(k).unwrap(),
+            concert.key_preset(k).unwrap(),
+        );
+        println!(
+            "key {k}: board zeta {} (concert {}), on {}",
+            ours.board.damping_ratio[0],
+            theirs.board.damping_ratio[0],
+            ours.preset.soundboard.asset
+        );
+        assert!(ours.board.damping_ratio.iter().all(|&z| z == 0.01));
+        assert!(theirs.board.damping_ratio.iter().all(|&z| z == 0.03));
+        assert_eq!(ours.board.freq_hz, theirs.board.freq_hz);
+        assert_eq!(ours.bridge_point, theirs.bridge_point);
+        assert_eq!(ours.board.heard, theirs.board.heard);
+    }
+    let e = keyboard("missing").map(|_| ()).unwrap_err().to_string();
+    println!("{e}");
+    assert!(e.contains("missing.txt"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -308,22 +308,8 @@ impl Preset {
     /// Parse, validate and resolve the soundboard of preset text read from `path`.
     pub fn from_str(text: &str, path: &Path) -> Result<LoadedPreset, PresetError> {
         let preset = Self::parse(text, path)?;
-        let (asset_name, board) = match BUILTIN_ASSETS
-            .iter()
-            .find(|(n, _)| *n == preset.soundboard.asset)
-        {
-            Some((name, text)) => {
-                let p = PathBuf::from(format!("assets/soundboard_modes/{name}.txt"));
-                (p.display().to_string(), asset::parse(text, &p)?)
-            }
-            None => {
-                let p = path
-                    .parent()
-                    .unwrap_or(Path::new("."))
-                    .join(&preset.soundboard.asset);
-                (p.display().to_string(), asset::load_file(&p)?)
-            }
-        };
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let (asset_name, board) = load_asset(&preset.soundboard.asset, dir)?;
         let bridge_point =
             bridge_point_index(&board, &preset.soundboard.bridge_point, path, &asset_name)?;
         let mut board = board;
@@ -486,6 +472,26 @@ impl Preset {
     }
 }
 
+/// The soundboard asset `name`: a built-in one, or a file relative to `dir`; with the name errors
+/// give it.
+pub(crate) fn load_asset(name: &str, dir: &Path) -> Result<(String, SoundboardModes), PresetError> {
+    match BUILTIN_ASSETS.iter().find(|(n, _)| *n == name) {
+        Some((name, text)) => {
+            let p = PathBuf::from(format!("assets/soundboard_modes/{name}.txt"));
+            Ok((p.display().to_string(), asset::parse(text, &p)?))
+        }
+        None => {
+            let p = dir.join(name);
+            Ok((p.display().to_string(), asset::load_file(&p)?))
+        }
+    }
+}
+
+/// Whether `name` is a built-in soundboard asset (not a file).
+pub(crate) fn is_builtin_asset(name: &str) -> bool {
+    BUILTIN_ASSETS.iter().any(|(n, _)| *n == name)
+}
+
 /// Index of the bridge point `name` in `board`, or an error naming the file, the asset and the
 /// points it has.
 pub(crate) fn bridge_point_index(
@@ -561,6 +567,22 @@ fn listener_index(
 }
 
 impl LoadedPreset {
+    /// This preset on the soundboard asset `name` (built-in, or a file relative to `dir`): its
+    /// bridge point and listeners found on that board.
+    pub(crate) fn on_board(mut self, name: &str, dir: &Path) -> Result<LoadedPreset, PresetError> {
+        let (asset_name, mut board) = load_asset(name, dir)?;
+        self.bridge_point = bridge_point_index(
+            &board,
+            &self.preset.soundboard.bridge_point,
+            &self.source,
+            &asset_name,
+        )?;
+        board.heard = heard(&board, &self.preset.radiation, &self.source, &asset_name)?;
+        self.preset.soundboard.asset = name.to_owned();
+        self.board = board;
+        Ok(self)
+    }
+
     /// The strings of the unison, string `i` retuned by `mistuning_cents[i]` through its tension.
     pub fn strings(&self) -> Vec<StringParams> {
         let s = &self.preset.strings;

@@ -8,9 +8,9 @@
 //! per-note [`Preset`] bridged at its own point of the soundboard.
 
 use crate::config::preset::{
-    bridge_point_index, heard, read_text, FeltModelName, LoadedPreset, Preset, PresetError,
-    RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA, MAX_HAMMER_MASS_KG,
-    MAX_HYSTERESIS_S, MIN_EXPONENT, MIN_FULL_SCALE_PA, MIN_HAMMER_MASS_KG,
+    bridge_point_index, heard, is_builtin_asset, read_text, FeltModelName, LoadedPreset, Preset,
+    PresetError, RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA,
+    MAX_HAMMER_MASS_KG, MAX_HYSTERESIS_S, MIN_EXPONENT, MIN_FULL_SCALE_PA, MIN_HAMMER_MASS_KG,
 };
 use crate::engine::physics::damper::{DamperParams, FeltModel};
 use crate::engine::physics::string::StringParams;
@@ -65,6 +65,9 @@ pub struct Scaling {
     /// The key from which down the bass octaves are `bass_octave`'s (`bass_octave_from_key`,
     /// 1–36); between it and the temperament they blend from 2:1.
     pub bass_octave_from_key: usize,
+    /// The soundboard asset every key stands on (`soundboard.asset`: a built-in name, or a file's
+    /// path as resolved from the keyboard file that names it); `None`: the base preset's.
+    pub soundboard_asset: Option<String>,
     /// The soundboard asset's listener every key radiates to (`radiation.listener`); `None`: the
     /// base preset's.
     pub listener: Option<String>,
@@ -142,6 +145,8 @@ struct ScalingFile {
     strings: StringOverrides,
     #[serde(default)]
     losses: Vec<LossAnchor>,
+    /// A built-in soundboard asset or a file relative to this one.
+    soundboard_asset: Option<String>,
     listener: Option<String>,
     stereo: Option<[String; 2]>,
     full_scale_pa: Option<f64>,
@@ -329,6 +334,10 @@ impl Scaling {
     /// This keyboard read from `source`, with its base preset.
     fn with_base(self, source: PathBuf) -> Result<LoadedScaling, PresetError> {
         let base = Preset::resolve(&self.base_preset)?;
+        let base = match &self.soundboard_asset {
+            Some(asset) => base.on_board(asset, Path::new(""))?,
+            None => base,
+        };
         // The exact engine advances every mode at the output rate: a string mode above the
         // output's band edge would fold back into the audible band (tests/bad_input.rs). The
         // lower bound is `validate`'s; this one needs the base preset's output rate.
@@ -429,6 +438,17 @@ impl Scaling {
                 .bass_octave_from_key
                 .or_else(|| base.as_ref().map(|b| b.bass_octave_from_key))
                 .unwrap_or(BASS_OCTAVE_FROM_KEY),
+            soundboard_asset: file
+                .soundboard_asset
+                .map(|a| {
+                    if is_builtin_asset(&a) {
+                        a
+                    } else {
+                        let dir = path.parent().unwrap_or(Path::new("."));
+                        dir.join(a).display().to_string()
+                    }
+                })
+                .or_else(|| base.as_ref().and_then(|b| b.soundboard_asset.clone())),
             listener: file
                 .listener
                 .or_else(|| base.as_ref().and_then(|b| b.listener.clone())),
