@@ -384,6 +384,19 @@ fn arc_points(c: &[[f64; 2]; 3], n: usize) -> (Vec<CurvePoint>, f64) {
     (points, total)
 }
 
+/// Trapezoid quadrature along a Bézier curve at about `per_m` points per metre (at least three):
+/// each point, its unit tangent and its weight (m).
+fn curve_quadrature(c: &[[f64; 2]; 3], per_m: f64) -> Vec<(CurvePoint, f64)> {
+    let (_, length) = arc_points(c, 2);
+    let count = ((length * per_m).ceil() as usize).max(2);
+    let ds = length / count as f64;
+    let (pts, _) = arc_points(c, count + 1);
+    pts.into_iter()
+        .enumerate()
+        .map(|(q, p)| (p, if q == 0 || q == count { 0.5 * ds } else { ds }))
+        .collect()
+}
+
 impl BoardSpec {
     fn validate(&self) -> Result<(), BoardError> {
         let p = &self.plate;
@@ -609,10 +622,7 @@ impl BoardSpec {
         }
         // Bridges: quadrature along each curve.
         for br in &self.bridges {
-            let (_, length) = arc_points(&br.curve_m, 2);
-            let count = ((length * self.basis.bridge_points_per_m).ceil() as usize).max(2);
-            let (pts, _) = arc_points(&br.curve_m, count + 1);
-            let ds = length / count as f64;
+            let pts = curve_quadrature(&br.curve_m, self.basis.bridge_points_per_m);
             let gj = br.shear_modulus_pa * rectangle_torsion_m4(br.width_m, br.height_m);
             let rho_a = br.density_kg_m3 * br.width_m * br.height_m;
             // Columns: basis values, bending curvature and twist at each point, scaled by sqrt(weight).
@@ -620,8 +630,7 @@ impl BoardSpec {
             let mut g_mass = Mat::<f64>::zeros(n, np);
             let mut g_bend = Mat::<f64>::zeros(n, np);
             let mut g_twist = Mat::<f64>::zeros(n, np);
-            for (q, (pt, t)) in pts.iter().enumerate() {
-                let w = if q == 0 || q == np - 1 { 0.5 * ds } else { ds };
+            for (q, &((pt, t), w)) in pts.iter().enumerate() {
                 let xs: Vec<[f64; 3]> = (0..nx).map(|i| bx.eval(i, pt[0])).collect();
                 let ys: Vec<[f64; 3]> = (0..ny).map(|j| by.eval(j, pt[1])).collect();
                 let (tx, ty) = (t[0], t[1]);
@@ -653,15 +662,11 @@ impl BoardSpec {
             k += &g_twist * g_twist.transpose();
         }
         for rim in &self.rims {
-            let (_, length) = arc_points(&rim.curve_m, 2);
-            let count = ((length * self.basis.bridge_points_per_m).ceil() as usize).max(2);
-            let (pts, _) = arc_points(&rim.curve_m, count + 1);
-            let ds = length / count as f64;
+            let pts = curve_quadrature(&rim.curve_m, self.basis.bridge_points_per_m);
             let np = pts.len();
             let mut g_pin = Mat::<f64>::zeros(n, np);
             let mut g_rot = Mat::<f64>::zeros(n, np);
-            for (q, (pt, t)) in pts.iter().enumerate() {
-                let w = if q == 0 || q == np - 1 { 0.5 * ds } else { ds };
+            for (q, &((pt, t), w)) in pts.iter().enumerate() {
                 let xs: Vec<[f64; 3]> = (0..nx).map(|i| bx.eval(i, pt[0])).collect();
                 let ys: Vec<[f64; 3]> = (0..ny).map(|j| by.eval(j, pt[1])).collect();
                 let (tx, ty) = (t[0], t[1]);
