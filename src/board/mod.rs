@@ -214,6 +214,11 @@ impl Basis1d {
         }
     }
 
+    /// `[f, f', f'']` of every function at `x`.
+    fn at(&self, x: f64) -> Vec<[f64; 3]> {
+        (0..self.terms).map(|i| self.eval(i, x)).collect()
+    }
+
     /// `∫ f_i^(p) f_k^(q) dx` over the edge for all i, k: exact by the trapezoid rule, since every
     /// product is a cosine series of degree below twice the number of intervals.
     fn integrals(&self, p: usize, q: usize) -> Vec<f64> {
@@ -588,7 +593,7 @@ impl BoardSpec {
                 (0..r.count)
                     .map(|c| {
                         let xr = r.first_x_m + c as f64 * r.spacing_m;
-                        (ei, gj, rho_a, (0..nx).map(|i| bx.eval(i, xr)).collect())
+                        (ei, gj, rho_a, bx.at(xr))
                     })
                     .collect()
             }
@@ -631,8 +636,7 @@ impl BoardSpec {
             let mut g_bend = Mat::<f64>::zeros(n, np);
             let mut g_twist = Mat::<f64>::zeros(n, np);
             for (q, &((pt, t), w)) in pts.iter().enumerate() {
-                let xs: Vec<[f64; 3]> = (0..nx).map(|i| bx.eval(i, pt[0])).collect();
-                let ys: Vec<[f64; 3]> = (0..ny).map(|j| by.eval(j, pt[1])).collect();
+                let (xs, ys) = (bx.at(pt[0]), by.at(pt[1]));
                 let (tx, ty) = (t[0], t[1]);
                 let e_f = p.modulus_along(tx, ty);
                 let ei = glued_beam_ei(
@@ -667,8 +671,7 @@ impl BoardSpec {
             let mut g_pin = Mat::<f64>::zeros(n, np);
             let mut g_rot = Mat::<f64>::zeros(n, np);
             for (q, &((pt, t), w)) in pts.iter().enumerate() {
-                let xs: Vec<[f64; 3]> = (0..nx).map(|i| bx.eval(i, pt[0])).collect();
-                let ys: Vec<[f64; 3]> = (0..ny).map(|j| by.eval(j, pt[1])).collect();
+                let (xs, ys) = (bx.at(pt[0]), by.at(pt[1]));
                 let (tx, ty) = (t[0], t[1]);
                 for i in 0..nx {
                     for j in 0..ny {
@@ -709,12 +712,7 @@ impl BoardSpec {
         type KeyBasis = (Vec<[f64; 3]>, Vec<[f64; 3]>);
         let key_basis: Vec<KeyBasis> = keys
             .iter()
-            .map(|kp| {
-                (
-                    (0..nx).map(|i| bx.eval(i, kp.x_m)).collect(),
-                    (0..ny).map(|j| by.eval(j, kp.y_m)).collect(),
-                )
-            })
+            .map(|kp| (bx.at(kp.x_m), by.at(kp.y_m)))
             .collect();
         let mut modes = SoundboardModes {
             freq_hz: vec![],

@@ -308,18 +308,9 @@ impl Preset {
     /// Parse, validate and resolve the soundboard of preset text read from `path`.
     pub fn from_str(text: &str, path: &Path) -> Result<LoadedPreset, PresetError> {
         let preset = Self::parse(text, path)?;
+        let asset = preset.soundboard.asset.clone();
         let dir = path.parent().unwrap_or(Path::new("."));
-        let (asset_name, board) = load_asset(&preset.soundboard.asset, dir)?;
-        let bridge_point =
-            bridge_point_index(&board, &preset.soundboard.bridge_point, path, &asset_name)?;
-        let mut board = board;
-        board.heard = heard(&board, &preset.radiation, path, &asset_name)?;
-        Ok(LoadedPreset {
-            preset,
-            source: path.to_owned(),
-            board,
-            bridge_point,
-        })
+        LoadedPreset::stand_on(preset, path.to_owned(), &asset, dir)
     }
 
     pub(crate) fn validate(&self, path: &Path) -> Result<(), PresetError> {
@@ -474,7 +465,7 @@ impl Preset {
 
 /// The soundboard asset `name`: a built-in one, or a file relative to `dir`; with the name errors
 /// give it.
-pub(crate) fn load_asset(name: &str, dir: &Path) -> Result<(String, SoundboardModes), PresetError> {
+fn load_asset(name: &str, dir: &Path) -> Result<(String, SoundboardModes), PresetError> {
     match BUILTIN_ASSETS.iter().find(|(n, _)| *n == name) {
         Some((name, text)) => {
             let p = PathBuf::from(format!("assets/soundboard_modes/{name}.txt"));
@@ -485,11 +476,6 @@ pub(crate) fn load_asset(name: &str, dir: &Path) -> Result<(String, SoundboardMo
             Ok((p.display().to_string(), asset::load_file(&p)?))
         }
     }
-}
-
-/// Whether `name` is a built-in soundboard asset (not a file).
-pub(crate) fn is_builtin_asset(name: &str) -> bool {
-    BUILTIN_ASSETS.iter().any(|(n, _)| *n == name)
 }
 
 /// Index of the bridge point `name` in `board`, or an error naming the file, the asset and the
@@ -567,20 +553,34 @@ fn listener_index(
 }
 
 impl LoadedPreset {
-    /// This preset on the soundboard asset `name` (built-in, or a file relative to `dir`): its
-    /// bridge point and listeners found on that board.
-    pub(crate) fn on_board(mut self, name: &str, dir: &Path) -> Result<LoadedPreset, PresetError> {
+    /// `preset`, read from `source`, on the soundboard asset `name` (built-in, or a file relative
+    /// to `dir`): its bridge point and listeners found on that board.
+    fn stand_on(
+        mut preset: Preset,
+        source: PathBuf,
+        name: &str,
+        dir: &Path,
+    ) -> Result<LoadedPreset, PresetError> {
         let (asset_name, mut board) = load_asset(name, dir)?;
-        self.bridge_point = bridge_point_index(
+        let bridge_point = bridge_point_index(
             &board,
-            &self.preset.soundboard.bridge_point,
-            &self.source,
+            &preset.soundboard.bridge_point,
+            &source,
             &asset_name,
         )?;
-        board.heard = heard(&board, &self.preset.radiation, &self.source, &asset_name)?;
-        self.preset.soundboard.asset = name.to_owned();
-        self.board = board;
-        Ok(self)
+        board.heard = heard(&board, &preset.radiation, &source, &asset_name)?;
+        preset.soundboard.asset = name.to_owned();
+        Ok(LoadedPreset {
+            preset,
+            source,
+            board,
+            bridge_point,
+        })
+    }
+
+    /// This preset on the soundboard asset `name` (built-in, or a file relative to `dir`).
+    pub(crate) fn on_board(self, name: &str, dir: &Path) -> Result<LoadedPreset, PresetError> {
+        Self::stand_on(self.preset, self.source, name, dir)
     }
 
     /// The strings of the unison, string `i` retuned by `mistuning_cents[i]` through its tension.

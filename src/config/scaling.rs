@@ -8,9 +8,9 @@
 //! per-note [`Preset`] bridged at its own point of the soundboard.
 
 use crate::config::preset::{
-    bridge_point_index, heard, is_builtin_asset, read_text, FeltModelName, LoadedPreset, Preset,
-    PresetError, RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA,
-    MAX_HAMMER_MASS_KG, MAX_HYSTERESIS_S, MIN_EXPONENT, MIN_FULL_SCALE_PA, MIN_HAMMER_MASS_KG,
+    bridge_point_index, heard, read_text, FeltModelName, LoadedPreset, Preset, PresetError,
+    RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA, MAX_HAMMER_MASS_KG,
+    MAX_HYSTERESIS_S, MIN_EXPONENT, MIN_FULL_SCALE_PA, MIN_HAMMER_MASS_KG,
 };
 use crate::engine::physics::damper::{DamperParams, FeltModel};
 use crate::engine::physics::string::StringParams;
@@ -65,9 +65,8 @@ pub struct Scaling {
     /// The key from which down the bass octaves are `bass_octave`'s (`bass_octave_from_key`,
     /// 1–36); between it and the temperament they blend from 2:1.
     pub bass_octave_from_key: usize,
-    /// The soundboard asset every key stands on (`soundboard.asset`: a built-in name, or a file's
-    /// path as resolved from the keyboard file that names it); `None`: the base preset's.
-    pub soundboard_asset: Option<String>,
+    /// The soundboard asset every key stands on (`soundboard.asset`); `None`: the base preset's.
+    pub soundboard_asset: Option<AssetRef>,
     /// The soundboard asset's listener every key radiates to (`radiation.listener`); `None`: the
     /// base preset's.
     pub listener: Option<String>,
@@ -77,6 +76,14 @@ pub struct Scaling {
     /// The sound pressure heard as full scale, 0 dBFS (`radiation.full_scale_pa`, Pa); `None`:
     /// the base preset's.
     pub full_scale_pa: Option<f64>,
+}
+
+/// A soundboard asset as a keyboard file names it: a built-in asset's name or a file's path, and
+/// the directory of the keyboard file that names it, which a path is relative to.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AssetRef {
+    pub name: String,
+    pub dir: PathBuf,
 }
 
 /// What a keyboard is tuned to.
@@ -335,7 +342,7 @@ impl Scaling {
     fn with_base(self, source: PathBuf) -> Result<LoadedScaling, PresetError> {
         let base = Preset::resolve(&self.base_preset)?;
         let base = match &self.soundboard_asset {
-            Some(asset) => base.on_board(asset, Path::new(""))?,
+            Some(asset) => base.on_board(&asset.name, &asset.dir)?,
             None => base,
         };
         // The exact engine advances every mode at the output rate: a string mode above the
@@ -440,13 +447,9 @@ impl Scaling {
                 .unwrap_or(BASS_OCTAVE_FROM_KEY),
             soundboard_asset: file
                 .soundboard_asset
-                .map(|a| {
-                    if is_builtin_asset(&a) {
-                        a
-                    } else {
-                        let dir = path.parent().unwrap_or(Path::new("."));
-                        dir.join(a).display().to_string()
-                    }
+                .map(|name| AssetRef {
+                    name,
+                    dir: path.parent().unwrap_or(Path::new(".")).to_owned(),
                 })
                 .or_else(|| base.as_ref().and_then(|b| b.soundboard_asset.clone())),
             listener: file
