@@ -27,9 +27,10 @@ fn c2_key_is_the_c2_preset() {
 
 #[test]
 fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
-    // `concert` names `paper` as its base keyboard: the same strings, striking points, layout and board on
-    // every key; only the strings' losses, the duplex felt, the dampers, the tuning (stretched),
-    // the hammers' voicing (masses and felts) and the listener differ.
+    // `concert` names `paper` as its base keyboard: the same strings, striking points and layout
+    // on every key, at the same bridge points of another board (`grand_sized`); only the board,
+    // the strings' losses, the duplex felt, the dampers, the tuning (stretched), the hammers'
+    // voicing (masses and felts) and the listener differ.
     let paper = Scaling::resolve("paper").unwrap();
     let concert = Scaling::resolve("concert").unwrap();
     println!("key  c_d paper/concert  zeta_T paper/concert  b1 1/s   b3 s");
@@ -100,19 +101,20 @@ fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
             );
         }
         // The same hammers but for the voicing: every felt's exponent 4.5, its force at 1 mm of
-        // compression the paper's felt's times 0.5 at A0, 2 at C2 and C4, 4 at C6, 0.7 at C7, 0.5
-        // at F#7, 4 at A7, 60 at C8; the hammers' masses 11.5 g at A0, 6.5 at C2, 6.1 at C4, 4.5
-        // at C6, 2.2 at C7, 2.1 at F#7, 2.05 at A7, 2.0 at C8; both log-linear in key number
-        // between (docs/parameters.md).
-        let points: [(usize, f64, f64); 8] = [
+        // compression the paper's felt's times 0.5 at A0, 2 at C2 and C4, 4 at C6, 0.7 at C7, 2
+        // at F#7, 25 at A7, 10 at Bb7, 80 at C8; the hammers' masses 11.5 g at A0, 6.5 at C2, 6.1
+        // at C4, 4.5 at C6, 2.2 at C7, 2.1 at F#7, 2.05 at A7, 2.03 at Bb7, 2.0 at C8; both
+        // log-linear in key number between (docs/parameters.md).
+        let points: [(usize, f64, f64); 9] = [
             (1, 0.5, 11.5e-3),
             (16, 2.0, 6.5e-3),
             (40, 2.0, 6.1e-3),
             (64, 4.0, 4.5e-3),
             (76, 0.7, 2.2e-3),
-            (82, 0.5, 2.1e-3),
-            (85, 4.0, 2.05e-3),
-            (88, 60.0, 2.0e-3),
+            (82, 2.0, 2.1e-3),
+            (85, 25.0, 2.05e-3),
+            (86, 10.0, 2.03e-3),
+            (88, 80.0, 2.0e-3),
         ];
         let (a, b) = points
             .windows(2)
@@ -173,7 +175,12 @@ fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
             "key {k}: the paper's damper"
         );
         assert!(c.damper.width_m > 0.0, "key {k}: the concert felt");
-        assert_eq!(p.soundboard, c.soundboard, "key {k}");
+        assert_eq!(p.soundboard.asset, "grand", "key {k}");
+        assert_eq!(c.soundboard.asset, "grand_sized", "key {k}");
+        assert_eq!(
+            p.soundboard.bridge_point, c.soundboard.bridge_point,
+            "key {k}"
+        );
         assert_eq!(
             (ps.loss_b1_per_s, ps.loss_b3_s),
             (0.0, 0.0),
@@ -438,17 +445,17 @@ fn a_keyboards_felt_hysteresis_runs_linearly_between_its_voicing_points() {
 
 #[test]
 fn a_keyboard_stands_its_keys_on_the_soundboard_it_names() {
-    // `soundboard_asset`, relative to the keyboard file: a copy of the built-in board whose modes
-    // are damped at zeta 0.01 (the concert keyboard's: 0.03) carries every key, bridge point and
-    // listener alike; a file that is not there is refused, naming it.
+    // `soundboard_asset`, relative to the keyboard file: a copy of the concert keyboard's built-in
+    // board (`grand_sized`) whose modes are damped at zeta 0.01 (its own: 0.03) carries every
+    // key, bridge point and listener alike; a file that is not there is refused, naming it.
     let dir = std::env::temp_dir().join(format!("unacorda-asset-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let grand = std::fs::read_to_string(concat!(
+    let board = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/assets/soundboard_modes/grand.txt"
+        "/assets/soundboard_modes/grand_sized.txt"
     ))
     .unwrap();
-    let damped: String = grand
+    let damped: String = board
         .lines()
         .map(|l| match l.split_once(' ') {
             Some((f, rest)) if f.parse::<f64>().is_ok() => {

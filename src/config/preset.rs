@@ -18,11 +18,18 @@ use std::path::{Path, PathBuf};
 /// Built-in presets, by name.
 const BUILTIN_PRESETS: &[(&str, &str)] = &[("c2", include_str!("../../presets/c2.toml"))];
 
-/// Built-in soundboard assets, by name.
-const BUILTIN_ASSETS: &[(&str, &str)] = &[(
-    "grand",
-    include_str!("../../assets/soundboard_modes/grand.txt"),
-)];
+/// Built-in soundboard assets, by name: Table 1's board (`grand`, the paper's) and the same
+/// spruce and ribs on a grand's size and layout (`grand_sized`, the concert keyboard's).
+const BUILTIN_ASSETS: &[(&str, &str)] = &[
+    (
+        "grand",
+        include_str!("../../assets/soundboard_modes/grand.txt"),
+    ),
+    (
+        "grand_sized",
+        include_str!("../../assets/soundboard_modes/grand_sized.txt"),
+    ),
+];
 
 /// The built-in board description that `grand.txt` is generated from.
 pub const GRAND_BOARD_TOML: &str = include_str!("../../assets/soundboard_modes/grand.toml");
