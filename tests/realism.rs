@@ -316,13 +316,7 @@ fn the_concert_keyboards_first_partials_fall_early_as_the_recorded_grands() {
             t60 / theirs
         })
         .collect();
-    ratios.sort_by(f64::total_cmp);
-    let half = ratios.len() / 2;
-    let median = if ratios.len() % 2 == 1 {
-        ratios[half]
-    } else {
-        0.5 * (ratios[half - 1] + ratios[half])
-    };
+    let median = median(&mut ratios);
     println!(
         "early T60 re the recording's over {} keys: median {median:.2} (limit 1/1.5–1.5), from {:.2} to {:.2}",
         ratios.len(),
@@ -400,6 +394,17 @@ fn the_concert_keyboard_fades_and_rings_out_like_the_recorded_grand() {
     assert!((ours / theirs - 1.0).abs() <= 0.3);
 }
 
+/// The median of `values` (sorted in place): the middle one, or the mean of the middle two.
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let half = values.len() / 2;
+    if values.len() % 2 == 1 {
+        values[half]
+    } else {
+        0.5 * (values[half - 1] + values[half])
+    }
+}
+
 /// `key` of `keyboard` struck at `velocity_m_s` on the exact engine, its first 0.5 s heard at the
 /// listener and measured as the recorded grand is (`analysis::struck::StruckKey`).
 fn struck_at_listener(
@@ -472,13 +477,16 @@ fn the_concert_hammers_leave_the_strings_when_measured_hammers_do() {
 }
 
 #[test]
-fn the_middle_registers_fundamental_is_nearer_the_recorded_grands() {
+fn the_middle_registers_fundamental_is_as_strong_as_the_recorded_grands() {
     // Partial 1 re partial 2 (first 0.3 s, MIDI velocity 80, heard at the listener) of the 16
     // recorded keys from D#2 to C6, against the recorded grand's. Issue 17 asks the fundamental
-    // to be no weaker against partial 2 than the recording's; it is still weaker, by a median of
-    // 6.8 dB (D#3 24 dB: its partial 1 on a board mode, docs/realism.md). Held here: the median
-    // within 8 dB. With the paper keyboard's hammers (Chaigne & Askenfelt's masses, 2.97 g at C4:
-    // contacts 20-30 % shorter than measured) the median is 9.0 dB and this fails.
+    // to be no weaker against partial 2 than the recording's. On the grand-sized board it is
+    // stronger, by a median of 1.3 dB; held here: no weaker than the recording's by more than
+    // 2 dB on median, the median's sampling error over 16 keys (bootstrap: ±2 dB; single keys
+    // move 10–20 dB with the recording's microphone, docs/realism.md). On Table 1's board (the
+    // tenor's bridge on the minor lobes of its modes at 134–174 Hz) it was 6.8 dB weaker and
+    // this fails; with the paper keyboard's hammers there (Chaigne & Askenfelt's masses, 2.97 g
+    // at C4: contacts 20-30 % shorter than measured), 9.0 dB.
     use unacorda::analysis::recorded::recorded_key;
     let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();
@@ -499,11 +507,9 @@ fn the_middle_registers_fundamental_is_nearer_the_recorded_grands() {
             theirs - db
         })
         .collect();
-    short_db.sort_by(f64::total_cmp);
-    let half = short_db.len() / 2;
-    let median_db = 0.5 * (short_db[half - 1] + short_db[half]);
-    println!("partial 1 re 2 short of the recording's: median {median_db:.1} dB (limit 8)");
-    assert!(median_db <= 8.0);
+    let median_db = median(&mut short_db);
+    println!("partial 1 re 2 short of the recording's: median {median_db:.1} dB (limit 2)");
+    assert!(median_db <= 2.0);
 }
 
 #[test]
@@ -571,10 +577,6 @@ fn the_concert_keyboard_grows_louder_and_brighter_with_velocity_as_the_recorded_
         louder_db.push(rise_db - recorded_rise_db);
         brighter_db.push((brighter - recorded_brighter).abs());
     }
-    let median = |v: &mut Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
     let (louder_db, brighter_db) = (median(&mut louder_db), median(&mut brighter_db));
     println!(
         "median over the five keys: the level rises {louder_db:+.1} dB more than recorded (limit 5), the brightening {brighter_db:.1} dB from the recording's (limit 10)"
