@@ -3,6 +3,7 @@
 //! (Eq. 2), and the command's table and CSV.
 
 use std::process::Command;
+use unacorda::analysis::listening::median;
 use unacorda::analysis::modes::linear_modes;
 use unacorda::analysis::partials::{cents, partials, tuner_pitch, KeyPartials};
 use unacorda::config::scaling::{parse_key, Scaling};
@@ -277,31 +278,24 @@ fn the_concert_keyboards_strings_ring_as_long_as_a_grands() {
 #[test]
 fn the_concert_keyboards_first_partials_fall_early_as_the_recorded_grands() {
     // The early decay of partial 1 (the board draining the unison's in-phase motion), rendered
-    // (the exact engine, MIDI velocity 80, 2.5 s at the listener) and measured as the recorded
-    // grand's is (`analysis::listening::early_t60_s`), at the recorded keys from F#1 to C8 (below,
-    // the recording's fundamentals are too weak to track: A0-D#1 3 s against its 24.5 s
-    // broadband). Key by key the two scatter by a factor of 3 either way on any board, a partial
-    // falling near a board mode or between two; held here: the median ratio within 1.5 (1.06;
-    // on Table 1's board 0.98). A board that drains too little fails: its modes damped at zeta
-    // 0.003 rather than the paper's 0.03 give 1.62.
-    use unacorda::analysis::listening::early_t60_s;
-    use unacorda::analysis::recorded::recorded_key;
-    use unacorda::analysis::spectral::peak_frequency;
-    use unacorda::analysis::struck::pressure;
+    // (the exact engine, MIDI velocity 80, 1.5 s at the listener, as `analyze --render` renders
+    // it) and measured as the recorded grand's is (`analysis::listening::early_t60_s`), at the
+    // recorded keys from F#1 to C8 (below, the recording's fundamentals are too weak to track:
+    // A0-D#1 3 s against its 24.5 s broadband). Key by key the two scatter by a factor of 3
+    // either way on any board, a partial falling near a board mode or between two; held here:
+    // the median ratio within 1.5 (1.06; on Table 1's board 0.98). A board that drains too
+    // little fails: its modes damped at zeta 0.003 rather than the paper's 0.03 give 1.62.
+    use unacorda::analysis::recorded::{recorded_key, EARLY_T60_FROM_KEY};
+    use unacorda::analysis::struck::{struck_key, LATE_S};
     let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();
-    let keys: Vec<usize> = (10..=88).step_by(3).collect();
+    let keys: Vec<usize> = (EARLY_T60_FROM_KEY..=88)
+        .filter(|&k| recorded_key(k).is_some_and(|r| r.p1_t60_s.0.is_some()))
+        .collect();
     let ours = unacorda::cores::map_on_cores(&keys, |&key| {
         let preset = keyboard.key_preset(key)?;
-        let f1_hz = keyboard.target_hz(key);
-        let (fs, x) = pressure(&preset, speed, 2.5, None)?;
-        let measured_hz = peak_frequency(
-            &x[(0.05 * fs) as usize..(1.05 * fs) as usize],
-            fs,
-            0.98 * f1_hz,
-            1.02 * f1_hz,
-        );
-        Ok::<_, anyhow::Error>(early_t60_s(&x, fs, measured_hz).unwrap())
+        let struck = struck_key(&preset, keyboard.target_hz(key), speed, LATE_S.1)?;
+        Ok::<_, anyhow::Error>(struck.heard.early_t60_s.unwrap())
     })
     .unwrap();
     let mut ratios: Vec<f64> = keys
@@ -392,17 +386,6 @@ fn the_concert_keyboard_fades_and_rings_out_like_the_recorded_grand() {
     let theirs = recorded_key(1).unwrap().broadband_t60_s.unwrap();
     println!("A0 broadband T60 over 1–12 s: {ours:.1} s (recorded {theirs:.1} s)");
     assert!((ours / theirs - 1.0).abs() <= 0.3);
-}
-
-/// The median of `values` (sorted in place): the middle one, or the mean of the middle two.
-fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let half = values.len() / 2;
-    if values.len() % 2 == 1 {
-        values[half]
-    } else {
-        0.5 * (values[half - 1] + values[half])
-    }
 }
 
 /// `key` of `keyboard` struck at `velocity_m_s` on the exact engine, its first 0.5 s heard at the

@@ -476,9 +476,9 @@ fn a_stereo_keyboard_sounds_each_channel_at_its_listener() {
         10.0 * (x.iter().map(|&v| f64::from(v).powi(2)).sum::<f64>() / x.len() as f64).log10()
     };
     // A top key is heard over the treble end 6 dB louder than over the bass end or more: its
-    // partials drive the board where it is, under the treble listener. (C8, heard by the close
-    // pair through a few board modes, is not: 2.2 dB to the bass side, as the recorded grand's
-    // A7 is by 2 dB; its top keys lie within 4 dB of the middle.)
+    // partials drive the board where it is, under the treble listener (on the grand-sized board
+    // A7 +12.5 dB, C8 +16.3; on Table 1's A7 +19.8 and C8, through a few board modes, 2.2 dB to
+    // the bass side, as the recorded grand's A7 is by 2 dB).
     let to_treble_db = |midi: u8| {
         let x = exact_output(&stereo, &keys, &[(0, on(midi, 90))], 2, frames);
         let [l, r] = left_right(&x);

@@ -216,29 +216,31 @@ pub fn late_t60_s(x: &[f64], fs: f64, from_s: f64, to_s: f64) -> f64 {
     -60.0 / (num / den)
 }
 
-/// The early decay of one partial as `scripts/recorded_grand.py` measures the recorded grand's:
-/// the partial's power (the bins within max(12.5 Hz, 0.003 f) of `f_hz`) in Hann frames of 0.2 s
-/// every 0.05 s from the onset at 0; the peak of its three-frame mean in the first second; the
-/// window from the peak to where that mean is 10 dB down, held to 0.3–1.0 s after the peak; the
-/// T60 (s) of the Theil–Sen slope of the frames' levels in it. `None` where the window is short
-/// of 0.2 s or four frames; infinite where the partial does not decay.
-pub fn early_t60_s(x: &[f64], fs: f64, f_hz: f64) -> Option<f64> {
-    const FRAME_S: f64 = 0.2;
-    const HOP_S: f64 = 0.05;
-    let half_hz = (0.003 * f_hz).max(12.5);
+/// The early decay of a key's first partial, at `f1_hz`, as `scripts/recorded_grand.py` measures
+/// the recorded grand's: the partial's power (the bins within max(12.5 Hz, 0.003 f1), at most
+/// 0.4 f1, of it) in Hann frames of 0.2 s every 0.05 s from the onset at 0; the peak of its
+/// three-frame mean in the first second; the window from the peak to where that mean is 10 dB
+/// down, held to 0.3–1.0 s after the peak and to the last frame; the T60 (s) of the Theil–Sen
+/// slope of the frames' levels in it. `None` where the window is short of 0.2 s or four frames;
+/// infinite where the partial does not decay.
+pub fn early_t60_s(x: &[f64], fs: f64, f1_hz: f64) -> Option<f64> {
+    const STFT_FRAME_S: f64 = 0.2;
+    const STFT_HOP_S: f64 = 0.05;
+    let half_hz = (0.003 * f1_hz).max(12.5).min(0.4 * f1_hz);
     let mut planner = RealFftPlanner::new();
-    let frames = ((x.len() as f64 / fs - FRAME_S) / HOP_S).floor() as usize + 1;
+    let frames = ((x.len() as f64 / fs - STFT_FRAME_S) / STFT_HOP_S).floor() as usize + 1;
     let (times, power): (Vec<f64>, Vec<f64>) = (0..frames)
         .map(|i| {
-            let from_s = i as f64 * HOP_S;
-            let (df, bins) = power_spectrum_with(&mut planner, x, fs, from_s, from_s + FRAME_S);
+            let from_s = i as f64 * STFT_HOP_S;
+            let (df, bins) =
+                power_spectrum_with(&mut planner, x, fs, from_s, from_s + STFT_FRAME_S);
             let band = bins
                 .iter()
                 .enumerate()
-                .filter(|(k, _)| (*k as f64 * df - f_hz).abs() <= half_hz)
+                .filter(|(k, _)| (*k as f64 * df - f1_hz).abs() <= half_hz)
                 .map(|(_, p)| p)
                 .sum::<f64>();
-            (from_s + 0.5 * FRAME_S, band.max(f64::MIN_POSITIVE))
+            (from_s + 0.5 * STFT_FRAME_S, band.max(f64::MIN_POSITIVE))
         })
         .unzip();
     let level: Vec<f64> = power.iter().map(|&p| power_db(p)).collect();
@@ -285,9 +287,18 @@ fn theil_sen_slope(points: &[(f64, f64)]) -> f64 {
                 .map(move |b| (b.1 - a.1) / (b.0 - a.0))
         })
         .collect();
-    slopes.sort_by(f64::total_cmp);
-    let n = slopes.len();
-    0.5 * (slopes[(n - 1) / 2] + slopes[n / 2])
+    median(&mut slopes)
+}
+
+/// The median of `values` (sorted in place): the middle one, or the mean of the middle two;
+/// NaN for none.
+pub fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    0.5 * (values[(n - 1) / 2] + values[n / 2])
 }
 
 /// Level drop (dB, negative) from the 10 ms before `at_s` to the 10 ms that end `after_s` later:

@@ -8,6 +8,10 @@
 use std::collections::HashMap;
 
 const CSV: &str = include_str!("../../docs/data/recorded_grand.csv");
+
+/// The lowest key (F#1) whose recorded early T60 of partial 1 is its string's: A0–D#1's
+/// fundamentals are too weak to track past 0.4 s (3 s against their 24.5 s broadband).
+pub const EARLY_T60_FROM_KEY: usize = 10;
 const DYNAMICS_CSV: &str = include_str!("../../docs/data/recorded_dynamics.csv");
 
 /// One recorded key's figures; `None` where the recording did not allow the measurement.

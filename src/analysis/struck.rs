@@ -1,12 +1,14 @@
 //! A key struck and recorded at the listener, measured as issue 17's table measures a recorded
 //! grand ([`super::listening`]; the recorded figures are in `docs/data/recorded_grand.csv`, from
 //! `scripts/recorded_grand.py`): its A-weighted level, how its upper bands fade, how many partials
-//! it sounds, its fundamental against its second partial, and the board's low boom.
+//! it sounds, its fundamental against its second partial, the board's low boom and how fast its
+//! fundamental falls at first.
 
 use super::listening::{
-    a_weighted_level_db, band_change_db, band_power, octave_shape_db, peaks, power_db,
+    a_weighted_level_db, band_change_db, band_power, early_t60_s, octave_shape_db, peaks, power_db,
     spectral_centroid_hz,
 };
+use super::spectral::peak_frequency;
 use crate::config::preset::LoadedPreset;
 use crate::engine::tuning::stiff_string_hz;
 use crate::engine::{BuildError, Integrator, Strike};
@@ -216,6 +218,9 @@ pub struct StruckKey {
     pub fundamental_re_second_db: f64,
     /// The 40–90 Hz band re the whole, first 0.5 s (dB).
     pub boom_db: f64,
+    /// Partial 1's early T60 (s; [`early_t60_s`]) at its frequency as heard (the peak within
+    /// 2 % of the law's in 0.05–1.05 s); `None` from a recording too short for its window.
+    pub early_t60_s: Option<f64>,
 }
 
 impl StruckKey {
@@ -242,8 +247,20 @@ impl StruckKey {
                 .count(),
             fundamental_re_second_db: fundamental_re_second_db(x, fs, f1_hz, b),
             boom_db: power_db(band_power(x, fs, ONSET_S, BOOM_HZ) / whole),
+            early_t60_s: early_partial_t60_s(x, fs, law(1)),
         }
     }
+}
+
+/// Partial 1's early T60 (s) of `x` at `fs`, at the peak within 2 % of `f1_hz` in its 0.05–1.05 s
+/// (the recording's script reads the partial's frequency from a 1 s spectrum so).
+fn early_partial_t60_s(x: &[f64], fs: f64, f1_hz: f64) -> Option<f64> {
+    let (from, to) = ((0.05 * fs) as usize, ((1.05 * fs) as usize).min(x.len()));
+    if to <= from {
+        return None;
+    }
+    let heard_hz = peak_frequency(&x[from..to], fs, 0.98 * f1_hz, 1.02 * f1_hz);
+    early_t60_s(x, fs, heard_hz)
 }
 
 /// A struck key's first 0.5 s as the dynamics rows measure it, rendered or recorded

@@ -342,13 +342,20 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
     let of = |k: usize| &struck_at(k).heard;
     let middle_db = MIDDLE.iter().map(|&k| of(k).a_level_db).sum::<f64>() / MIDDLE.len() as f64;
     let rec = |x: Option<f64>| x.map_or("-".into(), |x| format!("{x:+.1}"));
+    let early = |ours: Option<f64>, theirs: Option<f64>| {
+        let t = |x: Option<f64>| x.map_or("-".into(), |x| format!("{x:.2}"));
+        match theirs {
+            Some(_) => format!("{} ({})", t(ours), t(theirs)),
+            None => t(ours),
+        }
+    };
     let _ = writeln!(
         out,
         "struck at MIDI velocity {VELOCITY} (the exact engine), heard at the listener; in brackets the recorded grand (Salamander, Yamaha C5, docs/data/recorded_grand.csv) where it has the key; partial 1 re 2 also in the felt's force on the strings and in the strings' force on the bridge"
     );
     let _ = writeln!(
         out,
-        "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>6} {:>6} {:>9} {:>11}",
+        "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>6} {:>6} {:>9} {:>11} {:>15}",
         "key",
         "name",
         "level re A3–A4 dB",
@@ -359,7 +366,8 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
         "felt",
         "bridge",
         "boom dB",
-        "contact ms"
+        "contact ms",
+        "p1 early T60 s"
     );
     for &k in keys {
         let h = of(k);
@@ -370,7 +378,7 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
         };
         let _ = writeln!(
             out,
-            "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>+6.1} {:>+6.1} {:>9.1} {:>11.2}",
+            "{:>4} {:<4} {:>19} {:>19} {:>19} {:>13} {:>17} {:>+6.1} {:>+6.1} {:>9.1} {:>11.2} {:>15}",
             k,
             key_name(k),
             pair(
@@ -397,6 +405,27 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
             struck_at(k).bridge_fundamental_re_second_db,
             h.boom_db,
             1e3 * struck_at(k).contact_s,
+            early(h.early_t60_s, r.as_ref().and_then(|r| r.p1_t60_s.0)),
+        );
+    }
+    // The early decay against the recording's, where it is the string's.
+    let mut ratios: Vec<f64> = keys
+        .iter()
+        .filter(|&&k| k >= recorded::EARLY_T60_FROM_KEY)
+        .filter_map(|&k| {
+            let theirs = recorded::recorded_key(k)?.p1_t60_s.0?;
+            Some(of(k).early_t60_s? / theirs)
+        })
+        .collect();
+    if !ratios.is_empty() {
+        let median = unacorda::analysis::listening::median(&mut ratios);
+        let _ = writeln!(
+            out,
+            "partial 1's early T60 re the recorded grand's (measured alike, the recorded keys from {}): median {median:.2} over {} keys, from {:.2} to {:.2}",
+            key_name(recorded::EARLY_T60_FROM_KEY),
+            ratios.len(),
+            ratios[0],
+            ratios[ratios.len() - 1]
         );
     }
     // Balance over the keys heard.
