@@ -439,7 +439,7 @@ fn both_engines_damp_a_released_key_alike() {
     // rate and the exact engine at 48 kHz through the renderer, the key released at 0.5 s; the
     // radiated level in 0.1 s windows from 0.4 s to 1.0 s (shorter ones see the partials beat
     // against the window: +-0.6 dB on C2 before the release), while it falls by tens of dB (C2
-    // 29 dB, where held it would fall 2: its first partial's early T60 is 14 s).
+    // 29 dB, where held it falls 5.8: never released, this fails).
     use unacorda::analysis::spectral::rms_envelope;
     use unacorda::engine::Integrator;
     use unacorda::render::simulate_with;

@@ -285,7 +285,7 @@ fn the_concert_keyboards_first_partials_fall_early_as_the_recorded_grands() {
     // either way on any board, a partial falling near a board mode or between two; held here:
     // the median ratio within 1.5 (1.06; on Table 1's board 0.98). A board that drains too
     // little fails: its modes damped at zeta 0.003 rather than the paper's 0.03 give 1.62.
-    use unacorda::analysis::recorded::{recorded_key, EARLY_T60_FROM_KEY};
+    use unacorda::analysis::recorded::{early_t60_re_recorded, recorded_key, EARLY_T60_FROM_KEY};
     use unacorda::analysis::struck::{struck_key, LATE_S};
     let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();
@@ -302,12 +302,12 @@ fn the_concert_keyboards_first_partials_fall_early_as_the_recorded_grands() {
         .iter()
         .zip(&ours)
         .map(|(&key, &t60)| {
-            let theirs = recorded_key(key).unwrap().p1_t60_s.0.unwrap();
+            let ratio = early_t60_re_recorded(key, t60).unwrap();
             println!(
-                "{}: partial 1 early T60 {t60:.2} s (recorded {theirs:.2})",
+                "{}: partial 1 early T60 {t60:.2} s, {ratio:.2} × the recording's",
                 unacorda::board::key_name(key)
             );
-            t60 / theirs
+            ratio
         })
         .collect();
     let median = median(&mut ratios);

@@ -8,11 +8,11 @@
 use std::collections::HashMap;
 
 const CSV: &str = include_str!("../../docs/data/recorded_grand.csv");
+const DYNAMICS_CSV: &str = include_str!("../../docs/data/recorded_dynamics.csv");
 
 /// The lowest key (F#1) whose recorded early T60 of partial 1 is its string's: A0–D#1's
 /// fundamentals are too weak to track past 0.4 s (3 s against their 24.5 s broadband).
 pub const EARLY_T60_FROM_KEY: usize = 10;
-const DYNAMICS_CSV: &str = include_str!("../../docs/data/recorded_dynamics.csv");
 
 /// One recorded key's figures; `None` where the recording did not allow the measurement.
 #[derive(Debug, Clone, PartialEq)]
@@ -123,6 +123,15 @@ pub fn recorded_grand() -> Vec<RecordedKey> {
 /// The recorded key `key`, if it is one of the 30.
 pub fn recorded_key(key: usize) -> Option<RecordedKey> {
     recorded_grand().into_iter().find(|r| r.key == key)
+}
+
+/// An early T60 of partial 1 at `key` (`ours_s`, s) re the recorded grand's, where the recording
+/// has it as its string's (from [`EARLY_T60_FROM_KEY`] up).
+pub fn early_t60_re_recorded(key: usize, ours_s: f64) -> Option<f64> {
+    if key < EARLY_T60_FROM_KEY {
+        return None;
+    }
+    Some(ours_s / recorded_key(key)?.p1_t60_s.0?)
 }
 
 #[cfg(test)]

@@ -6,16 +6,30 @@ use std::f64::consts::PI;
 
 /// Magnitude of the Hann-windowed DTFT of `x` (sampled at `fs`) at frequency `f_hz`.
 pub fn dtft_magnitude(x: &[f64], fs: f64, f_hz: f64) -> f64 {
+    windowed_dtft_magnitude(&hann_windowed(x), fs, f_hz)
+}
+
+/// `x` under a Hann window of its length.
+fn hann_windowed(x: &[f64]) -> Vec<f64> {
     let n = x.len();
+    x.iter()
+        .enumerate()
+        .map(|(k, &xk)| xk * (0.5 - 0.5 * (2.0 * PI * k as f64 / n as f64).cos()))
+        .collect()
+}
+
+/// [`dtft_magnitude`] of a signal already under its Hann window (`xw`, from [`hann_windowed`]):
+/// a search over frequencies windows it once.
+fn windowed_dtft_magnitude(xw: &[f64], fs: f64, f_hz: f64) -> f64 {
+    let n = xw.len();
     let w = 2.0 * PI * f_hz / fs;
     // Rotating phasor with periodic renormalisation keeps this O(n) without trig per sample.
     let (mut re, mut im) = (0.0, 0.0);
     let (c, s) = (w.cos(), w.sin());
     let (mut pr, mut pi) = (1.0, 0.0);
-    for (k, &xk) in x.iter().enumerate() {
-        let win = 0.5 - 0.5 * (2.0 * PI * k as f64 / n as f64).cos();
-        re += xk * win * pr;
-        im -= xk * win * pi;
+    for (k, &xwk) in xw.iter().enumerate() {
+        re += xwk * pr;
+        im -= xwk * pi;
         let npr = pr * c - pi * s;
         pi = pr * s + pi * c;
         pr = npr;
@@ -33,11 +47,12 @@ pub fn dtft_magnitude(x: &[f64], fs: f64, f_hz: f64) -> f64 {
 /// sinusoid, whose magnitude spectrum is symmetric about its frequency).
 pub fn peak_frequency(x: &[f64], fs: f64, lo_hz: f64, hi_hz: f64) -> f64 {
     let duration = x.len() as f64 / fs;
+    let xw = hann_windowed(x);
     let step = 0.25 / duration;
     let mut best = (lo_hz, 0.0);
     let mut f = lo_hz;
     while f <= hi_hz {
-        let m = dtft_magnitude(x, fs, f);
+        let m = windowed_dtft_magnitude(&xw, fs, f);
         if m > best.1 {
             best = (f, m);
         }
@@ -46,20 +61,23 @@ pub fn peak_frequency(x: &[f64], fs: f64, lo_hz: f64, hi_hz: f64) -> f64 {
     let (mut a, mut b) = ((best.0 - step).max(lo_hz), (best.0 + step).min(hi_hz));
     let g = (5f64.sqrt() - 1.0) / 2.0;
     let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
-    let (mut mc, mut md) = (dtft_magnitude(x, fs, c), dtft_magnitude(x, fs, d));
+    let (mut mc, mut md) = (
+        windowed_dtft_magnitude(&xw, fs, c),
+        windowed_dtft_magnitude(&xw, fs, d),
+    );
     while b - a > 1e-7 * best.0.max(1.0) {
         if mc > md {
             b = d;
             d = c;
             md = mc;
             c = b - g * (b - a);
-            mc = dtft_magnitude(x, fs, c);
+            mc = windowed_dtft_magnitude(&xw, fs, c);
         } else {
             a = c;
             c = d;
             mc = md;
             d = a + g * (b - a);
-            md = dtft_magnitude(x, fs, d);
+            md = windowed_dtft_magnitude(&xw, fs, d);
         }
     }
     0.5 * (a + b)

@@ -411,11 +411,7 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
     // The early decay against the recording's, where it is the string's.
     let mut ratios: Vec<f64> = keys
         .iter()
-        .filter(|&&k| k >= recorded::EARLY_T60_FROM_KEY)
-        .filter_map(|&k| {
-            let theirs = recorded::recorded_key(k)?.p1_t60_s.0?;
-            Some(of(k).early_t60_s? / theirs)
-        })
+        .filter_map(|&k| recorded::early_t60_re_recorded(k, of(k).early_t60_s?))
         .collect();
     if !ratios.is_empty() {
         let median = unacorda::analysis::listening::median(&mut ratios);
