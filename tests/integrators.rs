@@ -493,9 +493,10 @@ fn string_modes_to_20_khz_sound_without_aliasing() {
     // the first 0.2 s, third-octave bands from 1 to 16 kHz (to 18 kHz) within 60 dB of the
     // loudest (the next, to 20 kHz, where both filters bend: C8 2.2 dB apart):
     // - the force on the bridge, where the strings' modes to 20 kHz act, agrees within 2 dB
-    //   (0.2 dB to 12.7 kHz; at 16 kHz, Bb7's fourth partial, the exact engine 1.5 dB over; with
-    //   Bb7's felt voiced 3.7 times harder, as interpolated between A7's and C8's, 2.9 dB: the
-    //   hammer's ETDRK4 step at 48 kHz, and this fails);
+    //   (Bb7 1.40, C8 1.04 dB). Their felts (p = 2) stay on the strings under 0.2 ms at 6 m/s,
+    //   eight samples at 48 kHz, and the exact engine steps the contact in three substeps
+    //   (`HammerParams::contact_substeps`); in one step of 48 kHz its ETDRK4 puts Bb7 7.7 dB and
+    //   C8 4.3 dB off, and this fails;
     // - the pressure at the treble listener agrees within 1 dB (0.25 dB on Bb7; C8's 12.7 kHz
     //   band 0.7 dB over, as its force on the bridge is). The shared board's modes take
     //   each key's force linear over a step (`engine::exact::interface`), which reaches the

@@ -404,16 +404,20 @@ fn struck_at_listener(
 #[test]
 fn the_concert_treble_carries_as_the_recorded_grands_does() {
     // The A-weighted level of the first 0.5 s re A3–A4 (MIDI velocity 80, the exact engine) of
-    // the recorded keys from A6 to C8, beside the recorded grand's. Heard at the listener above
-    // the board (each mode by its Rayleigh integral) and with the top hammers voiced (fitted to
-    // the recording's A7 and C8); heard as a monopole C7 was 15 dB under the recording, and with
-    // the paper's felts A7 and C8 were 15 and 55 dB under.
+    // the recorded keys from A6 to C8, heard at the listener above the board. Issue 17 asks every
+    // key within ±6 dB of A3–A4; the recorded grand's top falls further (A7 −8.4, C8 −13.2 dB).
+    // Held: each key within ±6 dB, or between the recording's level and ±6 dB (a treble that
+    // carries at least as the recording's, never louder than the issue allows). Heard as a
+    // monopole C7 was 15 dB under the recording; with the paper's felts A7 and C8 were 15 and
+    // 55 dB under; with the felts of p = 4.5 voiced soft to the recording's A7 and C8 (fitted
+    // within 1 dB, but their pianissimo 31–57 dB under their fortissimo:
+    // `the_concert_treble_grows_louder_with_velocity_as_the_recorded_grand`) C8 −13.9 dB, and
+    // this fails.
     use unacorda::analysis::recorded::recorded_key;
     let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();
     let level = |key: usize| struck_at_listener(&keyboard, key, speed).a_level_db;
     let middle = [37, 40, 43, 46, 49].map(level).iter().sum::<f64>() / 5.0;
-    let mut worst: f64 = 0.0;
     for key in [73, 76, 79, 82, 85, 88] {
         let ours = level(key) - middle;
         let theirs = recorded_key(key).unwrap().a_level_re_middle_db.unwrap();
@@ -421,16 +425,53 @@ fn the_concert_treble_carries_as_the_recorded_grands_does() {
             "{}: {ours:+.1} dB re A3–A4 (recorded {theirs:+.1})",
             unacorda::board::key_name(key)
         );
-        worst = worst.max((ours - theirs).abs());
-        if key == 85 || key == 88 {
-            assert!(
-                (ours - theirs).abs() <= 3.0,
-                "the voicing's fit at key {key}"
-            );
-        }
+        let (low, high) = (theirs.min(-6.0), theirs.max(6.0));
+        assert!(
+            (low..=high).contains(&ours),
+            "key {key}: {ours:+.1} dB, outside {low:+.1} … {high:+.1}"
+        );
     }
-    println!("worst difference from the recording, A6–C8: {worst:.1} dB (limit 8)");
-    assert!(worst <= 8.0);
+}
+
+#[test]
+fn the_concert_treble_grows_louder_with_velocity_as_the_recorded_grand() {
+    // The recorded keys from C5 to C8 struck at MIDI velocity 30 and 127 (the exact engine,
+    // 0.5 s, heard by the stereo pair mixed to mono as the recorded grand's pair is), and how much
+    // louder ff is than pp (the A-weighted level), beside the recorded grand's layers for those
+    // velocities (docs/data/recorded_dynamics.csv: +15.5 … +31.3 dB). Held: each key within
+    // 10 dB of the recording's rise (single keys scatter: its C6 +15.5, D#6 +24.5), and the
+    // median of the differences within ±5 dB. With every felt's exponent 4.5 (as first voiced on
+    // the grand-sized board) a pianissimo in the top octave and a half all but vanished: the felt stayed on
+    // C7's strings 1.67 ms at velocity 30, 3.5 of its periods, and C7 rose 47.5 dB, F#7 56.6,
+    // C8 47.6 (a median of +13.8 dB over the recording's), and this fails.
+    use unacorda::analysis::recorded::recorded_layer;
+    use unacorda::analysis::struck::{Hearing, Touch, FF_VELOCITY, PP_VELOCITY, TREBLE_TOUCH_KEYS};
+    let keyboard = Scaling::resolve("concert").unwrap();
+    let touches = unacorda::cores::map_on_cores(&TREBLE_TOUCH_KEYS, |&k| {
+        Ok::<_, anyhow::Error>(Touch::pp_and_ff(
+            &keyboard.key_preset(k)?,
+            Hearing::PairMix,
+        )?)
+    })
+    .unwrap();
+    let mut over_db = Vec::new();
+    for (&k, [pp, ff]) in TREBLE_TOUCH_KEYS.iter().zip(&touches) {
+        let rise_db = ff.a_level_db - pp.a_level_db;
+        let recorded_db = recorded_layer(k, FF_VELOCITY).unwrap().a_level_db
+            - recorded_layer(k, PP_VELOCITY).unwrap().a_level_db;
+        println!(
+            "{}: level {rise_db:+.1} dB from velocity 30 to 127 (recorded {recorded_db:+.1})",
+            unacorda::board::key_name(k)
+        );
+        assert!(
+            (rise_db - recorded_db).abs() <= 10.0,
+            "key {k}: {rise_db:+.1} dB"
+        );
+        over_db.push(rise_db - recorded_db);
+    }
+    let over_db = median(&mut over_db);
+    println!("median over the 13 keys: {over_db:+.1} dB over the recording's rise (limit ±5)");
+    assert!(over_db.abs() <= 5.0);
 }
 
 #[test]
@@ -438,13 +479,23 @@ fn the_concert_hammers_leave_the_strings_when_measured_hammers_do() {
     // The felt's contact with the strings at MIDI velocity 80 (2.37 m/s, the exact engine,
     // `analysis::struck::contact_s`), beside Askenfelt & Jansson's at mezzoforte (Five Lectures on
     // the Acoustics of the Piano, 1990, Fig. 7: C2 3.0, C3 2.8, C4 2.1, C5 1.45, C6 1.1 ms;
-    // docs/realism-sources.md §4), within 15 %. With the paper keyboard's hammer masses (Chaigne &
-    // Askenfelt's, 2.97 g at C4) C4 and C6 leave after 1.62 and 0.88 ms, 23 and 20 % early (C2
-    // after 3.52 ms, 17 % late), and this fails.
+    // docs/realism-sources.md §4), within 15 %; C7 (0.6 ms) within 25 %: its felt is voiced for
+    // the touch: one that stays 0.56 ms at mezzoforte (p = 2.25, factor 1.5) stays 0.77 at
+    // pianissimo, and C7 then rises 30.9 dB to fortissimo against the recording's 22.5. With the paper
+    // keyboard's hammer masses (Chaigne & Askenfelt's, 2.97 g at C4) C4 and C6 leave after 1.62
+    // and 0.88 ms, 23 and 20 % early (C2 after 3.52 ms, 17 % late), and this fails; with every
+    // felt's exponent 4.5, C7 after 0.85 ms, 42 % late, and this fails.
     use unacorda::analysis::struck::contact_s;
     let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();
-    for (key, measured_ms) in [(16, 3.0), (28, 2.8), (40, 2.1), (52, 1.45), (64, 1.1)] {
+    for (key, measured_ms, within) in [
+        (16, 3.0, 0.15),
+        (28, 2.8, 0.15),
+        (40, 2.1, 0.15),
+        (52, 1.45, 0.15),
+        (64, 1.1, 0.15),
+        (76, 0.6, 0.25),
+    ] {
         let preset = keyboard.key_preset(key).unwrap();
         let contact_ms = 1e3 * contact_s(&preset, speed).unwrap();
         println!(
@@ -453,7 +504,7 @@ fn the_concert_hammers_leave_the_strings_when_measured_hammers_do() {
             1e3 * preset.preset.hammer.mass_kg
         );
         assert!(
-            (contact_ms / measured_ms - 1.0).abs() <= 0.15,
+            (contact_ms / measured_ms - 1.0).abs() <= within,
             "key {key}: {contact_ms:.2} ms"
         );
     }

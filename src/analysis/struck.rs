@@ -32,6 +32,10 @@ pub const PARTIAL_MARGIN_DB: f64 = 6.0;
 /// The keys whose touch the dynamics rows measure (C2, F#3, C4, A4, C6: recorded at every
 /// velocity layer), and the velocities of pp and ff.
 pub const TOUCH_KEYS: [usize; 5] = [16, 34, 40, 49, 64];
+/// The recorded keys from C5 to C8 (every third key, recorded at every velocity layer), on which
+/// the treble's touch is read: how much louder ff is than pp. From C7 up the first partial lies in
+/// the 2–4 kHz band or above it, and the level's rise is what tells a soft blow from a hard one.
+pub const TREBLE_TOUCH_KEYS: [usize; 13] = [52, 55, 58, 61, 64, 67, 70, 73, 76, 79, 82, 85, 88];
 pub const PP_VELOCITY: u8 = 30;
 pub const FF_VELOCITY: u8 = 127;
 

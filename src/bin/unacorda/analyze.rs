@@ -482,6 +482,37 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
             theirs(&|p, f| format!("{:+.1} / {:+.1}", p.octave_shape_db[5], f.octave_shape_db[5])),
         );
     }
+    // The treble's touch: the level's rise from pp to ff on the recorded keys from C5 up.
+    let treble = unacorda::cores::map_on_cores(&struck::TREBLE_TOUCH_KEYS, |&k| -> Result<f64> {
+        let [pp, ff] = Touch::pp_and_ff(&scaling.key_preset(k)?, Hearing::PairMix)?;
+        Ok(ff.a_level_db - pp.a_level_db)
+    })?;
+    let mut over_db = Vec::new();
+    let rises: Vec<String> = struck::TREBLE_TOUCH_KEYS
+        .iter()
+        .zip(&treble)
+        .map(|(&k, rise_db)| {
+            let recorded = recorded::recorded_layer(k, struck::PP_VELOCITY)
+                .zip(recorded::recorded_layer(k, struck::FF_VELOCITY))
+                .map(|(p, f)| f.a_level_db - p.a_level_db);
+            if let Some(r) = recorded {
+                over_db.push(rise_db - r);
+            }
+            format!(
+                "{} {rise_db:+.1}{}",
+                key_name(k),
+                recorded.map_or(String::new(), |r| format!(" ({r:+.1})"))
+            )
+        })
+        .collect();
+    let _ = writeln!(
+        out,
+        "treble's touch, A-weighted level velocity {} → {} (as above; recorded): {}; median {:+.1} dB over the recording's",
+        struck::PP_VELOCITY,
+        struck::FF_VELOCITY,
+        rises.join(", "),
+        listening::median(&mut over_db)
+    );
     // C6's release: the damper lands 1 s after the strike.
     let (fs, x) = strike(scaling, 64, VELOCITY, 1.2, Some(1.0))?;
     let _ = writeln!(

@@ -490,14 +490,15 @@ fn markov_parameters<const R: usize, const I: usize>(
     out
 }
 
-/// One key's coefficients (module notes), shared by every voice that plays it.
+/// The step while the felt touches: ETDRK4 (Cox & Matthews) in `substeps` steps of `h` a sample,
+/// as many as [`HammerParams::contact_substeps`] asks for the key's felt, so that its shortest
+/// contact spans enough of them (a hard treble felt's, under 0.2 ms, is eight samples at 48 kHz).
 #[derive(Debug, Clone)]
-pub struct ExactKey {
-    /// What they are derived from (kept to be stored).
-    pub(crate) modes: KeyModes,
-    pub(crate) n_strings: usize,
+pub(crate) struct ContactStep {
+    pub(crate) substeps: usize,
+    /// The substep (s).
     pub(crate) h: f64,
-    /// `e^{lambda h/2}`, `e^{lambda h}`.
+    /// `e^{lambda h/2}`, `e^{lambda h}` of the substep.
     pub(crate) eh: Split,
     pub(crate) ef: Split,
     /// Per string, the felt force's input through ETDRK4's `f1`, `f2`, `f3` (through its `Q`,
@@ -509,6 +510,73 @@ pub struct ExactKey {
     /// and through `e^{lambda h/2} Q` at stage `c` (`Re(r e_h Q_s)`).
     pub(crate) stage_q: [[f64; MAX_STRINGS]; FELT_ROWS],
     pub(crate) stage_eq: [[f64; MAX_STRINGS]; FELT_ROWS],
+}
+
+impl ContactStep {
+    /// The contact step of `modes` for a sample of `h_sample` in `substeps`; `velocity_rows` are
+    /// the striking points' velocity rows (read by a hysteretic felt).
+    fn new(
+        modes: &KeyModes,
+        velocity_rows: &[Split],
+        h_sample: f64,
+        substeps: usize,
+    ) -> ContactStep {
+        let h = h_sample / substeps as f64;
+        let exp = |t: f64| -> Vec<c64> { modes.lambda.iter().map(|&l| (l * t).exp()).collect() };
+        let (eh, ef) = (exp(0.5 * h), exp(h));
+        let etd: Vec<[c64; 5]> = modes
+            .lambda
+            .iter()
+            .map(|&l| crate::engine::modal::etd_weights(l, h))
+            .collect();
+        let drive_q: Vec<Split> = modes
+            .strike_input
+            .iter()
+            .map(|g| Split::weighted_by(g, |m| etd[m][0]))
+            .collect();
+        let drive_f = modes
+            .strike_input
+            .iter()
+            .map(|g| std::array::from_fn(|w| Split::weighted_by(g, |m| etd[m][2 + w])))
+            .collect();
+        let felt_rows: Vec<&Split> = modes.strike_row.iter().chain(velocity_rows).collect();
+        let eh_q: Vec<Split> = drive_q
+            .iter()
+            .map(|q| Split::weighted_by(q, |m| eh[m]))
+            .collect();
+        let (mut stage_q, mut stage_eq) = (
+            [[0.0; MAX_STRINGS]; FELT_ROWS],
+            [[0.0; MAX_STRINGS]; FELT_ROWS],
+        );
+        for (i, row) in felt_rows.iter().enumerate() {
+            for (s, (q, eq)) in drive_q.iter().zip(&eh_q).enumerate() {
+                stage_q[i][s] = row.read(q);
+                stage_eq[i][s] = row.read(eq);
+            }
+        }
+        ContactStep {
+            substeps,
+            h,
+            eh: Split::new(&eh),
+            ef: Split::new(&ef),
+            drive_f,
+            stage_q,
+            stage_eq,
+        }
+    }
+}
+
+/// One key's coefficients (module notes), shared by every voice that plays it.
+#[derive(Debug, Clone)]
+pub struct ExactKey {
+    /// What they are derived from (kept to be stored).
+    pub(crate) modes: KeyModes,
+    pub(crate) n_strings: usize,
+    pub(crate) h: f64,
+    /// `e^{lambda h}`.
+    pub(crate) ef: Split,
+    /// The step while the felt touches.
+    pub(crate) contact: ContactStep,
     /// Read after every step: the key's board modes' radiating source of the left channel, the
     /// total contact force per direction T, L, P relative to them (the force on the shared board
     /// is this less `feed_k D + feed_c Ddot`), the right channel's source ([`SOUND_READS`]).
@@ -578,24 +646,8 @@ impl ExactKey {
     fn face(spec: &UnisonSpec, modes: KeyModes, coupled_n_s_m: Option<f64>) -> ExactKey {
         let h = 1.0 / spec.sample_rate_hz;
         let n = modes.n_modes();
-        let exp = |t: f64| -> Vec<c64> { modes.lambda.iter().map(|&l| (l * t).exp()).collect() };
-        let (eh, ef) = (exp(0.5 * h), exp(h));
-        let etd: Vec<[c64; 5]> = modes
-            .lambda
-            .iter()
-            .map(|&l| crate::engine::modal::etd_weights(l, h))
-            .collect();
+        let ef: Vec<c64> = modes.lambda.iter().map(|&l| (l * h).exp()).collect();
         let weights: Vec<[c64; 2]> = modes.lambda.iter().map(|&l| input_weights(l, h)).collect();
-        let drive_q: Vec<Split> = modes
-            .strike_input
-            .iter()
-            .map(|g| Split::weighted_by(g, |m| etd[m][0]))
-            .collect();
-        let drive_f = modes
-            .strike_input
-            .iter()
-            .map(|g| std::array::from_fn(|w| Split::weighted_by(g, |m| etd[m][2 + w])))
-            .collect();
         let total_force = |d: usize| -> Split {
             let mut t = Split::zeros(n);
             for row in &modes.force_row {
@@ -686,25 +738,12 @@ impl ExactKey {
             .map(|r| Split::weighted_by(r, |m| modes.lambda[m]))
             .collect();
         let strike_velocity_settle = strike_velocity_row.iter().map(reads_of).collect();
-        let felt_rows: Vec<&Split> = modes
-            .strike_row
-            .iter()
-            .chain(&strike_velocity_row)
-            .collect();
-        let eh_q: Vec<Split> = drive_q
-            .iter()
-            .map(|q| Split::weighted_by(q, |m| eh[m]))
-            .collect();
-        let (mut stage_q, mut stage_eq) = (
-            [[0.0; MAX_STRINGS]; FELT_ROWS],
-            [[0.0; MAX_STRINGS]; FELT_ROWS],
+        let contact = ContactStep::new(
+            &modes,
+            &strike_velocity_row,
+            h,
+            spec.hammer.contact_substeps(h),
         );
-        for (i, row) in felt_rows.iter().enumerate() {
-            for (s, (q, eq)) in drive_q.iter().zip(&eh_q).enumerate() {
-                stage_q[i][s] = row.read(q);
-                stage_eq[i][s] = row.read(eq);
-            }
-        }
         let force_settle = modes
             .force_row
             .iter()
@@ -724,11 +763,8 @@ impl ExactKey {
         ExactKey {
             n_strings: modes.force_row.len(),
             h,
-            eh: Split::new(&eh),
             ef,
-            drive_f,
-            stage_q,
-            stage_eq,
+            contact,
             reads,
             feed_k,
             feed_c,
@@ -786,10 +822,10 @@ impl ExactKey {
         let split = 16 * self.n_modes();
         let damper = self.damper.as_ref().map_or(0, |d| 3 * d.channels * split)
             + self.modal_felt.as_ref().map_or(0, |f| f.bytes());
-        // eh, ef; per string the strike row, drive_f, three force rows; reads, settle,
-        // beta, hold, follow, the bridge velocity rows; the block's f32 copies and e^BLOCK; the
-        // Markov taps; the energy; the stored modes (a dozen rows more).
-        (2 + self.n_strings * 7 + READS + 4 * DIRECTIONS + 3 + 12) * split
+        // ef, and the contact step's eh and ef; per string the strike row, drive_f, three force
+        // rows; reads, settle, beta, hold, follow, the bridge velocity rows; the block's f32
+        // copies and e^BLOCK; the Markov taps; the energy; the stored modes (a dozen rows more).
+        (3 + self.n_strings * 7 + READS + 4 * DIRECTIONS + 3 + 12) * split
             + (1 + READS + DIRECTIONS) * split / 2
             + split
             + 8 * BLOCK * READS * DIRECTIONS

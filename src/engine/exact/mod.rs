@@ -15,7 +15,8 @@
 //! costs `2 m^2` a step for the whole pool ([`interface`]). Only the felt hammer is nonlinear,
 //! and only for the few milliseconds it touches: then the step is ETDRK4 (Cox & Matthews 2002)
 //! with the felt force as the nonlinear term on the key's modes and on the hammer (whose linear
-//! part is zero, so its stages are classical RK4); after release, none.
+//! part is zero, so its stages are classical RK4), in substeps where a hard treble felt's contact
+//! is only a few samples long (`HammerParams::contact_substeps`); after release, none.
 //!
 //! A key's system (second-order form, `q` over the strings' T, L, P modes and the board's modes
 //! above [`interface::SHARED_BELOW_HZ`]):

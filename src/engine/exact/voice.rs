@@ -381,26 +381,34 @@ impl Voice {
     /// `u`, `E_2 u` and `E_2^2 u` (one pass over the modes) and the key's `Re(r Q)`,
     /// `Re(r E_2 Q)`; the modes are then advanced in one more pass — not four stages formed.
     fn contact_step(&mut self, key: &ExactKey, fast: bool) {
-        let (h, m_h) = (key.h, key.hammer.mass_kg);
+        for _ in 0..key.contact.substeps {
+            self.contact_substep(key, fast);
+        }
+    }
+
+    /// One substep of [`Self::contact_step`] (of `key.contact.h`).
+    fn contact_substep(&mut self, key: &ExactKey, fast: bool) {
+        let step = &key.contact;
+        let (h, m_h) = (step.h, key.hammer.mass_kg);
         let (y, v) = (self.hammer_y, self.hammer_v);
         let accel = |f: &[f64; MAX_STRINGS]| -> f64 { -f.iter().sum::<f64>() / m_h };
         let ns = key.n_strings;
         let hysteretic = key.hammer.is_hysteretic();
         // The rows the felt reads: each string's displacement at the striking point, then (a
         // hysteretic felt) its velocity there, as in `ExactKey::stage_q`.
-        let mut rows: [&Split; FELT_ROWS] = [&key.eh; FELT_ROWS];
+        let mut rows: [&Split; FELT_ROWS] = [&step.eh; FELT_ROWS];
         for s in 0..ns {
             rows[s] = &key.modes.strike_row[s];
             rows[ns + s] = &key.strike_velocity_row[s];
         }
         let count = if hysteretic { 2 * ns } else { ns };
-        let p = kernels::powers_read(fast, &key.eh, &self.w, &rows[..count]);
+        let p = kernels::powers_read(fast, &step.eh, &self.w, &rows[..count]);
         // Row `i` at a stage: `power` of `E_2` on `u`, with forces `fq` through `Q` and `feq`
         // through `E_2 Q`.
         let at = |i: usize, power: usize, fq: &[f64; MAX_STRINGS], feq: &[f64; MAX_STRINGS]| {
             p[i][power]
                 + (0..ns)
-                    .map(|s| key.stage_q[i][s] * fq[s] + key.stage_eq[i][s] * feq[s])
+                    .map(|s| step.stage_q[i][s] * fq[s] + step.stage_eq[i][s] * feq[s])
                     .sum::<f64>()
         };
         let struck = self.state.struck;
@@ -430,16 +438,16 @@ impl Voice {
             va + 0.5 * h * (2.0 * accel(&fb) - accel(&fu)),
         );
         let fc = felt(2, &mixed, &fu, yc, vc);
-        let mut inputs: [&Split; FELT_INPUTS] = [&key.ef; FELT_INPUTS];
+        let mut inputs: [&Split; FELT_INPUTS] = [&step.ef; FELT_INPUTS];
         let mut forces = [0.0; FELT_INPUTS];
         let mut k = 0;
         for s in (0..ns).filter(|&s| struck[s]) {
-            for (g, f) in key.drive_f[s].iter().zip([fu[s], fa[s] + fb[s], fc[s]]) {
+            for (g, f) in step.drive_f[s].iter().zip([fu[s], fa[s] + fb[s], fc[s]]) {
                 (inputs[k], forces[k]) = (g, f);
                 k += 1;
             }
         }
-        kernels::drive(fast, &key.ef, &mut self.w, &inputs[..k], &forces[..k]);
+        kernels::drive(fast, &step.ef, &mut self.w, &inputs[..k], &forces[..k]);
         self.hammer_y = y + h / 6.0 * v + h / 3.0 * (va + vb) + h / 6.0 * vc;
         self.hammer_v =
             v + h / 6.0 * accel(&fu) + h / 3.0 * (accel(&fa) + accel(&fb)) + h / 6.0 * accel(&fc);

@@ -10,6 +10,14 @@
 //! compression and release: a fortissimo blow is shorter and brighter than a pianissimo one.
 //! `alpha = 0` is the paper's elastic felt, bit for bit.
 
+/// The fastest blow a key is built to resolve (m/s): MIDI velocity 127's hammer speed
+/// (`midi::VELOCITY_ANCHORS_M_S`).
+pub const FASTEST_BLOW_M_S: f64 = 6.0;
+
+/// Steps in which a stepper that takes the felt's force as a polynomial over each step (the
+/// exact engine's ETDRK4) must see the shortest contact ([`HammerParams::contact_substeps`]).
+pub const STEPS_PER_CONTACT: f64 = 16.0;
+
 /// Hammer parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HammerParams {
@@ -66,6 +74,46 @@ impl HammerParams {
         velocity_m_s < 0.0 && strike_points_m.all(|y| y - position_m >= self.release_gap_m)
     }
 
+    /// How long the elastic felt (Eq. 8) stays on a rigid wall it meets at `speed_m_s` (s): it
+    /// compresses to `xi_max = ((p + 1) m v^2 / 2K)^(1/(p+1))` and comes back, in
+    /// `2 (xi_max / v) int_0^1 du / sqrt(1 - u^(p+1))`. A string yields, so the contact on it is
+    /// longer: this is the shortest the felt can make it.
+    pub fn rigid_contact_s(&self, speed_m_s: f64) -> f64 {
+        let q = self.exponent + 1.0;
+        let xi_max_m =
+            (q * self.mass_kg * speed_m_s * speed_m_s / (2.0 * self.stiffness_n_m_p)).powf(1.0 / q);
+        // u = 1 - w^2 takes the integrand's end singularity away: 2w / sqrt(1 - (1 - w^2)^q),
+        // which tends to 2 / sqrt(q) at w = 0; Simpson's rule on 64 intervals.
+        let f = |w: f64| {
+            if w == 0.0 {
+                2.0 / q.sqrt()
+            } else {
+                2.0 * w / (1.0 - (1.0 - w * w).powf(q)).sqrt()
+            }
+        };
+        let n = 64;
+        let integral = (0..=n)
+            .map(|i| {
+                let weight = if i == 0 || i == n {
+                    1.0
+                } else {
+                    [4.0, 2.0][(i + 1) % 2]
+                };
+                weight * f(i as f64 / n as f64)
+            })
+            .sum::<f64>()
+            / (3.0 * n as f64);
+        2.0 * xi_max_m / speed_m_s * integral
+    }
+
+    /// How many steps of `h / n` a stepper of step `h` takes while the felt touches, so that the
+    /// shortest contact ([`Self::rigid_contact_s`] at [`FASTEST_BLOW_M_S`]) spans at least
+    /// [`STEPS_PER_CONTACT`] of them (1 to 16).
+    pub fn contact_substeps(&self, h_s: f64) -> usize {
+        let shortest_s = self.rigid_contact_s(FASTEST_BLOW_M_S);
+        ((STEPS_PER_CONTACT * h_s / shortest_s).ceil() as usize).clamp(1, 16)
+    }
+
     /// Potential energy stored in the felt at compression `xi_m` (J).
     pub fn felt_energy_j(&self, xi_m: f64) -> f64 {
         if xi_m > 0.0 {
@@ -93,12 +141,14 @@ mod tests {
     }
 
     /// The hammer thrown at `v0_m_s` against a rigid wall, `m xdd = -F(x, xd)`, by RK4 in steps
-    /// of 10 ns until it leaves: its speed then, and `int K alpha p x^(p-1) xd^2 dt` along the way.
-    fn rebound(h: &HammerParams, v0_m_s: f64) -> (f64, f64) {
+    /// of 10 ns until it leaves: its speed then, `int K alpha p x^(p-1) xd^2 dt` along the way and
+    /// the time it took.
+    fn rebound(h: &HammerParams, v0_m_s: f64) -> (f64, f64, f64) {
         let dt = 1e-8;
         let a = |x: f64, v: f64| -h.felt_force_n(x, v) / h.mass_kg;
-        let (mut x, mut v, mut loss_j) = (0.0f64, v0_m_s, 0.0);
+        let (mut x, mut v, mut loss_j, mut t) = (0.0f64, v0_m_s, 0.0, 0.0);
         loop {
+            t += dt;
             let (k1x, k1v) = (v, a(x, v));
             let (k2x, k2v) = (
                 v + 0.5 * dt * k1v,
@@ -116,7 +166,7 @@ mod tests {
                 loss_j += h.stiffness_n_m_p * p * x.powf(p - 1.0) * v * v * dt;
             }
             if x <= 0.0 && v < 0.0 {
-                return (-v, loss_j);
+                return (-v, loss_j, t);
             }
         }
     }
@@ -132,7 +182,7 @@ mod tests {
             );
         }
         assert_eq!(elastic.felt_force_n(-1e-4, 3.0), 0.0);
-        let (out, _) = rebound(&elastic, 2.5);
+        let (out, _, _) = rebound(&elastic, 2.5);
         println!("elastic felt: thrown at 2.5 m/s, leaves at {out:.6} m/s");
         assert!((out / 2.5 - 1.0).abs() < 1e-6);
         // Stulov's felt pushes harder compressed than released, never pulls.
@@ -143,12 +193,53 @@ mod tests {
         assert_eq!(felt.felt_force_n(xi, -1e3), 0.0);
         // The energy it loses is the work of its rate term, K alpha int p xi^(p-1) xid^2 dt along
         // its path: the elastic part gives back all it takes.
-        let (out, loss_j) = rebound(&felt, 2.5);
+        let (out, loss_j, _) = rebound(&felt, 2.5);
         let lost_j = 0.5 * felt.mass_kg * (2.5f64.powi(2) - out * out);
         let predicted_j = felt.hysteresis_s * loss_j;
         println!(
             "hysteretic felt (alpha 1 us): leaves at {out:.4} m/s, loses {lost_j:.4e} J; its rate term's work {predicted_j:.4e} J"
         );
         assert!((lost_j / predicted_j - 1.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn the_felts_shortest_contact_is_its_rebound_from_a_rigid_wall() {
+        // A linear felt (p = 1) is half a period of its spring, pi sqrt(m / K); the paper's C4
+        // felt (p = 2.5) and a treble felt (p = 2, as hard as concert's C8) as RK4 throws them
+        // at a wall in steps of 10 ns.
+        let linear = HammerParams {
+            exponent: 1.0,
+            stiffness_n_m_p: 1e5,
+            ..c4(0.0)
+        };
+        let half_period_s = std::f64::consts::PI * (linear.mass_kg / 1e5).sqrt();
+        let got = linear.rigid_contact_s(3.0);
+        println!(
+            "linear felt: {got:.6e} s, half its period {half_period_s:.6e} s ({:.1e} apart)",
+            (got / half_period_s - 1.0).abs()
+        );
+        assert!((got / half_period_s - 1.0).abs() < 1e-4);
+        let treble = HammerParams {
+            mass_kg: 2e-3,
+            stiffness_n_m_p: 5.0e9,
+            exponent: 2.0,
+            ..c4(0.0)
+        };
+        for (felt, v) in [
+            (c4(0.0), 2.5),
+            (c4(0.0), FASTEST_BLOW_M_S),
+            (treble, FASTEST_BLOW_M_S),
+        ] {
+            let (_, _, thrown_s) = rebound(&felt, v);
+            let got = felt.rigid_contact_s(v);
+            println!(
+                "p {}, {v} m/s: contact {got:.4e} s, thrown {thrown_s:.4e} s ({:.1e} apart); {} substeps at 48 kHz",
+                felt.exponent,
+                (got / thrown_s - 1.0).abs(),
+                felt.contact_substeps(1.0 / 48_000.0)
+            );
+            assert!((got / thrown_s - 1.0).abs() < 1e-3);
+        }
+        assert_eq!(c4(0.0).contact_substeps(1.0 / 48_000.0), 1);
     }
 }
