@@ -485,19 +485,22 @@ fn both_engines_damp_a_released_key_alike() {
 
 #[test]
 fn string_modes_to_20_khz_sound_without_aliasing() {
-    // The concert keyboard keeps Bb7's and C8's string modes to 20 kHz (`mode_limits`: Bb7's
-    // partials 1–4 to 17.3 kHz, C8's 1–3 to 14.0 kHz). The exact engine advances every mode
-    // exactly at 48 kHz, and the hammer's stages at 48 kHz too; RK4 runs at 10 × the key's
-    // highest mode (144–192 kHz) and its output passes the anti-alias FIR (flat to 20 kHz, −90 dB
-    // from 24 kHz) on the way to 48 kHz. Struck fortissimo (6 m/s, the felt's shortest contact),
-    // the first 0.2 s, third-octave bands from 1 to 16 kHz (to 18 kHz) within 60 dB of the
-    // loudest (the next, to 20 kHz, where both filters bend: C8 2.2 dB apart):
+    // The concert keyboard keeps the string modes of C4-C8 to 20 kHz (`mode_limits`: C4's to
+    // 19.9 kHz, Bb7's partials 1–4 to 17.3 kHz, C8's 1–3 to 14.0 kHz); here C4, C6, C7, Bb7 and
+    // C8. The exact engine advances every mode exactly at 48 kHz, and the hammer's stages at
+    // 48 kHz too; RK4 runs at 10 × the key's highest mode (144–200 kHz) and its output passes the
+    // anti-alias FIR (flat to 20 kHz, −90 dB from 24 kHz) on the way to 48 kHz. Struck
+    // fortissimo (6 m/s, the felt's shortest contact), the first 0.2 s, third-octave bands from 1
+    // to 16 kHz (to 18 kHz) within 60 dB of the loudest (the next, to 20 kHz, where both filters
+    // bend: C8 2.2 dB apart):
     // - the force on the bridge, where the strings' modes to 20 kHz act, agrees within 2 dB
-    //   (Bb7 1.40, C8 1.04 dB). Their felts (p = 2) stay on the strings under 0.2 ms at 6 m/s,
-    //   eight samples at 48 kHz, and the exact engine steps the contact in three substeps
+    //   (C4 0.63, C6 0.49, C7 0.99, Bb7 1.40, C8 1.04 dB). The top felts (p = 2) stay on the
+    //   strings under 0.2 ms at 6 m/s, eight samples at 48 kHz, and the exact engine steps the
+    //   contact in three substeps
     //   (`HammerParams::contact_substeps`); in one step of 48 kHz its ETDRK4 puts Bb7 7.7 dB and
     //   C8 4.3 dB off, and this fails;
-    // - the pressure at the treble listener agrees within 1 dB (0.25 dB on Bb7; C8's 12.7 kHz
+    // - the pressure at the treble listener agrees within 1 dB (C4 0.11, C6 0.55, C7 0.44, Bb7
+    //   0.29, C8 0.56 dB; before the treble's felts were made harder, 0.25 dB on Bb7; C8's 12.7 kHz
     //   band 0.7 dB over, as its force on the bridge is). The shared board's modes take
     //   each key's force linear over a step (`engine::exact::interface`), which reaches the
     //   source as `sinc²(ωh/2)`, and a step-to-step difference of the source was `sinc(ωh/2)`:
@@ -518,7 +521,7 @@ fn string_modes_to_20_khz_sound_without_aliasing() {
     };
     let force: Channel = |f| f.obs.total_force_n[0];
     let pressure: Channel = |f| f.pressure_right_pa;
-    for key in [86, 88] {
+    for key in [40, 64, 76, 86, 88] {
         let name = unacorda::board::key_name(key);
         let preset = concert.key_preset(key).unwrap();
         let f_max = preset.unison_spec().max_mode_freq_hz();

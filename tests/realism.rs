@@ -283,8 +283,9 @@ fn the_concert_keyboards_first_partials_fall_early_as_the_recorded_grands() {
     // recorded keys from F#1 to C8 (below, the recording's fundamentals are too weak to track:
     // A0-D#1 3 s against its 24.5 s broadband). Key by key the two scatter by a factor of 3
     // either way on any board, a partial falling near a board mode or between two; held here:
-    // the median ratio within 1.5 (1.06; on Table 1's board 0.98). A board that drains too
-    // little fails: its modes damped at zeta 0.003 rather than the paper's 0.03 give 1.62.
+    // the median ratio within 1.5 (1.21; 1.06 with the string modes of C4-A7 below 9.6 kHz, 0.98
+    // on Table 1's board). A board that drains too little fails: its modes damped at zeta 0.003
+    // rather than the paper's 0.03 give 1.62.
     use unacorda::analysis::recorded::{early_t60_re_recorded, recorded_key, EARLY_T60_FROM_KEY};
     use unacorda::analysis::struck::{struck_key, LATE_S};
     let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
