@@ -434,6 +434,21 @@ fn the_concert_treble_carries_as_the_recorded_grands_does() {
     }
 }
 
+/// `keys` of the concert keyboard struck at MIDI velocity 30 and 127 (the exact engine, 0.5 s),
+/// heard by the stereo pair mixed to mono as the recorded grand's pair is, and measured as its
+/// velocity layers are (`analysis::struck::Touch`).
+fn concert_touches(keys: &[usize]) -> Vec<[unacorda::analysis::struck::Touch; 2]> {
+    use unacorda::analysis::struck::{Hearing, Touch};
+    let keyboard = Scaling::resolve("concert").unwrap();
+    unacorda::cores::map_on_cores(keys, |&k| {
+        Ok::<_, anyhow::Error>(Touch::pp_and_ff(
+            &keyboard.key_preset(k)?,
+            Hearing::PairMix,
+        )?)
+    })
+    .unwrap()
+}
+
 #[test]
 fn the_concert_treble_grows_louder_with_velocity_as_the_recorded_grand() {
     // The recorded keys from C5 to C8 struck at MIDI velocity 30 and 127 (the exact engine,
@@ -445,21 +460,13 @@ fn the_concert_treble_grows_louder_with_velocity_as_the_recorded_grand() {
     // the grand-sized board) a pianissimo in the top octave and a half all but vanished: the felt stayed on
     // C7's strings 1.67 ms at velocity 30, 3.5 of its periods, and C7 rose 47.5 dB, F#7 56.6,
     // C8 47.6 (a median of +13.8 dB over the recording's), and this fails.
-    use unacorda::analysis::recorded::recorded_layer;
-    use unacorda::analysis::struck::{Hearing, Touch, FF_VELOCITY, PP_VELOCITY, TREBLE_TOUCH_KEYS};
-    let keyboard = Scaling::resolve("concert").unwrap();
-    let touches = unacorda::cores::map_on_cores(&TREBLE_TOUCH_KEYS, |&k| {
-        Ok::<_, anyhow::Error>(Touch::pp_and_ff(
-            &keyboard.key_preset(k)?,
-            Hearing::PairMix,
-        )?)
-    })
-    .unwrap();
+    use unacorda::analysis::struck::{recorded_pp_and_ff, TREBLE_TOUCH_KEYS};
+    let touches = concert_touches(&TREBLE_TOUCH_KEYS);
     let mut over_db = Vec::new();
     for (&k, [pp, ff]) in TREBLE_TOUCH_KEYS.iter().zip(&touches) {
         let rise_db = ff.a_level_db - pp.a_level_db;
-        let recorded_db = recorded_layer(k, FF_VELOCITY).unwrap().a_level_db
-            - recorded_layer(k, PP_VELOCITY).unwrap().a_level_db;
+        let [rp, rf] = recorded_pp_and_ff(k).unwrap();
+        let recorded_db = rf.a_level_db - rp.a_level_db;
         println!(
             "{}: level {rise_db:+.1} dB from velocity 30 to 127 (recorded {recorded_db:+.1})",
             unacorda::board::key_name(k)
@@ -567,22 +574,11 @@ fn the_concert_keyboard_grows_louder_and_brighter_with_velocity_as_the_recorded_
     // - ff's 2–4 kHz band re the whole within 8 dB of the recording's at every key.
     // The paper keyboard (its felts, p = 2.2–3.2) fails each: C2's ff band 15.2 dB dark, C4's
     // rise +19.4 dB, the brightening 10.4 dB from the recording's on median (13.3 at F#3).
-    use unacorda::analysis::recorded::recorded_layer;
-    use unacorda::analysis::struck::{Hearing, Touch, FF_VELOCITY, PP_VELOCITY, TOUCH_KEYS};
-    let keyboard = Scaling::resolve("concert").unwrap();
-    let touches = unacorda::cores::map_on_cores(&TOUCH_KEYS, |&k| {
-        Ok::<_, anyhow::Error>(Touch::pp_and_ff(
-            &keyboard.key_preset(k)?,
-            Hearing::PairMix,
-        )?)
-    })
-    .unwrap();
+    use unacorda::analysis::struck::{recorded_pp_and_ff, TOUCH_KEYS};
+    let touches = concert_touches(&TOUCH_KEYS);
     let (mut louder_db, mut brighter_db) = (Vec::new(), Vec::new());
     for (&k, [pp, ff]) in TOUCH_KEYS.iter().zip(&touches) {
-        let (rp, rf) = (
-            recorded_layer(k, PP_VELOCITY).unwrap(),
-            recorded_layer(k, FF_VELOCITY).unwrap(),
-        );
+        let [rp, rf] = recorded_pp_and_ff(k).unwrap();
         let rise_db = ff.a_level_db - pp.a_level_db;
         let recorded_rise_db = rf.a_level_db - rp.a_level_db;
         let brighter = ff.octave_shape_db[5] - pp.octave_shape_db[5];

@@ -8,6 +8,7 @@ use super::listening::{
     a_weighted_level_db, band_change_db, band_power, early_t60_s, octave_shape_db, peaks, power_db,
     spectral_centroid_hz,
 };
+use super::recorded::{recorded_layer, RecordedLayer};
 use super::spectral::peak_frequency;
 use crate::config::preset::LoadedPreset;
 use crate::engine::tuning::stiff_string_hz;
@@ -38,6 +39,15 @@ pub const TOUCH_KEYS: [usize; 5] = [16, 34, 40, 49, 64];
 pub const TREBLE_TOUCH_KEYS: [usize; 13] = [52, 55, 58, 61, 64, 67, 70, 73, 76, 79, 82, 85, 88];
 pub const PP_VELOCITY: u8 = 30;
 pub const FF_VELOCITY: u8 = 127;
+
+/// The recorded grand's layers for [`PP_VELOCITY`] and [`FF_VELOCITY`] at `key`, where it has the
+/// key (`docs/data/recorded_dynamics.csv`).
+pub fn recorded_pp_and_ff(key: usize) -> Option<[RecordedLayer; 2]> {
+    Some([
+        recorded_layer(key, PP_VELOCITY)?,
+        recorded_layer(key, FF_VELOCITY)?,
+    ])
+}
 
 /// Where a struck key is heard.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -441,10 +441,19 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
         levels.len(),
         if outside.is_empty() { "none".to_string() } else { outside.join(", ") }
     );
-    // The touch: pp (velocity 30) to ff (127) on the keys recorded at every layer.
-    let touches = unacorda::cores::map_on_cores(&struck::TOUCH_KEYS, |&k| -> Result<[Touch; 2]> {
+    // The touch: pp (velocity 30) to ff (127) on the keys recorded at every layer, the dynamics
+    // rows' and the treble's each struck once (C6 is in both).
+    let mut touch_keys: Vec<usize> = struck::TOUCH_KEYS
+        .iter()
+        .chain(&struck::TREBLE_TOUCH_KEYS)
+        .copied()
+        .collect();
+    touch_keys.sort_unstable();
+    touch_keys.dedup();
+    let touches = unacorda::cores::map_on_cores(&touch_keys, |&k| -> Result<[Touch; 2]> {
         Ok(Touch::pp_and_ff(&scaling.key_preset(k)?, Hearing::PairMix)?)
     })?;
+    let touch = |k: usize| &touches[touch_keys.binary_search(&k).expect("a touch key")];
     let _ = writeln!(
         out,
         "dynamics, velocity {} → {} (first 0.5 s, heard by the stereo pair mixed to mono as the recording's pair is; in brackets the recorded grand's layers for velocities {} and {}):",
@@ -457,13 +466,13 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
         out,
         "  key   A-weighted level   centroid (Hz)             1–2 kHz re all, pp / ff (dB)   2–4 kHz re all, pp / ff (dB)"
     );
-    for (&k, [pp, ff]) in struck::TOUCH_KEYS.iter().zip(&touches) {
-        let recorded = recorded::recorded_layer(k, struck::PP_VELOCITY)
-            .zip(recorded::recorded_layer(k, struck::FF_VELOCITY));
+    for k in struck::TOUCH_KEYS {
+        let [pp, ff] = touch(k);
+        let recorded = struck::recorded_pp_and_ff(k);
         let theirs = |f: &dyn Fn(&recorded::RecordedLayer, &recorded::RecordedLayer) -> String| {
             recorded
                 .as_ref()
-                .map_or(String::new(), |(p, f_)| format!(" ({})", f(p, f_)))
+                .map_or(String::new(), |[p, f_]| format!(" ({})", f(p, f_)))
         };
         let _ = writeln!(
             out,
@@ -483,18 +492,13 @@ fn listen(scaling: &LoadedScaling, keys: &[usize], out: &mut String) -> Result<(
         );
     }
     // The treble's touch: the level's rise from pp to ff on the recorded keys from C5 up.
-    let treble = unacorda::cores::map_on_cores(&struck::TREBLE_TOUCH_KEYS, |&k| -> Result<f64> {
-        let [pp, ff] = Touch::pp_and_ff(&scaling.key_preset(k)?, Hearing::PairMix)?;
-        Ok(ff.a_level_db - pp.a_level_db)
-    })?;
     let mut over_db = Vec::new();
     let rises: Vec<String> = struck::TREBLE_TOUCH_KEYS
         .iter()
-        .zip(&treble)
-        .map(|(&k, rise_db)| {
-            let recorded = recorded::recorded_layer(k, struck::PP_VELOCITY)
-                .zip(recorded::recorded_layer(k, struck::FF_VELOCITY))
-                .map(|(p, f)| f.a_level_db - p.a_level_db);
+        .map(|&k| {
+            let [pp, ff] = touch(k);
+            let rise_db = ff.a_level_db - pp.a_level_db;
+            let recorded = struck::recorded_pp_and_ff(k).map(|[p, f]| f.a_level_db - p.a_level_db);
             if let Some(r) = recorded {
                 over_db.push(rise_db - r);
             }
