@@ -321,10 +321,11 @@ fn the_kept_modes_radiate_as_the_full_board() {
     println!(
         "C4-C6, partials from 1.5 kHz, |correlation| of the pair's channels, median: full {c_full:.2}, kept modes alone {c_alone:.2}, fitted {c_fitted:.2}"
     );
-    // Measured: alone 3.1 dB rms, worst -19.5 (D6); fitted 1.8, worst -9.8 (C#6, one partial at
-    // 1.1 kHz, where 55 shared modes fit 70 keys at once).
-    assert!(rms(squares[1]) < 2.5 && rms(squares[1]) < 0.7 * rms(squares[0]));
-    assert!(worst[1].0.abs() < 0.6 * worst[0].0.abs());
+    // Measured: alone 3.1 dB rms, worst -19.5 (D6); fitted 1.4, worst +7.5 (Gb6, one partial at
+    // 1.48 kHz). Fitted alike at every frequency (the partials not weighted) 1.8, worst -9.8
+    // (C#6, one partial at 1.1 kHz, where 55 shared modes fit 70 keys at once): fails.
+    assert!(rms(squares[1]) < 1.6 && rms(squares[1]) < 0.55 * rms(squares[0]));
+    assert!(worst[1].0.abs() < 0.45 * worst[0].0.abs());
 }
 
 #[test]
@@ -636,7 +637,7 @@ fn tenor_octave_tilt_db(board: &SoundboardModes) -> f64 {
 /// way, as a board with many modes does on average (Skudrzyk's mean mobility, a radiation
 /// efficiency rising as sqrt(f): about -1.5 dB per octave). The size and the bridges' layout turn
 /// it, not the rim that cuts the bent side (-3.7 dB; without the rim -3.1). On that board the
-/// concert keyboard's fundamental is 1.3 dB stronger against partial 2 than the recorded grand's
+/// concert keyboard's fundamental is 0.3 dB weaker against partial 2 than the recorded grand's
 /// (median over the 16 keys), where on Table 1's it is 6.8 dB weaker.
 #[test]
 fn a_grand_sized_board_carries_the_tenors_fundamental_as_table_1s_rectangle_does_not() {

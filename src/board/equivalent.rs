@@ -18,7 +18,10 @@
 //! H(w) = sum_m phi_m(x) (-w^2 Re D_m - i w w_m Im D_m) / (w_m^2 - w^2 + 2 i zeta_m w_m w)    (rho0 / (2 pi) left out)
 //! ```
 //! with the full board's `D_m` their Rayleigh integrals ([`super::radiation`]) and the kept
-//! ones' the unknowns, returned as their equivalent `D_m`. The kept modes at and above
+//! ones' the unknowns, returned as their equivalent `D_m`. A key is heard at its partials: each
+//! point's rows within [`PARTIAL_BAND`] of its key's partials count [`PARTIAL_WEIGHT`] times those
+//! between them (fitted alike at every frequency, C#6 had its one partial below 1.5 kHz in 2 % of
+//! its rows, and it came out 18 dB under the full board's at `above`). The kept modes at and above
 //! `below_hz` radiate by their own integrals (the fit's target leaves their part out); both
 //! engines read the same integrals.
 
@@ -63,18 +66,24 @@ pub fn fit(
             .collect();
         let mut normal = Normal::new(2 * low.len());
         for p in &full.points {
-            let rows: Vec<(Vec<C>, C)> = (0..3)
+            let f0_hz = fundamental_hz(&p.name);
+            let rows: Vec<(Vec<C>, C, f64)> = (0..3)
                 .flat_map(|d| grid.iter().map(move |&w| (d, w)))
                 .map(|(d, w)| {
                     let shape = &p.shape[d];
                     let target = transfer(full, &heard, shape, &own, w);
-                    (columns(full, &low, shape, w), target)
+                    let weight = partial_weight(f0_hz, w / (2.0 * PI));
+                    (columns(full, &low, shape, w), target, weight)
                 })
                 .collect();
-            let norm = rows.iter().map(|(_, t)| abs2(*t)).sum::<f64>().sqrt();
+            let norm = rows
+                .iter()
+                .map(|(_, t, g)| g * g * abs2(*t))
+                .sum::<f64>()
+                .sqrt();
             let scale = if norm > 0.0 { 1.0 / norm } else { 0.0 };
-            for (cols, target) in &rows {
-                normal.add(cols, *target, scale);
+            for (cols, target, weight) in &rows {
+                normal.add(cols, *target, scale * weight);
             }
         }
         let mut d = own;
@@ -88,6 +97,39 @@ pub fn fit(
         });
     }
     Ok(listeners)
+}
+
+/// How much more a row counts where the point's key has a partial ([`partial_weight`]), in
+/// amplitude: between its partials a row still counts, for the attack's broadband knock and the
+/// sympathetic partials (10 left C#6 at −7.8 dB re A3–A4 struck, 30 −4.6: docs/realism.md).
+const PARTIAL_WEIGHT: f64 = 30.0;
+
+/// Half-width of the band around each partial `n f0` that [`PARTIAL_WEIGHT`] covers, relative:
+/// a board mode's half-power band at ζ = 0.03, and the stretch of a treble key's partials.
+const PARTIAL_BAND: f64 = 0.04;
+
+/// The equal-tempered fundamental (Hz) of the key a bridge point is named for (`A0`–`C8`);
+/// `None` for another name.
+fn fundamental_hz(name: &str) -> Option<f64> {
+    (1..=88)
+        .find(|&k| super::key_name(k) == name)
+        .map(|k| 440.0 * 2f64.powf((k as f64 - 49.0) / 12.0))
+}
+
+/// A row's weight at `f_hz` for a point whose key sounds `f0_hz`: [`PARTIAL_WEIGHT`] within
+/// [`PARTIAL_BAND`] of one of its (harmonic) partials, 1 elsewhere and at a point of no key.
+fn partial_weight(f0_hz: Option<f64>, f_hz: f64) -> f64 {
+    match f0_hz {
+        Some(f0) => {
+            let n = (f_hz / f0).round().max(1.0);
+            if (f_hz / (n * f0) - 1.0).abs() <= PARTIAL_BAND {
+                PARTIAL_WEIGHT
+            } else {
+                1.0
+            }
+        }
+        None => 1.0,
+    }
 }
 
 /// The grid `[lo, hi)` at [`GRID_RATIO`] (angular frequencies).
