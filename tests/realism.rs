@@ -440,7 +440,8 @@ fn the_keys_round_c_sharp_6_carry_as_their_neighbours() {
     // the listener above the board) of C6–E6. Their fundamentals (1.0–1.3 kHz) are heard through
     // the kept board modes' fitted radiation (`board::equivalent`); fitted alike at every
     // frequency, the fit missed C#6's first partial by 18 dB at the listener (D6's by 10), and
-    // C#6 came out at −8.1 dB, D6 −6.9. Fitted on each key's partials: −4.6 and 0.0 dB. Held:
+    // C#6 came out at −8.1 dB, D6 −6.9. Fitted on each key's partials: −4.6 and 0.0 dB (with the
+    // board's dropped modes heard −2.5 and −0.1; C6 +1.8, D#6 +4.7, E6 +4.6). Held:
     // every key within issue 17's ±6 dB.
     let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();

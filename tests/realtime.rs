@@ -477,7 +477,7 @@ fn a_stereo_keyboard_sounds_each_channel_at_its_listener() {
     };
     // A top key is heard over the treble end 6 dB louder than over the bass end or more: its
     // partials drive the board where it is, under the treble listener (on the grand-sized board
-    // A7 +12.8 dB, C8 +16.4; on Table 1's A7 +19.8 and C8, through a few board modes, 2.2 dB to
+    // A7 +21.8 dB, C8 +21.0 with the dropped modes heard, +12.8 and +16.4 without; on Table 1's A7 +19.8 and C8, through a few board modes, 2.2 dB to
     // the bass side, as the recorded grand's A7 is by 2 dB).
     let to_treble_db = |midi: u8| {
         let x = exact_output(&stereo, &keys, &[(0, on(midi, 90))], 2, frames);

@@ -159,6 +159,12 @@ pub struct ReductionSpec {
     /// modes radiate ([`equivalent`]); absent (and above it), each by its own Rayleigh integral.
     #[serde(default)]
     pub radiation_fit_below_hz: Option<f64>,
+    /// The modes the reduction drops from this frequency (Hz) up are kept in the asset as its
+    /// residual ([`SoundboardModes::residual`]): driven by each key's bridge force and heard, not
+    /// coupled. At or above `radiation_fit_below_hz`, where the kept modes radiate by their own
+    /// integrals (below it their fit stands for the dropped ones). Absent: none (the paper).
+    #[serde(default)]
+    pub residual_from_hz: Option<f64>,
 }
 
 /// Name of key `k` (1 = A0 … 88 = C8), with flats so that names hold no `#`.
@@ -453,6 +459,18 @@ impl BoardSpec {
                 });
             }
         }
+        if let Some(f) = self.reduction.residual_from_hz {
+            let from = self
+                .reduction
+                .radiation_fit_below_hz
+                .unwrap_or(self.reduction.f_min_hz);
+            check(
+                "reduction.residual_from_hz",
+                f,
+                from,
+                self.reduction.f_max_hz,
+            )?;
+        }
         if let Some(p) = self.reduction.points.iter().find(|p| !named(p)) {
             return Err(BoardError::Range {
                 field: "reduction.points".to_owned(),
@@ -727,6 +745,7 @@ impl BoardSpec {
                 .collect(),
             listeners: vec![],
             heard: [None; 2],
+            residual: None,
         };
         let mut kept: Vec<(usize, f64)> = Vec::new();
         for mode in 0..n {
@@ -844,6 +863,12 @@ pub fn generate_asset(
     if let Some(below_hz) = r.radiation_fit_below_hz {
         reduced.listeners = equivalent::fit(&solved.modes, &kept, below_hz)?;
     }
+    if let Some(from_hz) = r.residual_from_hz {
+        let full = &solved.modes;
+        let mut dropped = full.clone();
+        dropped.retain(|k| kept.binary_search(&k).is_err() && full.freq_hz[k] >= from_hz);
+        reduced.residual = Some(std::sync::Arc::new(dropped));
+    }
     let p = &spec.plate;
     let mut header = vec![
         "unacorda reduced soundboard model (DESIGN.md §1.3, §4; format in src/config/asset.rs)".to_string(),
@@ -903,6 +928,12 @@ pub fn generate_asset(
     if let Some(below_hz) = r.radiation_fit_below_hz {
         header.push(format!(
             "kept modes below {below_hz} Hz radiate what the full board's modes radiate for forces at the bridges (least squares over frequency and every key, src/board/equivalent.rs); above, each by its own Rayleigh integral"
+        ));
+    }
+    if let (Some(from_hz), Some(dropped)) = (r.residual_from_hz, &reduced.residual) {
+        header.push(format!(
+            "residual: the {} modes dropped from {from_hz} Hz up, heard (driven by each key's bridge force, radiated by their own integrals) and not coupled (src/engine/physics/soundboard.rs, DroppedModes)",
+            dropped.len()
         ));
     }
     Ok((solved, reduced, header))

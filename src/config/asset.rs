@@ -9,6 +9,9 @@
 //! columns: freq_hz zeta volume_m2_per_sqrt_kg T@C2 L@C2 P@C2 T@C4 L@C4 P@C4 Dre@above Dim@above
 //! 21.52 0.03 1.23e-2 4.5e-2 -1.2e-3 3.4e-4 ...   # one row per mode
 //! ```
+//! A line `residual:` may follow the mode rows: the rows after it are the modes the reduction
+//! dropped ([`SoundboardModes::residual`]), in the same columns, heard and not coupled.
+//!
 //! Units: `freq_hz` Hz (> 0), `zeta` damping ratio in [0, 1), `volume_m2_per_sqrt_kg` the mode's
 //! net volume displacement per unit modal coordinate (m^2/sqrt(kg)), `T@X`, `L@X`, `P@X` the
 //! mass-normalised mode shape at point X in each direction (1/sqrt(kg)), `Dre@Y`, `Dim@Y` the
@@ -59,6 +62,8 @@ pub fn parse(text: &str, path: &Path) -> Result<SoundboardModes, AssetError> {
     let mut points: Option<Vec<String>> = None;
     let mut listeners: Option<Vec<String>> = None;
     let mut columns: Option<Vec<String>> = None;
+    // The kept modes' rows, once `residual:` is read (`rows` then gathers the dropped ones).
+    let mut residual: Option<Vec<Vec<f64>>> = None;
     let mut rows: Vec<Vec<f64>> = Vec::new();
     for (idx, raw) in text.lines().enumerate() {
         let line_no = idx + 1;
@@ -110,6 +115,14 @@ pub fn parse(text: &str, path: &Path) -> Result<SoundboardModes, AssetError> {
                 ));
             }
             listeners = Some(v.split_whitespace().map(str::to_owned).collect());
+        } else if line == "residual:" {
+            if columns.is_none() || rows.is_empty() || residual.is_some() {
+                return Err(syntax(
+                    line_no,
+                    "`residual:` must come once, after the kept modes' rows".into(),
+                ));
+            }
+            residual = Some(std::mem::take(&mut rows));
         } else if let Some(v) = line.strip_prefix("columns:") {
             let Some(names) = &points else {
                 return Err(syntax(line_no, "`columns:` must follow `points:`".into()));
@@ -193,32 +206,44 @@ pub fn parse(text: &str, path: &Path) -> Result<SoundboardModes, AssetError> {
     if rows.is_empty() {
         return Err(content("no modes: at least one mode row is required"));
     }
+    let listeners = listeners.unwrap_or_default();
+    Ok(match residual {
+        None => board(&rows, &names, &listeners),
+        Some(kept) => SoundboardModes {
+            residual: Some(std::sync::Arc::new(board(&rows, &names, &listeners))),
+            ..board(&kept, &names, &listeners)
+        },
+    })
+}
+
+/// The board of mode rows `rows` (columns as `expected_columns` names them).
+fn board(rows: &[Vec<f64>], names: &[String], listeners: &[String]) -> SoundboardModes {
     let col = |c: usize| rows.iter().map(|r| r[c]).collect::<Vec<f64>>();
     let at = 3 + 3 * names.len();
-    Ok(SoundboardModes {
+    SoundboardModes {
         freq_hz: col(0),
         damping_ratio: col(1),
         volume_m2_per_sqrt_kg: col(2),
         points: names
-            .into_iter()
+            .iter()
             .enumerate()
             .map(|(p, name)| BridgePoint {
-                name,
+                name: name.clone(),
                 shape: [col(3 + 3 * p), col(4 + 3 * p), col(5 + 3 * p)],
             })
             .collect(),
         listeners: listeners
-            .unwrap_or_default()
-            .into_iter()
+            .iter()
             .enumerate()
             .map(|(l, name)| Listener {
-                name,
+                name: name.clone(),
                 rayleigh_re: col(at + 2 * l),
                 rayleigh_im: col(at + 2 * l + 1),
             })
             .collect(),
         heard: [None; 2],
-    })
+        residual: None,
+    }
 }
 
 /// Write the asset text; `header` lines are written as comments first.
@@ -239,6 +264,16 @@ pub fn to_text(modes: &SoundboardModes, header: &[String]) -> String {
         "columns: {}",
         expected_columns(&names, &heard).join(" ")
     );
+    rows(&mut out, modes);
+    if let Some(r) = &modes.residual {
+        let _ = writeln!(out, "residual:");
+        rows(&mut out, r);
+    }
+    out
+}
+
+/// One line per mode of `modes`.
+fn rows(out: &mut String, modes: &SoundboardModes) {
     for k in 0..modes.len() {
         let _ = write!(
             out,
@@ -255,7 +290,6 @@ pub fn to_text(modes: &SoundboardModes, header: &[String]) -> String {
         }
         out.push('\n');
     }
-    out
 }
 
 fn expected_columns(points: &[String], listeners: &[String]) -> Vec<String> {
@@ -295,6 +329,7 @@ mod tests {
                 rayleigh_im: vec![2e-5, 4e-4],
             }],
             heard: [None; 2],
+            residual: None,
         };
         let text = to_text(&sb, &["test".into()]);
         let back = parse(&text, Path::new("mem")).unwrap();

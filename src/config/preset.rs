@@ -650,8 +650,13 @@ impl LoadedPreset {
                 model: self.preset.damper.model,
             }),
             contact: self.contact(),
-            board: self.board.clone(),
+            // The residual stays with the preset's board: the key takes its own point's share.
+            board: SoundboardModes {
+                residual: None,
+                ..self.board.clone()
+            },
             bridge_point: self.bridge_point,
+            dropped: self.board.dropped_at(self.bridge_point),
             sample_rate_hz: 0.0,
         };
         spec.sample_rate_hz = self.oversampling(&spec) as f64 * self.output_rate_hz();

@@ -5,7 +5,7 @@
 use crate::engine::physics::contact::Contact;
 use crate::engine::physics::damper::DamperParams;
 use crate::engine::physics::hammer::HammerParams;
-use crate::engine::physics::soundboard::{BridgePoint, SoundboardModes};
+use crate::engine::physics::soundboard::{BridgePoint, DroppedModes, SoundboardModes};
 use crate::engine::physics::string::{ModeSet, StringParams};
 use std::f64::consts::PI;
 
@@ -34,6 +34,9 @@ pub struct UnisonSpec {
     /// The reduced soundboard and the index of the bridge point where this unison rests.
     pub board: SoundboardModes,
     pub bridge_point: usize,
+    /// The board's dropped modes at the bridge point, heard, not coupled
+    /// ([`SoundboardModes::dropped_at`]); `None`: the reduced board's sound alone (the paper).
+    pub dropped: Option<DroppedModes>,
     /// Internal (integration) rate (Hz).
     pub sample_rate_hz: f64,
 }

@@ -231,6 +231,25 @@ impl KeyModes {
         };
         let strike_x = spec.hammer.strike_ratio * s0.speaking_length_m;
         let (mut strike_row, mut strike_input, mut force_row) = (vec![], vec![], vec![]);
+        // The dropped board modes' source per unit force at the point, per channel and direction,
+        // at each mode's eigenvalue; and what the strings' forces make of it, per channel.
+        let dropped: Option<Vec<[Vec<c64>; 3]>> = spec.dropped.as_ref().map(|dm| {
+            (0..CHANNELS)
+                .map(|c| {
+                    std::array::from_fn(|d| {
+                        modal
+                            .lambda
+                            .iter()
+                            .map(|l| {
+                                let (re, im) = dm.source_per_force(c, d, (l.re, l.im));
+                                c64::new(re, im)
+                            })
+                            .collect()
+                    })
+                })
+                .collect()
+        });
+        let mut dropped_rows = vec![vec![c64::new(0.0, 0.0); modal.lambda.len()]; CHANNELS];
         for s in 0..ns {
             let psi_e = t_modes(s, strike_x);
             strike_row.push(Split::new(&modal.row(&psi_e, false)));
@@ -244,20 +263,29 @@ impl KeyModes {
                     .zip(modal.row(&w, true))
                     .map(|(q, v)| q * kc + v * cc)
                     .collect();
+                // Each mode's share of the force, through the dropped modes to each channel.
+                for (c, per_dir) in dropped.iter().flatten().enumerate() {
+                    for ((x, f), r) in dropped_rows[c].iter_mut().zip(&row).zip(&per_dir[d]) {
+                        *x += f * r;
+                    }
+                }
                 Split::new(&row)
             }));
         }
         let board_row = |x: &[f64]| Split::new(&modal.row(&layout.board_vector(x), true));
         // Each channel's radiating source: the board modes' velocities and displacements,
-        // weighted.
+        // weighted, and the dropped modes' part, each key mode's force through them at its own
+        // eigenvalue (as the mode rings, `e^{lambda t}`; what they do with the hammer's and the
+        // shared board's inputs over their own brief transients is left out).
         let radiation = |c: usize| {
             let [by_v, by_q] = spec.board.radiation_weights(c);
             let mut row = modal.row(&layout.board_vector(&by_v), true);
-            for (r, q) in row
+            for ((r, q), x) in row
                 .iter_mut()
                 .zip(modal.row(&layout.board_vector(&by_q), false))
+                .zip(&dropped_rows[c])
             {
-                *r += q;
+                *r += q + x;
             }
             Split::new(&row)
         };

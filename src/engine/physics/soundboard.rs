@@ -9,6 +9,7 @@
 use super::Oscillator;
 use crate::engine::spec::CHANNELS;
 use std::f64::consts::PI;
+use std::sync::Arc;
 
 /// A reduced modal soundboard, structure-of-arrays.
 #[derive(Debug, Clone, PartialEq)]
@@ -25,6 +26,49 @@ pub struct SoundboardModes {
     /// ([`SoundboardModes::radiation_weights`]); `None`: the monopole of the net volume velocity
     /// (the paper's board). The same in both channels: a mono piano.
     pub heard: [Option<usize>; CHANNELS],
+    /// The modes the reduction dropped from some frequency up, at the same points and listeners
+    /// (their own Rayleigh integrals): heard, not coupled ([`DroppedModes`]); `None` for the
+    /// paper's boards. Shared, not copied, by every key's preset.
+    pub residual: Option<Arc<SoundboardModes>>,
+}
+
+/// The board's dropped modes at one key's bridge point ([`SoundboardModes::dropped_at`]): each
+/// driven by the force the key's strings put on the bridge (`q_j'' + 2 zeta_j w_j q_j' + w_j^2 q_j
+/// = phi_j . F`, Eq. 4's board without the strings' reaction) and radiated to each channel as the
+/// kept modes are ([`SoundboardModes::radiation_weights`]). What the reduction (§2.2) leaves out of
+/// the sound, not out of the strings' coupling: the kept modes couple, the dropped ones are heard.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DroppedModes {
+    pub freq_hz: Vec<f64>,
+    pub damping_ratio: Vec<f64>,
+    /// `[phi_T, phi_L, phi_P]` at the key's point, one value per mode (1/sqrt(kg)).
+    pub shape: [Vec<f64>; 3],
+    /// Per channel, the radiating source's weights on each mode's velocity and displacement.
+    pub weights: [[Vec<f64>; 2]; CHANNELS],
+}
+
+impl DroppedModes {
+    /// The radiating source of `channel` per unit force in direction `d` at the key's point,
+    /// oscillating as `e^{lambda t}`: `sum_j phi_j,d (a_j lambda + b_j) / (lambda^2 + 2 zeta_j w_j
+    /// lambda + w_j^2)` (`a`, `b` the weights), as `(re, im)`.
+    pub fn source_per_force(&self, channel: usize, d: usize, lambda: (f64, f64)) -> (f64, f64) {
+        let (lr, li) = lambda;
+        let [a, b] = &self.weights[channel];
+        let (mut re, mut im) = (0.0, 0.0);
+        for j in 0..self.freq_hz.len() {
+            let w = 2.0 * PI * self.freq_hz[j];
+            let c = 2.0 * self.damping_ratio[j] * w;
+            // lambda^2 + c lambda + w^2
+            let (dr, di) = (lr * lr - li * li + c * lr + w * w, 2.0 * lr * li + c * li);
+            // a lambda + b
+            let (nr, ni) = (a[j] * lr + b[j], a[j] * li);
+            let den = dr * dr + di * di;
+            let s = self.shape[d][j];
+            re += s * (nr * dr + ni * di) / den;
+            im += s * (ni * dr - nr * di) / den;
+        }
+        (re, im)
+    }
 }
 
 /// How each mode radiates to one listener over the board as a baffled plate: its Rayleigh
@@ -66,6 +110,18 @@ impl SoundboardModes {
         self.freq_hz.is_empty()
     }
 
+    /// The dropped modes ([`SoundboardModes::residual`]) at bridge point `point`, heard as this
+    /// board's channels are; `None` without them.
+    pub fn dropped_at(&self, point: usize) -> Option<DroppedModes> {
+        let r = self.residual.as_deref()?;
+        Some(DroppedModes {
+            freq_hz: r.freq_hz.clone(),
+            damping_ratio: r.damping_ratio.clone(),
+            shape: r.points[point].shape.clone(),
+            weights: std::array::from_fn(|c| r.weights_heard(self.heard[c])),
+        })
+    }
+
     /// What the engines read as the board's radiating source `Y` (m^3/s) of output `channel`
     /// (0 left, 1 right, [`SoundboardModes::heard`]): per mode, the weight
     /// of its modal velocity and of its modal displacement. Without a listener, the net volume
@@ -74,7 +130,12 @@ impl SoundboardModes {
     /// [`LISTENER_REFERENCE_M`]: `2 r_ref (Re D_m qdot_m - omega_m Im D_m q_m)`, whose phasor at
     /// the mode's frequency is `2 r_ref D_m Qdot_m`.
     pub fn radiation_weights(&self, channel: usize) -> [Vec<f64>; 2] {
-        match self.heard[channel].and_then(|l| self.listeners.get(l)) {
+        self.weights_heard(self.heard[channel])
+    }
+
+    /// [`SoundboardModes::radiation_weights`] at listener `heard` (`None`: the monopole).
+    fn weights_heard(&self, heard: Option<usize>) -> [Vec<f64>; 2] {
+        match heard.and_then(|l| self.listeners.get(l)) {
             None => [self.volume_m2_per_sqrt_kg.clone(), vec![0.0; self.len()]],
             Some(l) => {
                 let r2 = 2.0 * LISTENER_REFERENCE_M;
@@ -171,6 +232,7 @@ mod tests {
                 rayleigh_im: vec![im],
             }],
             heard: [Some(0), None],
+            residual: None,
         };
         let [by_v, by_q] = board.radiation_weights(0);
         let (w, rho) = (2.0 * PI * f_hz, 1.2);

@@ -29,6 +29,9 @@ pub struct Rk4Key<T> {
     pub(super) static_shape: Vec<T>,
     /// Board modes: `phi_T`, `phi_L`, `phi_P` at this key's bridge point (Eq. 5).
     pub(super) board_shape: [Vec<T>; 3],
+    /// The board's dropped modes at the point (`UnisonSpec::dropped`): driven, not coupled; empty
+    /// without them.
+    pub(super) residual_shape: [Vec<T>; 3],
     /// `psi_n(L_e)` of the T modes (identical for every string: same length).
     pub(super) hammer_shape: Vec<T>,
     /// Per point of the damper felt, `a_k psi_n(x_k)` of the transverse modes
@@ -140,6 +143,10 @@ pub(super) fn build_key<T: Real>(spec: &UnisonSpec) -> Result<Rk4Key<T>, BuildEr
         bridge_shape: cast(&bridge_shape),
         static_shape: cast(&static_shape),
         board_shape: point.shape.each_ref().map(|phi| cast(phi)),
+        residual_shape: match &spec.dropped {
+            Some(d) => d.shape.each_ref().map(|phi| cast(phi)),
+            None => Default::default(),
+        },
         hammer_shape: (1..=nt)
             .map(|k| T::from_f64(s0.mode_shape(k, strike_x)))
             .collect(),

@@ -45,6 +45,9 @@ struct Model<T> {
     keys: Vec<Rk4Key<T>>,
     voices: Vec<Voice>,
     board: Range<usize>,
+    /// The board's dropped modes (`UnisonSpec::dropped`), right after `board`: driven by every
+    /// voice's bridge force at its point, heard, not coupled (empty without them).
+    residual: Range<usize>,
     omega2: Vec<T>,
     /// `2 zeta omega` per mode (1/s).
     damp: Vec<T>,
@@ -56,6 +59,8 @@ struct Model<T> {
     /// ([`crate::engine::physics::soundboard::SoundboardModes::radiation_weights`]); whether the
     /// two channels hear different listeners.
     board_radiation: [[Vec<T>; 2]; CHANNELS],
+    /// The same for the dropped modes.
+    residual_radiation: [[Vec<T>; 2]; CHANNELS],
     stereo: bool,
     h: f64,
 }
@@ -175,7 +180,9 @@ impl<T: Real> Rk4Pool<T> {
             .collect();
         let strings_end = voices * capacity;
         let board = strings_end..strings_end + first.board.len();
-        let n = board.end;
+        let dropped = first.dropped.as_ref();
+        let residual = board.end..board.end + dropped.map_or(0, |d| d.freq_hz.len());
+        let n = residual.end;
         // Every per-mode array at its final length at once (no growth, no spare capacity).
         let (mut omega2, mut damp) = (vec![T::ZERO; n], vec![T::ZERO; n]);
         let (bridge_shape, static_shape) = (vec![T::ZERO; n], vec![T::ZERO; strings_end]);
@@ -184,17 +191,29 @@ impl<T: Real> Rk4Pool<T> {
             omega2[i] = T::from_f64(mode.omega2());
             damp[i] = T::from_f64(mode.damping_per_s());
         }
+        if let Some(d) = dropped {
+            for (j, i) in residual.clone().enumerate() {
+                let w = 2.0 * std::f64::consts::PI * d.freq_hz[j];
+                omega2[i] = T::from_f64(w * w);
+                damp[i] = T::from_f64(2.0 * d.damping_ratio[j] * w);
+            }
+        }
         let h = 1.0 / first.sample_rate_hz;
         let model = Model {
             keys,
             voices: voice_slots,
             board,
+            residual,
             omega2,
             damp,
             bridge_shape,
             static_shape,
             board_radiation: std::array::from_fn(|c| {
                 first.board.radiation_weights(c).map(|w| cast(&w))
+            }),
+            residual_radiation: std::array::from_fn(|c| match dropped {
+                Some(d) => d.weights[c].each_ref().map(|w| cast(w)),
+                None => [vec![], vec![]],
             }),
             stereo: first.board.is_stereo(),
             h,
@@ -437,7 +456,8 @@ impl<T: Real> Rk4Pool<T> {
                 n += 1;
             }
         }
-        self.live[n] = self.model.board.clone();
+        // The board and its dropped modes, which follow it.
+        self.live[n] = self.model.board.start..self.model.residual.end;
         self.n_live = n + 1;
         #[cfg(target_arch = "x86_64")]
         if self.fast_path {

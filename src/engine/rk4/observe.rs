@@ -79,8 +79,12 @@ impl<T: Real> Rk4Pool<T> {
     fn radiated_by(&self, channel: usize) -> f64 {
         let [by_v, by_q] = &self.model.board_radiation[channel];
         let board = self.model.board.clone();
+        let [res_v, res_q] = &self.model.residual_radiation[channel];
+        let res = self.model.residual.clone();
         T::dot_wide::<false>(by_v, &self.v[board.clone()])
             + T::dot_wide::<false>(by_q, &self.q[board])
+            + T::dot_wide::<false>(res_v, &self.v[res.clone()])
+            + T::dot_wide::<false>(res_q, &self.q[res])
     }
 
     /// Floating-point operations of one RK4 step in the current state (active voices, hammers,
@@ -88,10 +92,11 @@ impl<T: Real> Rk4Pool<T> {
     /// counts 2. What `unacorda bench` divides by time to report a FLOP rate.
     pub fn flops_per_step(&self) -> f64 {
         let (m, f) = (&self.model, &self.states);
-        let nb = m.board.len();
-        let mut live = nb;
-        // Per evaluation: the uncoupled oscillators (3 per mode) of the board ...
-        let mut eval = 3 * nb;
+        let (nb, nr) = (m.board.len(), m.residual.len());
+        let mut live = nb + nr;
+        // Per evaluation: the uncoupled oscillators (3 per mode) of the board and its dropped
+        // modes ...
+        let mut eval = 3 * (nb + nr);
         for (k, voice) in m.voices.iter().enumerate() {
             let (true, Some(key)) = (f[k].active, f[k].key) else {
                 continue;
@@ -104,7 +109,8 @@ impl<T: Real> Rk4Pool<T> {
             // board's side at this point (3 directions × (4 + 2) per board mode), the duplex
             // product through its rank-r factor (2 × 2 r per entry of W, T and P of every string).
             let r = km.duplex_rank;
-            eval += 3 * n + 6 * n + 18 * nb + 4 * r * voice.n_strings * (nt + np);
+            // (and the dropped modes driven by its force, 3 × 2 per mode).
+            eval += 3 * n + 6 * n + 18 * nb + 6 * nr + 4 * r * voice.n_strings * (nt + np);
             if f[k].damper_down {
                 eval += 4 * km.damper_shapes.len() * voice.n_strings * (nt + np);
             }
