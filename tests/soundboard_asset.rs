@@ -572,6 +572,12 @@ fn a_reduction_point_must_be_a_key() {
         println!("{e}");
         assert!(e.contains("`reduction.radiation_fit_below_hz`") && e.contains(allowed));
     }
+    // The dropped modes kept from a frequency the kept modes' fit already stands for: refused.
+    let mut spec = grand();
+    spec.reduction.residual_from_hz = Some(1000.0);
+    let e = spec.solve().map(|_| ()).unwrap_err().to_string();
+    println!("{e}");
+    assert!(e.contains("`reduction.residual_from_hz`") && e.contains("1.5e3"));
 }
 
 /// A rim held as a clamped edge (`[[rims]]`, a penalty on the deflection and on the slope across

@@ -334,5 +334,44 @@ mod tests {
         let text = to_text(&sb, &["test".into()]);
         let back = parse(&text, Path::new("mem")).unwrap();
         assert_eq!(back, sb);
+
+        // With the dropped modes after `residual:`, the same columns.
+        let with = SoundboardModes {
+            residual: Some(std::sync::Arc::new(SoundboardModes {
+                freq_hz: vec![1600.0],
+                damping_ratio: vec![0.03],
+                volume_m2_per_sqrt_kg: vec![-2e-4],
+                points: vec![BridgePoint {
+                    name: "C2".into(),
+                    shape: [vec![0.1], vec![0.2], vec![-0.3]],
+                }],
+                listeners: vec![Listener {
+                    name: "above".into(),
+                    rayleigh_re: vec![1e-4],
+                    rayleigh_im: vec![-2e-4],
+                }],
+                heard: [None; 2],
+                residual: None,
+            })),
+            ..sb
+        };
+        let text = to_text(&with, &[]);
+        assert!(text.contains("\nresidual:\n"));
+        assert_eq!(parse(&text, Path::new("mem")).unwrap(), with);
+        // `residual:` before the kept rows, or twice: refused, naming the line.
+        let rows: Vec<&str> = text.lines().collect();
+        let at = rows.iter().position(|l| *l == "residual:").unwrap();
+        let mut early = rows.clone();
+        let marker = early.remove(at);
+        early.insert(at - 2, marker);
+        let mut twice = rows.clone();
+        twice.push("residual:");
+        for (bad, line) in [(early, at - 1), (twice, rows.len() + 1)] {
+            let e = parse(&bad.join("\n"), Path::new("mem.txt"))
+                .unwrap_err()
+                .to_string();
+            println!("{e}");
+            assert!(e.contains(&format!("mem.txt:{line}:")) && e.contains("`residual:`"));
+        }
     }
 }
