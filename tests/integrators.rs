@@ -94,6 +94,25 @@ fn band_levels_db(x: &[f64]) -> Vec<(f64, f64)> {
     third_octave_levels_db(x, 50.0, 5000.0)
 }
 
+/// [`third_octave_levels_db`] from 1 kHz to `last_hz` of `seconds` of `p` from sample `skip`,
+/// faded out over its second half (a strike starts from silence: the onset needs no window).
+fn faded_third_octaves_db(p: &[f64], skip: usize, seconds: f64, last_hz: f64) -> Vec<(f64, f64)> {
+    let n = (seconds * FS) as usize;
+    let x: Vec<f64> = p[skip..skip + n]
+        .iter()
+        .enumerate()
+        .map(|(k, v)| {
+            let t = k as f64 / n as f64 - 0.5;
+            v * if t < 0.0 {
+                1.0
+            } else {
+                (std::f64::consts::PI * t).cos().powi(2)
+            }
+        })
+        .collect();
+    third_octave_levels_db(&x, 1000.0, last_hz)
+}
+
 /// Level (dB) of `x` (at 48 kHz) in third-octave bands centred from `first_hz` to `last_hz`.
 fn third_octave_levels_db(x: &[f64], first_hz: f64, last_hz: f64) -> Vec<(f64, f64)> {
     let n = x.len();
@@ -541,21 +560,7 @@ fn string_modes_to_20_khz_sound_without_aliasing() {
                 "pressure" => rec.pressure_delay_s,
                 _ => rec.delay_s,
             };
-            let skip = (delay_s * FS).round() as usize;
-            let n = (0.2 * FS) as usize;
-            let x: Vec<f64> = p[skip..skip + n]
-                .iter()
-                .enumerate()
-                .map(|(k, v)| {
-                    let t = k as f64 / n as f64 - 0.5;
-                    v * if t < 0.0 {
-                        1.0
-                    } else {
-                        (std::f64::consts::PI * t).cos().powi(2)
-                    }
-                })
-                .collect();
-            third_octave_levels_db(&x, 1000.0, 16_000.0)
+            faded_third_octaves_db(&p, (delay_s * FS).round() as usize, 0.2, 16_000.0)
         };
         let mut heard_above = 0;
         for (what, channel) in [("bridge force", force), ("pressure", pressure)] {
@@ -623,21 +628,12 @@ fn the_boards_dropped_modes_sound_alike_on_both_engines() {
         let bands = |preset: &unacorda::config::preset::LoadedPreset, i: Integrator| {
             let rec = simulate_with(preset, i, strike, None, 0.55, |_| {}).unwrap();
             let p = rec.channel(|f| f.pressure_right_pa);
-            let skip = (rec.pressure_delay_s * FS).round() as usize;
-            let n = (0.5 * FS) as usize;
-            let x: Vec<f64> = p[skip..skip + n]
-                .iter()
-                .enumerate()
-                .map(|(k, v)| {
-                    let t = k as f64 / n as f64 - 0.5;
-                    v * if t < 0.0 {
-                        1.0
-                    } else {
-                        (std::f64::consts::PI * t).cos().powi(2)
-                    }
-                })
-                .collect();
-            third_octave_levels_db(&x, 1000.0, 8000.0)
+            faded_third_octaves_db(
+                &p,
+                (rec.pressure_delay_s * FS).round() as usize,
+                0.5,
+                8000.0,
+            )
         };
         let [r, e, r0] = [
             bands(&preset, Integrator::Rk4),

@@ -402,6 +402,17 @@ fn struck_at_listener(
         .heard
 }
 
+/// `keys` of the concert keyboard struck at MIDI velocity 80 (the exact engine, 0.5 s, at the
+/// listener above the board): each one's A-weighted level re the mean of the recorded keys of
+/// A3–A4 (A3, C4, D#4, F#4, A4), as the recording's balance is taken.
+fn concert_levels_re_middle_db(keys: &[usize]) -> Vec<f64> {
+    let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
+    let keyboard = Scaling::resolve("concert").unwrap();
+    let level = |key: usize| struck_at_listener(&keyboard, key, speed).a_level_db;
+    let middle = [37, 40, 43, 46, 49].map(level).iter().sum::<f64>() / 5.0;
+    keys.iter().map(|&k| level(k) - middle).collect()
+}
+
 #[test]
 fn the_concert_treble_carries_as_the_recorded_grands_does() {
     // The A-weighted level of the first 0.5 s re A3–A4 (MIDI velocity 80, the exact engine) of
@@ -415,12 +426,8 @@ fn the_concert_treble_carries_as_the_recorded_grands_does() {
     // `the_concert_treble_grows_louder_with_velocity_as_the_recorded_grand`) C8 −13.9 dB, and
     // this fails.
     use unacorda::analysis::recorded::recorded_key;
-    let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
-    let keyboard = Scaling::resolve("concert").unwrap();
-    let level = |key: usize| struck_at_listener(&keyboard, key, speed).a_level_db;
-    let middle = [37, 40, 43, 46, 49].map(level).iter().sum::<f64>() / 5.0;
-    for key in [73, 76, 79, 82, 85, 88] {
-        let ours = level(key) - middle;
+    let keys = [73, 76, 79, 82, 85, 88];
+    for (key, ours) in keys.into_iter().zip(concert_levels_re_middle_db(&keys)) {
         let theirs = recorded_key(key).unwrap().a_level_re_middle_db.unwrap();
         println!(
             "{}: {ours:+.1} dB re A3–A4 (recorded {theirs:+.1})",
@@ -443,12 +450,8 @@ fn the_keys_round_c_sharp_6_carry_as_their_neighbours() {
     // C#6 came out at −8.1 dB, D6 −6.9. Fitted on each key's partials: −4.6 and 0.0 dB (with the
     // board's dropped modes heard −2.5 and −0.1; C6 +1.8, D#6 +4.7, E6 +4.6). Held:
     // every key within issue 17's ±6 dB.
-    let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
-    let keyboard = Scaling::resolve("concert").unwrap();
-    let level = |key: usize| struck_at_listener(&keyboard, key, speed).a_level_db;
-    let middle = [37, 40, 43, 46, 49].map(level).iter().sum::<f64>() / 5.0;
-    for key in 64..=68 {
-        let ours = level(key) - middle;
+    let keys = [64, 65, 66, 67, 68];
+    for (key, ours) in keys.into_iter().zip(concert_levels_re_middle_db(&keys)) {
         println!("{}: {ours:+.1} dB re A3–A4", unacorda::board::key_name(key));
         assert!(ours.abs() <= 6.0, "key {key}: {ours:+.1} dB");
     }

@@ -48,6 +48,14 @@ pub struct DroppedModes {
 }
 
 impl DroppedModes {
+    /// Dropped mode `j` (0-based) as an oscillator (Eq. 4).
+    pub fn oscillator(&self, j: usize) -> Oscillator {
+        Oscillator {
+            omega_rad_s: 2.0 * PI * self.freq_hz[j],
+            damping_ratio: self.damping_ratio[j],
+        }
+    }
+
     /// The radiating source of `channel` per unit force in direction `d` at the key's point,
     /// oscillating as `e^{lambda t}`: `sum_j phi_j,d (a_j lambda + b_j) / (lambda^2 + 2 zeta_j w_j
     /// lambda + w_j^2)` (`a`, `b` the weights), as `(re, im)`.
@@ -56,10 +64,10 @@ impl DroppedModes {
         let [a, b] = &self.weights[channel];
         let (mut re, mut im) = (0.0, 0.0);
         for j in 0..self.freq_hz.len() {
-            let w = 2.0 * PI * self.freq_hz[j];
-            let c = 2.0 * self.damping_ratio[j] * w;
+            let mode = self.oscillator(j);
+            let (c, w2) = (mode.damping_per_s(), mode.omega2());
             // lambda^2 + c lambda + w^2
-            let (dr, di) = (lr * lr - li * li + c * lr + w * w, 2.0 * lr * li + c * li);
+            let (dr, di) = (lr * lr - li * li + c * lr + w2, 2.0 * lr * li + c * li);
             // a lambda + b
             let (nr, ni) = (a[j] * lr + b[j], a[j] * li);
             let den = dr * dr + di * di;

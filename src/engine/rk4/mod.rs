@@ -193,9 +193,9 @@ impl<T: Real> Rk4Pool<T> {
         }
         if let Some(d) = dropped {
             for (j, i) in residual.clone().enumerate() {
-                let w = 2.0 * std::f64::consts::PI * d.freq_hz[j];
-                omega2[i] = T::from_f64(w * w);
-                damp[i] = T::from_f64(2.0 * d.damping_ratio[j] * w);
+                let mode = d.oscillator(j);
+                omega2[i] = T::from_f64(mode.omega2());
+                damp[i] = T::from_f64(mode.damping_per_s());
             }
         }
         let h = 1.0 / first.sample_rate_hz;
