@@ -107,11 +107,11 @@ fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
         // The same hammers but for the voicing: the felts' exponents 4.5 from A0 to C4, 3.75 at
         // C6, 2.6 at G#6 and 2 from C7 up, linear in key number between; their force at 1 mm of
         // compression the paper's felt's times 0.5 at A0, 2 at C2 and C4, 4 at C6, 1 at G#6, 2.5
-        // at C7, 3 at E7, 8 at F#7, 40 at A7, 100 at C8; the hammers' masses 11.5 g at
-        // A0, 6.5 at C2, 6.1 at C4, 4.5 at C6, 1.6 at G#6, 2.2 at C7, 2.13 at E7, 2.1 at F#7, 2.05
-        // at A7, 2.0 at C8; both log-linear in key number between
+        // at C7, 3 at E7, 8 at F#7, 40 at A7, 200 at Bb7, 100 at C8; the hammers' masses 11.5 g
+        // at A0, 6.5 at C2, 6.1 at C4, 4.5 at C6, 1.6 at G#6, 2.2 at C7, 2.13 at E7, 2.1 at F#7,
+        // 2.05 at A7, 3.0 at Bb7, 2.0 at C8; both log-linear in key number between
         // (docs/parameters.md).
-        let points: [(usize, f64, f64, f64); 10] = [
+        let points: [(usize, f64, f64, f64); 11] = [
             (1, 0.5, 11.5e-3, 4.5),
             (16, 2.0, 6.5e-3, 4.5),
             (40, 2.0, 6.1e-3, 4.5),
@@ -121,6 +121,7 @@ fn the_concert_keyboard_is_the_paper_keyboard_but_for_what_it_sets() {
             (80, 3.0, 2.13e-3, 2.0),
             (82, 8.0, 2.1e-3, 2.0),
             (85, 40.0, 2.05e-3, 2.0),
+            (86, 200.0, 3.0e-3, 2.0),
             (88, 100.0, 2.0e-3, 2.0),
         ];
         let (a, b) = points

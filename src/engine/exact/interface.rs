@@ -44,19 +44,25 @@ use faer::c64;
 pub(crate) const SHARED_BELOW_HZ: f64 = 1500.0;
 
 /// Taps of the correction of the shared board's radiating source (odd: a whole delay).
-const SOURCE_TAPS: usize = 7;
+const SOURCE_TAPS: usize = 11;
 
 /// The delay of the pool's radiating source (steps): the shared board's correction's, which the
 /// voices' part keeps too.
 pub(crate) const SOURCE_DELAY_STEPS: usize = (SOURCE_TAPS - 1) / 2;
 
 /// The pool's radiating source as heard. The shared board's modes take each key's force linear
-/// over a step (above), which reaches their source as `sinc²(ω h / 2)` of what the continuous
-/// force would give (at 48 kHz: −1.4 dB at 10 kHz, −3.3 at 16, −5.4 at 20 kHz; against RK4 on
-/// Bb7 and C8, `tests/integrators.rs`). Their part goes through a linear-phase FIR fitted to
-/// `1 / sinc²` (within 0.07 % to 5 kHz, 1.2 % at 15 kHz, 3.7 % at 20 kHz), the voices' part —
-/// integrated exactly — is delayed as much, [`SOURCE_DELAY_STEPS`]. Touched by the thread that
-/// steps the pool.
+/// over a step (above): the samples joined by straight lines, whose spectrum is the samples'
+/// times `sinc²(ω h / 2)`, repeated every `2π / h`. Read again at the steps, a mode's source
+/// gathers every repeat: above its own frequency (every shared mode is under
+/// [`SHARED_BELOW_HZ`]) its velocity is a mass's, `1 / (jω)`, and with `x = ω h / 2` the repeats
+/// sum to `Σ_k x/(x + kπ) · sin²x/(x + kπ)² = x cot x` of what the continuous force gives (at
+/// 48 kHz: −1.4 dB at 10 kHz, −4.4 at 16, −9.1 at 20 kHz). `sinc²` alone, the first term, left
+/// C4's and C6's 12.7–16 kHz bands 0.7 and 1.1 dB under RK4's at 20 × f_max
+/// (`tests/integrators.rs`). Their part goes through a linear-phase FIR fitted to `tan x / x`
+/// (within 1 % to 16 kHz, 2.1 % at 18 kHz, 5.9 % at 20 kHz); the modes' displacement, which
+/// the source weighs less by `omega_m / omega`, is left to it too. The voices' part — integrated
+/// exactly — is delayed as much, [`SOURCE_DELAY_STEPS`]. Touched by the thread that steps the
+/// pool.
 #[derive(Debug, Clone)]
 pub(crate) struct HeardSource {
     /// The board's part, per channel, through the correction.
@@ -72,7 +78,7 @@ impl HeardSource {
         let delay = SOURCE_DELAY_STEPS as f64;
         let taps = least_squares_fir(FIT_BAND, |wh| {
             let x = 0.5 * wh;
-            let gain = (x / x.sin()).powi(2);
+            let gain = x.tan() / x;
             (gain * (wh * delay).cos(), -gain * (wh * delay).sin())
         });
         HeardSource {
