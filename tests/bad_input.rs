@@ -583,3 +583,31 @@ fn bench_writes_every_printed_figure_as_json() {
     assert_eq!(exact, [0, 88]);
     assert!(report["memory"][0]["bytes_per_voice"].as_u64().unwrap() > 0);
 }
+
+#[test]
+fn pools_refuse_keys_that_stand_on_different_boards() {
+    // Every key of one instrument shares its soundboard, the board's dropped modes included:
+    // RK4 carries them once for all its keys (`engine::pool::check_keys`). C7 of the concert
+    // keyboard beside the same key without its dropped modes, in either order, or with its
+    // first dropped mode 1 % higher: both engines refuse the pair, where RK4 stepped the first
+    // key's dropped modes and silently left the other key's force off them (or carried none).
+    use unacorda::engine::{exact::ExactPool, BuildError, Rk4Pool, VoicePool};
+    let preset = Scaling::resolve("concert").unwrap().key_preset(76).unwrap();
+    let with = preset.unison_spec();
+    let (mut without, mut moved) = (with.clone(), with.clone());
+    without.dropped = None;
+    moved.dropped.as_mut().unwrap().freq_hz[0] *= 1.01;
+    let rate = preset.output_rate_hz();
+    for specs in [
+        [with.clone(), without.clone()],
+        [without, with.clone()],
+        [with, moved],
+    ] {
+        let refused = [
+            Rk4Pool::build_pool(&specs, 2, rate).err(),
+            ExactPool::build_pool(&specs, 2, rate).err(),
+        ];
+        println!("{refused:?}");
+        assert_eq!(refused, [const { Some(BuildError::SharedBoard) }; 2]);
+    }
+}

@@ -448,17 +448,17 @@ fn every_concert_key_carries_within_six_db_of_the_middle() {
             );
         }
     }
-    let (mut low, mut high) = ((f64::INFINITY, 0), (f64::NEG_INFINITY, 0));
-    for (&key, &level) in keys.iter().zip(&levels) {
-        low = if level < low.0 { (level, key) } else { low };
-        high = if level > high.0 { (level, key) } else { high };
-    }
+    let by_level = |a: &(&usize, &f64), b: &(&usize, &f64)| a.1.total_cmp(b.1);
+    let (low, high) = (
+        keys.iter().zip(&levels).min_by(by_level).unwrap(),
+        keys.iter().zip(&levels).max_by(by_level).unwrap(),
+    );
     println!(
         "88 keys re A3–A4: from {:+.1} dB ({}) to {:+.1} dB ({})",
-        low.0,
-        name(low.1),
-        high.0,
-        name(high.1)
+        low.1,
+        name(*low.0),
+        high.1,
+        name(*high.0)
     );
     for (&key, &level) in keys.iter().zip(&levels) {
         assert!(level.abs() <= 6.0, "{}: {level:+.1} dB", name(key));

@@ -56,10 +56,16 @@ pub fn check_keys(
     if voices == 0 {
         return Err(BuildError::NoVoice);
     }
-    if specs
-        .iter()
-        .any(|s| s.sample_rate_hz != first.sample_rate_hz || s.board != first.board)
-    {
+    // The board's dropped modes are one set of states for every key (RK4): every key's must be
+    // the same modes, at its own point.
+    let same_dropped = |s: &UnisonSpec| match (&s.dropped, &first.dropped) {
+        (None, None) => true,
+        (Some(d), Some(e)) => d.same_modes(e),
+        _ => false,
+    };
+    if specs.iter().any(|s| {
+        s.sample_rate_hz != first.sample_rate_hz || s.board != first.board || !same_dropped(s)
+    }) {
         return Err(BuildError::SharedBoard);
     }
     if prepared != specs.len() {

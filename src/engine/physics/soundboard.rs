@@ -56,6 +56,14 @@ impl DroppedModes {
         }
     }
 
+    /// Whether `other` holds the same modes, heard alike, wherever its point (two keys on one
+    /// board).
+    pub fn same_modes(&self, other: &DroppedModes) -> bool {
+        self.freq_hz == other.freq_hz
+            && self.damping_ratio == other.damping_ratio
+            && self.weights == other.weights
+    }
+
     /// The radiating source of `channel` per unit force in direction `d` at the key's point,
     /// oscillating as `e^{lambda t}`: `sum_j phi_j,d (a_j lambda + b_j) / (lambda^2 + 2 zeta_j w_j
     /// lambda + w_j^2)` (`a`, `b` the weights), as `(re, im)`.

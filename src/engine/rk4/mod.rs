@@ -65,6 +65,13 @@ struct Model<T> {
     h: f64,
 }
 
+impl<T> Model<T> {
+    /// The board's modes and its dropped modes, which follow them.
+    fn board_and_residual(&self) -> Range<usize> {
+        self.board.start..self.residual.end
+    }
+}
+
 /// Strings of up to 88 keys on one shared soundboard (paper Eq. 10, the board coupling every
 /// string of every sounding key), with their hammers and dampers.
 ///
@@ -456,8 +463,7 @@ impl<T: Real> Rk4Pool<T> {
                 n += 1;
             }
         }
-        // The board and its dropped modes, which follow it.
-        self.live[n] = self.model.board.start..self.model.residual.end;
+        self.live[n] = self.model.board_and_residual();
         self.n_live = n + 1;
         #[cfg(target_arch = "x86_64")]
         if self.fast_path {

@@ -127,6 +127,6 @@ impl<T: Real> Policy for Rk4Pool<T> {
     }
 
     fn rest_board(&mut self) {
-        self.rest(self.model.board.start..self.model.residual.end);
+        self.rest(self.model.board_and_residual());
     }
 }

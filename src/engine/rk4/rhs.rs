@@ -119,12 +119,11 @@ pub(super) fn evaluate<T: Real, const SIMD: bool>(
         for d in 0..3 {
             T::axpy::<SIMD>(ab, &km.board_shape[d], T::from_f64(total[d]));
         }
-        // ... and the board's dropped modes, which do not push back.
-        if km.residual_shape[0].len() == m.residual.len() && !m.residual.is_empty() {
-            let ar = &mut acc[m.residual.clone()];
-            for d in 0..3 {
-                T::axpy::<SIMD>(ar, &km.residual_shape[d], T::from_f64(total[d]));
-            }
+        // ... and the board's dropped modes, which do not push back (every key's at its own point,
+        // the same modes: `pool::check_keys`; none, empty).
+        let ar = &mut acc[m.residual.clone()];
+        for d in 0..3 {
+            T::axpy::<SIMD>(ar, &km.residual_shape[d], T::from_f64(total[d]));
         }
         // Hammer (Eq. 8, 14): felt force on each struck string, reaction on the hammer mass.
         if states[k].hammer_on {
