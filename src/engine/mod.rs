@@ -101,11 +101,24 @@ pub trait StoredKey: Sized {
     fn to_bytes(&self) -> Vec<u8> {
         Vec::new()
     }
-    /// The key [`StoredKey::to_bytes`] wrote for `spec`, or `None` if the bytes do not read
-    /// back whole for it.
-    fn from_bytes(_spec: &UnisonSpec, _bytes: &[u8]) -> Option<Self> {
-        None
+    /// The key [`StoredKey::to_bytes`] wrote for `spec`, or why the bytes are not one.
+    fn from_bytes(_spec: &UnisonSpec, _bytes: &[u8]) -> Result<Self, StoredKeyError> {
+        Err(StoredKeyError::Layout)
     }
+}
+
+/// Why bytes are not a stored key of a spec.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum StoredKeyError {
+    /// Not laid out as this build writes this spec's key: another version, cut short or longer,
+    /// or counts (modes, strings, damper channels) that are another key's.
+    #[error("the bytes are not laid out as this key's")]
+    Layout,
+    /// Laid out right, but no key of this engine has such values: a mode that grows, a value
+    /// that is not a finite number, a negative energy (a key read back is played as it is, so it
+    /// is checked first).
+    #[error("the bytes do not describe a key that can be played")]
+    Meaning,
 }
 
 impl StoredKey for rk4::Rk4Key<f64> {}
@@ -129,7 +142,7 @@ impl StoredKey for exact::ExactKey {
     fn to_bytes(&self) -> Vec<u8> {
         exact::ExactKey::to_bytes(self)
     }
-    fn from_bytes(spec: &UnisonSpec, bytes: &[u8]) -> Option<Self> {
+    fn from_bytes(spec: &UnisonSpec, bytes: &[u8]) -> Result<Self, StoredKeyError> {
         exact::ExactKey::from_bytes(spec, bytes)
     }
 }
