@@ -4,7 +4,8 @@
 //! later activations clone it. One piano is built at a time: an activation that asks for the
 //! piano a background build ([`crate::rebuild`]) is making waits for it and clones it. Hosts run
 //! one engine per host rate: from 44.1 to 192 kHz the engine runs at the host's rate; below, at
-//! the smallest multiple of it from 44.1 kHz, decimated by the synth.
+//! the smallest multiple of it from 44.1 kHz, decimated by the synth. Kept keys the cache refused
+//! (and prepared afresh) are told to the host by the next activation, on the main thread.
 
 use std::sync::{Arc, Mutex};
 use unacorda::config::output::OutputSettings;
@@ -45,6 +46,15 @@ type Built = Arc<(Pianos, OutputSettings)>;
 static PIANOS: Mutex<Vec<(Key, Built)>> = Mutex::new(Vec::new());
 /// Held while a piano is built, so that no two threads build at once (the same threads).
 static BUILDING: Mutex<()> = Mutex::new(());
+/// What builds found the user should know (kept keys refused and prepared afresh), left by
+/// whichever thread built (an activation's, or a background build's) for the next activation to
+/// tell the host on the main thread ([`take_warnings`]).
+static WARNINGS: Mutex<Vec<String>> = Mutex::new(Vec::new());
+
+/// The warnings builds left since the last call (main thread, at activation).
+pub fn take_warnings() -> Vec<String> {
+    std::mem::take(&mut *WARNINGS.lock().unwrap_or_else(|e| e.into_inner()))
+}
 
 /// Engine steps per host frame at `host_rate_hz`, or why it cannot play there.
 pub fn oversampling(host_rate_hz: f64) -> Result<u32, String> {
@@ -133,5 +143,9 @@ fn build(key: Key) -> Result<(Pianos, OutputSettings), String> {
             Piano::build_with(&scaling, &keys, voices, cache.as_ref()).map_err(failed)?,
         )),
     };
+    if let Some(warning) = cache.as_ref().and_then(|c| c.refusal_warning()) {
+        let mut warnings = WARNINGS.lock().unwrap_or_else(|e| e.into_inner());
+        warnings.push(format!("unacorda: {warning}"));
+    }
     Ok((piano, scaling.output_settings()))
 }

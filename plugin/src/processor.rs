@@ -131,6 +131,9 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             values.voices(),
             values.integrator(),
         );
+        for warning in crate::prepare::take_warnings() {
+            main_thread.warn(&warning);
+        }
         let (engine, latency) = match prepared.and_then(start) {
             Ok((engine, latency)) => {
                 *shared

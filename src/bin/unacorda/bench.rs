@@ -223,6 +223,7 @@ fn callback<E: VoicePool>(
     {
         piano = build(report)?;
     }
+    crate::warn_refused(cache.as_ref());
     let settings = scaling.output_settings();
     let deadline = BLOCK as f64 / settings.rate_hz;
     println!(
@@ -338,6 +339,7 @@ fn damped(keyboard: &str, model: FeltModel, seconds: f64, voices: usize) -> Resu
     let keys: Vec<usize> = (1..=damped_keys).collect();
     let cache = unacorda::keycache::KeyCache::from_env();
     let piano = Piano::<ExactPool>::build_with(&scaling, &keys, voices, cache.as_ref())?;
+    crate::warn_refused(cache.as_ref());
     let settings = scaling.output_settings();
     let deadline = BLOCK as f64 / settings.rate_hz;
     let mut medians = [0.0; 2];

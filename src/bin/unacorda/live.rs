@@ -172,6 +172,7 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
             );
         }
     }
+    crate::warn_refused(cache.as_ref());
     let settings = scaling.output_settings();
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
     if cores == 2 {

@@ -192,6 +192,13 @@ impl From<IntegratorArg> for unacorda::engine::Integrator {
     }
 }
 
+/// Say (once the keys are built) how many kept keys were refused and prepared afresh, if any.
+fn warn_refused(cache: Option<&unacorda::keycache::KeyCache>) {
+    if let Some(warning) = cache.and_then(|c| c.refusal_warning()) {
+        eprintln!("warning: {warning}");
+    }
+}
+
 fn progress_bar(seconds: f64, label: &str) -> ProgressBar {
     // Anything that simulates more than a second shows progress.
     if seconds <= 1.0 {
@@ -278,6 +285,7 @@ fn render_midi_file<E: unacorda::engine::VoicePool>(
         },
     );
     pb.finish_and_clear();
+    warn_refused(cache.as_ref());
     if let Some(e) = failure {
         return Err(e.into());
     }
