@@ -197,7 +197,9 @@ fn callback<E: VoicePool>(
     let build = |report: &mut Report| -> Result<Piano<E>> {
         let hits = cache.as_ref().map_or(0, |c| c.hits.load(Ordering::Relaxed));
         let started = std::time::Instant::now();
-        let piano = Piano::<E>::build_with(scaling, &keys, max_voices, cache.as_ref())?;
+        let piano = crate::keys_bar::building(cache.as_ref(), keys.len(), |_| {
+            Piano::<E>::build_with(scaling, &keys, max_voices, cache.as_ref())
+        })?;
         let build_s = started.elapsed().as_secs_f64();
         let from_cache = cache.as_ref().map_or(0, |c| c.hits.load(Ordering::Relaxed)) - hits;
         if cores == 1 {
@@ -338,7 +340,9 @@ fn damped(keyboard: &str, model: FeltModel, seconds: f64, voices: usize) -> Resu
     let damped_keys = scaling.scaling.layout.dampers_until_key;
     let keys: Vec<usize> = (1..=damped_keys).collect();
     let cache = unacorda::keycache::KeyCache::from_env();
-    let piano = Piano::<ExactPool>::build_with(&scaling, &keys, voices, cache.as_ref())?;
+    let piano = crate::keys_bar::building(cache.as_ref(), keys.len(), |_| {
+        Piano::<ExactPool>::build_with(&scaling, &keys, voices, cache.as_ref())
+    })?;
     crate::warn_refused(cache.as_ref());
     let settings = scaling.output_settings();
     let deadline = BLOCK as f64 / settings.rate_hz;

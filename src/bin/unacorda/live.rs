@@ -158,7 +158,9 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     eprintln!("building {} keys on one soundboard…", keys.len());
     let started = std::time::Instant::now();
     let cache = unacorda::keycache::KeyCache::from_env();
-    let piano = Piano::<E>::build_with(&scaling, &keys, args.voices, cache.as_ref())?;
+    let piano = crate::keys_bar::building(cache.as_ref(), keys.len(), |_| {
+        Piano::<E>::build_with(&scaling, &keys, args.voices, cache.as_ref())
+    })?;
     if let Some(cache) = &cache {
         let (hits, stored) = (
             cache.hits.load(Ordering::Relaxed),

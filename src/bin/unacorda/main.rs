@@ -173,6 +173,7 @@ enum Command {
 
 mod analyze;
 mod bench;
+mod keys_bar;
 mod live;
 mod modes;
 
@@ -243,7 +244,6 @@ fn render_midi_file<E: unacorda::engine::VoicePool>(
     out: &Path,
     length_s: f64,
 ) -> Result<()> {
-    let pb = progress_bar(length_s, "rendering");
     let started = std::time::Instant::now();
     let settings = scaling.output_settings();
     let mut wav = WavStream::create(out, settings.rate_hz as u32, settings.channels)?;
@@ -266,25 +266,47 @@ fn render_midi_file<E: unacorda::engine::VoicePool>(
         voices,
         cores,
     };
-    let r = unacorda::render::render_midi_into::<E>(
-        keyboard,
-        events,
-        offline,
-        |f| pb.set_position((f * 1000.0) as u64),
-        None,
-        |block| {
-            peak = block.iter().fold(peak, |m, s| m.max(s.abs()));
-            if let Err(e) = wav.write(block) {
-                failure = Some(e);
-                return ControlFlow::Break(());
-            }
-            if interrupted.load(Ordering::Relaxed) {
-                return ControlFlow::Break(());
-            }
-            ControlFlow::Continue(())
-        },
-    );
-    pb.finish_and_clear();
+    // The keys the render prepares: those the file plays.
+    let mut keys: Vec<usize> = events
+        .iter()
+        .filter_map(|e| match e.event {
+            unacorda::midi::Event::NoteOn { note, .. } => unacorda::midi::piano_key(note),
+            _ => None,
+        })
+        .collect();
+    keys.sort_unstable();
+    keys.dedup();
+    // The render's bar, drawn from its first block on, once the keys' bar has ended.
+    let mut pb = None;
+    let r = keys_bar::building(cache.as_ref(), keys.len(), |keys_done| {
+        unacorda::render::render_midi_into::<E>(
+            keyboard,
+            events,
+            offline,
+            |f| {
+                pb.get_or_insert_with(|| {
+                    keys_done();
+                    progress_bar(length_s, "rendering")
+                })
+                .set_position((f * 1000.0) as u64)
+            },
+            None,
+            |block| {
+                peak = block.iter().fold(peak, |m, s| m.max(s.abs()));
+                if let Err(e) = wav.write(block) {
+                    failure = Some(e);
+                    return ControlFlow::Break(());
+                }
+                if interrupted.load(Ordering::Relaxed) {
+                    return ControlFlow::Break(());
+                }
+                ControlFlow::Continue(())
+            },
+        )
+    });
+    if let Some(pb) = pb {
+        pb.finish_and_clear();
+    }
     warn_refused(cache.as_ref());
     if let Some(e) = failure {
         return Err(e.into());
