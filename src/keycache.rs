@@ -89,8 +89,8 @@ fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
 /// against accidents, not against someone who means harm (whoever can write the directory can
 /// write a valid checksum; the engine's check is what keeps unplayable values out). CRC-32 sees
 /// every burst of up to 32 damaged bits and any one or two flipped bits in a file of any size a
-/// key has, lets other damage through once in 2^32, and is computed with the processor's
-/// carry-less multiply, far faster than the disk reads. A 64-bit hash would only lower that
+/// key has, lets other damage through once in 2^32, and is computed (with the processor's
+/// carry-less multiply where it has one) far faster than the disk reads. A 64-bit hash would only lower that
 /// chance, which accidents do not need; the FNV hash the names use reads a byte at a time.
 fn checksum(identity: u64, payload: &[u8]) -> u32 {
     let mut crc = crc32fast::Hasher::new();
