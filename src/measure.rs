@@ -13,10 +13,14 @@ use crate::midi::{Event, Pedal};
 use crate::play::Piano;
 use std::time::{Duration, Instant};
 
+/// MIDI velocity of every key the measurements strike.
+pub const VELOCITY: u8 = 80;
+
 /// A synth on `piano` with `voices` keys sounding under the sustain pedal — spread over the
-/// keyboard from A0 upwards, struck 48 frames (1 ms at 48 kHz) apart at MIDI velocity 80 — run
-/// until 50 ms after the last strike, so that every hammer has left its strings. `piano` must
-/// hold all 88 keys and at least `voices` voices.
+/// keyboard from A0 upwards, struck 48 frames (1 ms at 48 kHz) apart at MIDI velocity
+/// [`VELOCITY`] — run until 50 ms after the last strike, so that every hammer has left its
+/// strings ([`loaded_scenario`] says it in words). `piano` must hold all 88 keys and at least
+/// `voices` voices.
 pub fn loaded_synth<E: VoicePool>(
     piano: &Piano<E>,
     settings: OutputSettings,
@@ -32,7 +36,13 @@ pub fn loaded_synth<E: VoicePool>(
     let mut events = vec![(0, sustain)];
     for v in 0..voices {
         let note = (21 + v * 88 / voices.max(1)) as u8;
-        events.push((v as u64 * 48, Event::NoteOn { note, velocity: 80 }));
+        events.push((
+            v as u64 * 48,
+            Event::NoteOn {
+                note,
+                velocity: VELOCITY,
+            },
+        ));
     }
     for (frame, event) in events {
         // The queue holds 4096 events; at most 257 are pushed.
@@ -44,6 +54,58 @@ pub fn loaded_synth<E: VoicePool>(
         synth.process(&mut out, 1);
     }
     (synth, handle)
+}
+
+/// What [`loaded_synth`] plays with `voices` keys, in words: the scenario of a callback figure
+/// (`None`: with "N keys", a count given elsewhere).
+pub fn loaded_scenario(voices: Option<usize>) -> String {
+    let keys = match voices {
+        Some(1) => format!("1 key (A0) struck at velocity {VELOCITY}"),
+        Some(n) => format!("{n} keys struck 1 ms apart at velocity {VELOCITY} spread from A0"),
+        None => format!("N keys struck 1 ms apart at velocity {VELOCITY} spread from A0"),
+    };
+    format!("pedalled: sustain down, {keys}, measured from 50 ms after the last strike")
+}
+
+/// A pianist's chord held under the pedal (MIDI notes): C2 G2 E3 C4 E4 G4 C5, C major over
+/// three octaves with the bass in octaves, the hands' usual spread.
+pub const HELD_CHORD: [u8; 7] = [36, 43, 52, 60, 64, 67, 72];
+
+/// A synth on `piano` at its first frame, with the sustain pedal down and `notes` about to be
+/// struck together at MIDI velocity [`VELOCITY`] and then held (never released). `piano` must
+/// hold the notes' keys and at least as many voices as notes.
+pub fn struck_chord_synth<E: VoicePool>(
+    piano: &Piano<E>,
+    settings: OutputSettings,
+    notes: &[u8],
+) -> (Synth<E>, SynthHandle<E>) {
+    let (synth, mut handle) =
+        Synth::new(piano.clone(), settings, EVENT_QUEUE).expect("the keyboard's rates match");
+    let sustain = Event::Pedal {
+        pedal: Pedal::Sustain,
+        down: true,
+    };
+    let strikes = notes.iter().map(|&note| Event::NoteOn {
+        note,
+        velocity: VELOCITY,
+    });
+    for event in std::iter::once(sustain).chain(strikes) {
+        // The queue holds 4096 events; a chord pushes a few.
+        let _ = handle.schedule(Scheduled { frame: 0, event });
+    }
+    (synth, handle)
+}
+
+/// The callbacks that started within one window of time after a strike.
+#[derive(Debug, Clone)]
+pub struct Window {
+    /// The window's bounds (s after the synth's first frame).
+    pub from_s: f64,
+    pub to_s: f64,
+    /// Each callback's time (s), sorted.
+    pub times_s: Vec<f64>,
+    /// Voices simulated after the window's last callback.
+    pub active_voices: usize,
 }
 
 /// Time each of `blocks` callbacks of `frames` frames at `rate_hz` (s), sorted — as `play`'s audio
@@ -58,18 +120,77 @@ pub fn block_times_s<E: VoicePool>(
     blocks: usize,
 ) -> (Vec<f64>, bool) {
     let period = Duration::try_from_secs_f64(frames as f64 / rate_hz).unwrap_or_default();
+    on_real_time_thread(synth, |synth| {
+        let mut out = vec![0f32; frames];
+        paced_times_s(period, blocks, || {
+            let t = Instant::now();
+            synth.process(&mut out, 1);
+            t.elapsed().as_secs_f64()
+        })
+    })
+}
+
+/// Time every callback of `frames` frames at `rate_hz` from the synth's current frame until
+/// the last of `bounds_s` (s after the synth's first frame, rising), paced as [`block_times_s`]
+/// paces them, and group them by the window between two consecutive bounds in which each
+/// started (a synth made by [`struck_chord_synth`]: the windows after the strike). Also says
+/// whether the timing thread's real-time priority was granted.
+pub fn windowed_block_times_s<E: VoicePool>(
+    synth: &mut Synth<E>,
+    frames: usize,
+    rate_hz: f64,
+    bounds_s: &[f64],
+) -> (Vec<Window>, bool) {
+    let period = Duration::try_from_secs_f64(frames as f64 / rate_hz).unwrap_or_default();
+    let end_frame = (bounds_s.last().copied().unwrap_or(0.0) * rate_hz).ceil() as u64;
+    let blocks = (end_frame.saturating_sub(synth.frame()) as usize).div_ceil(frames.max(1));
+    on_real_time_thread(synth, |synth| {
+        // Each callback's start (s) and the voices simulated after it, beside its time.
+        let mut started_s = Vec::with_capacity(blocks);
+        let mut active = Vec::with_capacity(blocks);
+        let mut out = vec![0f32; frames];
+        let times = paced_unsorted_s(period, blocks, || {
+            started_s.push(synth.frame() as f64 / rate_hz);
+            let t = Instant::now();
+            synth.process(&mut out, 1);
+            let took = t.elapsed().as_secs_f64();
+            let inst = &synth.piano().instrument;
+            active.push((0..inst.n_voices()).filter(|&k| inst.is_active(k)).count());
+            took
+        });
+        bounds_s
+            .windows(2)
+            .map(|w| {
+                let within: Vec<usize> = (0..times.len())
+                    .filter(|&b| (w[0]..w[1]).contains(&started_s[b]))
+                    .collect();
+                let mut times_s: Vec<f64> = within.iter().map(|&b| times[b]).collect();
+                times_s.sort_by(f64::total_cmp);
+                Window {
+                    from_s: w[0],
+                    to_s: w[1],
+                    times_s,
+                    active_voices: within.last().map_or(0, |&b| active[b]),
+                }
+            })
+            .collect()
+    })
+}
+
+/// Run `work` on `synth` on a thread of its own at real-time priority where the system grants
+/// it (the synth's helper thread, if any, asked for it too), as an audio device's thread runs
+/// the callbacks; returns what `work` returns and whether this thread's priority was granted.
+fn on_real_time_thread<E: VoicePool, R: Send>(
+    synth: &mut Synth<E>,
+    work: impl FnOnce(&mut Synth<E>) -> R + Send,
+) -> (R, bool) {
     synth.ask_real_time_priority();
     std::thread::scope(|scope| {
         let measure = scope.spawn(|| {
             let priority = Promotion::default();
             priority.ask();
-            let mut out = vec![0f32; frames];
-            let times = paced_times_s(period, blocks, || {
-                let t = Instant::now();
-                synth.process(&mut out, 1);
-                t.elapsed().as_secs_f64()
-            });
-            (times, priority.granted())
+            let result = work(synth);
+            (result, priority.granted())
         });
         measure.join().expect("the measuring thread does not panic")
     })
@@ -78,9 +199,16 @@ pub fn block_times_s<E: VoicePool>(
 /// Run `block` (which returns the seconds it took to compute) `blocks` times, one every
 /// `period` as a device asks for them (each started on time, or at once after one that ran
 /// late), and return the times, sorted.
-pub fn paced_times_s(period: Duration, blocks: usize, mut block: impl FnMut() -> f64) -> Vec<f64> {
+pub fn paced_times_s(period: Duration, blocks: usize, block: impl FnMut() -> f64) -> Vec<f64> {
+    let mut times = paced_unsorted_s(period, blocks, block);
+    times.sort_by(f64::total_cmp);
+    times
+}
+
+/// [`paced_times_s`]'s times in the order the blocks ran.
+fn paced_unsorted_s(period: Duration, blocks: usize, mut block: impl FnMut() -> f64) -> Vec<f64> {
     let start = Instant::now();
-    let mut times: Vec<f64> = (1..=blocks as u32)
+    (1..=blocks as u32)
         .map(|b| {
             let took = block();
             let next = start + period * b;
@@ -90,9 +218,7 @@ pub fn paced_times_s(period: Duration, blocks: usize, mut block: impl FnMut() ->
             }
             took
         })
-        .collect();
-    times.sort_by(f64::total_cmp);
-    times
+        .collect()
 }
 
 /// Percentile `p` (0–1) of sorted, non-empty `x`.

@@ -471,7 +471,8 @@ fn play_refuses_bad_flags_and_missing_devices() {
 #[test]
 fn bench_writes_every_printed_figure_as_json() {
     // A short bench: the JSON holds each engine's callback figures for every voice count it
-    // printed, the same numbers as the text, and the real-time factors, start-up and memory.
+    // printed, the same numbers as the text, each with its scenario; the held chord's windows
+    // as printed; and the real-time factors, start-up and memory.
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("bench.json");
     let out = Command::new(env!("CARGO_BIN_EXE_unacorda"))
@@ -533,6 +534,7 @@ fn bench_writes_every_printed_figure_as_json() {
             "engine",
             "cores",
             "voices",
+            "scenario",
             "median_x_deadline",
             "p999_x_deadline",
             "misses",
@@ -561,6 +563,51 @@ fn bench_writes_every_printed_figure_as_json() {
             }
         }
         assert!(c["p999_x_deadline"].as_f64().unwrap() >= median);
+        let scenario = c["scenario"].as_str().unwrap();
+        assert!(
+            scenario.contains("sustain down") && scenario.contains(&format!("{} key", c["voices"])),
+            "{c}"
+        );
+    }
+    // The keyboard played: `concert` by default, what `play` sounds.
+    assert_eq!(report["keyboard"], "concert");
+    assert!(text.contains("live callback: concert keyboard, exact engine"));
+    // The held chord: each window's median and voices as printed, in order, over the 10 s after
+    // the strike.
+    let held: Vec<(f64, u64)> = text
+        .lines()
+        .filter(|l| l.contains("after the strike: median"))
+        .map(|l| {
+            let open = l.find('(').unwrap();
+            let median = l[open + 1..].split('×').next().unwrap().trim().parse();
+            let voices = l
+                .split(", ")
+                .last()
+                .unwrap()
+                .split(' ')
+                .next()
+                .unwrap()
+                .parse();
+            (median.unwrap(), voices.unwrap())
+        })
+        .collect();
+    let windows = report["held_chord"].as_array().unwrap();
+    println!("held chord: printed {held:?}");
+    assert_eq!(held.len(), 5);
+    assert_eq!(windows.len(), held.len());
+    assert_eq!(windows[0]["from_s"], 0.0);
+    assert_eq!(windows[4]["to_s"], 10.0);
+    for (w, (median, voices)) in windows.iter().zip(&held) {
+        let json = w["median_x_deadline"].as_f64().unwrap();
+        assert!(
+            (json - median).abs() <= 0.0051,
+            "printed {median}, JSON {w}"
+        );
+        assert_eq!(w["active_voices"].as_u64(), Some(*voices), "{w}");
+        assert!(w["scenario"]
+            .as_str()
+            .unwrap()
+            .contains("C2 G2 E3 C4 E4 G4 C5"));
     }
     let engines: Vec<&str> = report["voices"]
         .as_array()

@@ -1,10 +1,13 @@
 //! `bench`: the engine's speed on this machine, in the user's terms (real-time factors, voices
-//! within the deadline, FLOP rate against the core's peak, memory).
+//! within the deadline, FLOP rate against the core's peak, memory), each figure with the
+//! keyboard, engine, cores, voices, block and what is played that it was measured on.
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
-use std::path::Path;
+use std::path::PathBuf;
 use std::sync::atomic::Ordering;
+use std::time::Instant;
+use unacorda::board::key_name;
 use unacorda::config::preset::Preset;
 use unacorda::config::scaling::{LoadedScaling, Scaling, KEYS};
 use unacorda::engine::exact::ExactPool;
@@ -12,9 +15,39 @@ use unacorda::engine::physics::damper::FeltModel;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::measure::{
     block_times_s, core_meeting_s, denormal_tail_step_s, dense_real_time_factor, exact_speed,
-    loaded_synth, nominal_f64_peak, percentile, resident_bytes, voice_speed,
+    loaded_scenario, loaded_synth, nominal_f64_peak, percentile, resident_bytes,
+    struck_chord_synth, voice_speed, windowed_block_times_s, HELD_CHORD, VELOCITY,
 };
 use unacorda::play::{Piano, MAX_VOICES};
+
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    /// Seconds spent on each measurement, 0.1–60.
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
+    seconds: f64,
+    /// Largest voice count tried (also the pool size), 1–256.
+    #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES)]
+    voices: usize,
+    /// Also write every figure as JSON (the keyboard; per engine, core count and voice count:
+    /// median and p99.9 as fractions of the deadline, misses, blocks, the scenario; real-time
+    /// factors; start-up; memory; the held chord's windows).
+    #[arg(long, value_name = "FILE.json")]
+    json: Option<PathBuf>,
+    /// Time the callback of this engine only (default: every engine).
+    #[arg(long, value_parser = ["rk4", "exact"])]
+    engine: Option<String>,
+    /// Keyboard whose keys the callbacks, the damped figure and the held chord play: built-in
+    /// name (concert, the default: what `play`, `render --midi` and the plugin sound; paper, the
+    /// paper's model on Table 1's board) or path to a .toml file. The damped figure plays the
+    /// concert keyboard's damper felts where the keyboard has none (paper).
+    #[arg(long, default_value = "concert")]
+    keyboard: String,
+    /// Skip the held chord: the exact engine's callback over the 10 s after a chord is struck
+    /// under the pedal, timed as a device runs it (10 s of the bench's time). It runs with
+    /// `--engine exact` or no `--engine`.
+    #[arg(long)]
+    no_held_chord: bool,
+}
 
 /// Block length of the live figures (frames at 48 kHz).
 const BLOCK: usize = 64;
@@ -24,9 +57,14 @@ const BLOCK: usize = 64;
 const MEETING_VALUES: usize = 64;
 const MEETINGS: usize = 1_000;
 
+/// The held chord's windows after its strike (s): bounds of consecutive windows.
+const HELD_CHORD_BOUNDS_S: [f64; 6] = [0.0, 0.5, 1.0, 2.0, 5.0, 10.0];
+
 /// Every figure `bench` prints, for `--json`.
 #[derive(Serialize, Default)]
 struct Report {
+    /// The keyboard the callbacks, start-up, memory and held chord play (its name).
+    keyboard: String,
     block_frames: usize,
     rate_hz: f64,
     deadline_s: f64,
@@ -35,10 +73,13 @@ struct Report {
     /// Nominal f64 peak of one core (FLOP/s), where known.
     f64_peak_flops: Option<f64>,
     voices: Vec<VoiceFigure>,
-    dense_real_time_factor: f64,
-    denormal_step_us: Denormals,
+    /// The dense baseline's and the denormal tail's figures (`null` with `--engine`, which
+    /// skips the single voice).
+    dense_real_time_factor: Option<f64>,
+    denormal_step_us: Option<Denormals>,
     callbacks: Vec<CallbackFigure>,
     damped: Vec<DampedFigure>,
+    held_chord: Vec<HeldWindow>,
     startup: Vec<Startup>,
     memory: Vec<Memory>,
 }
@@ -47,14 +88,18 @@ struct Report {
 #[derive(Serialize)]
 struct VoiceFigure {
     engine: &'static str,
+    /// What is played and timed.
+    scenario: String,
     real_time_factor: f64,
     flops_per_s: f64,
     /// Time to build the key (s), where it is measured.
     build_s: Option<f64>,
 }
 
-#[derive(Serialize, Default)]
+#[derive(Serialize)]
 struct Denormals {
+    /// What is played and timed.
+    scenario: String,
     sounding: f64,
     tail_ftz: f64,
     tail_plain: f64,
@@ -66,6 +111,8 @@ struct CallbackFigure {
     engine: &'static str,
     cores: usize,
     voices: usize,
+    /// What is played while the callbacks are timed ([`loaded_scenario`]).
+    scenario: String,
     median_x_deadline: f64,
     p999_x_deadline: f64,
     misses: usize,
@@ -81,16 +128,36 @@ struct CallbackFigure {
 /// fractions of the deadline.
 #[derive(Serialize)]
 struct DampedFigure {
+    /// The keyboard whose keys and felts are played (the concert keyboard's where the chosen
+    /// one has no felts).
+    keyboard: String,
     model: &'static str,
     voices: usize,
+    /// What is played while the callbacks are timed.
+    scenario: String,
     held_median_x_deadline: f64,
     damped_median_x_deadline: f64,
+}
+
+/// One window of time after the held chord's strike: the median of the callbacks that started
+/// in it, as a fraction of the deadline, and the voices still simulated at its end.
+#[derive(Serialize)]
+struct HeldWindow {
+    /// What is played and how it is timed.
+    scenario: String,
+    from_s: f64,
+    to_s: f64,
+    median_x_deadline: f64,
+    blocks: usize,
+    active_voices: usize,
 }
 
 /// Building the 88-key piano, what `play` does before it sounds.
 #[derive(Serialize)]
 struct Startup {
     engine: &'static str,
+    /// What is built.
+    scenario: String,
     keys: usize,
     build_s: f64,
     /// Keys read back from the cache of prepared keys (the rest were prepared).
@@ -100,25 +167,33 @@ struct Startup {
 #[derive(Serialize)]
 struct Memory {
     engine: &'static str,
+    /// What is sounding when the resident memory is read ([`loaded_scenario`]).
+    scenario: String,
     bytes_per_voice: usize,
     voices: usize,
     resident_bytes: Option<u64>,
 }
 
-pub fn bench(
-    seconds: f64,
-    max_voices: usize,
-    json: Option<&Path>,
-    only: Option<&str>,
-    keyboard: &str,
-) -> Result<()> {
+pub fn bench(args: BenchArgs) -> Result<()> {
+    let BenchArgs {
+        seconds,
+        voices: max_voices,
+        json,
+        engine: only,
+        keyboard,
+        no_held_chord,
+    } = args;
+    let only = only.as_deref();
     if !(0.1..=60.0).contains(&seconds) {
         bail!("--seconds {seconds}: expected 0.1 to 60 s per measurement");
     }
     if !(1..=MAX_VOICES).contains(&max_voices) {
         bail!("--voices {max_voices}: expected 1 to {MAX_VOICES}");
     }
+    let started = Instant::now();
+    let scaling = Scaling::resolve(&keyboard)?;
     let mut report = Report {
+        keyboard: scaling.scaling.name.clone(),
         block_frames: BLOCK,
         f64_peak_flops: nominal_f64_peak().map(|(peak, _)| peak),
         ..Report::default()
@@ -126,23 +201,10 @@ pub fn bench(
     if only.is_none() {
         single_voice(seconds, &mut report)?;
     }
-    let scaling = Scaling::resolve(keyboard)?;
     let settings = scaling.output_settings();
     report.rate_hz = settings.rate_hz;
     report.deadline_s = BLOCK as f64 / settings.rate_hz;
-    for (engine, cores, label) in [
-        ("rk4", 1, "RK4 at 96 kHz, the reference"),
-        (
-            "exact",
-            1,
-            "exact at 48 kHz, each key's coupled modes, keys coupled through the board",
-        ),
-        (
-            "exact",
-            2,
-            "exact at 48 kHz, each key's coupled modes, keys coupled through the board, voices split over two cores",
-        ),
-    ] {
+    for (engine, cores) in [("rk4", 1), ("exact", 1), ("exact", 2)] {
         if only.is_some_and(|only| only != engine) {
             continue;
         }
@@ -150,15 +212,7 @@ pub fn bench(
             "rk4" => callback::<Rk4Pool>,
             _ => callback::<ExactPool>,
         };
-        run(
-            &scaling,
-            seconds,
-            max_voices,
-            cores,
-            label,
-            engine,
-            &mut report,
-        )?;
+        run(&scaling, seconds, max_voices, cores, engine, &mut report)?;
     }
     if only.is_none_or(|only| only == "exact") {
         // Felts whose decay it can lengthen: the keyboard's own, or the concert keyboard's where
@@ -166,19 +220,45 @@ pub fn bench(
         let damped_keyboard = if scaling.scaling.dampers.is_empty() {
             "concert"
         } else {
-            keyboard
+            keyboard.as_str()
         };
         for model in [FeltModel::Modal, FeltModel::Coupled] {
             let figure = damped(damped_keyboard, model, seconds, max_voices.min(32))?;
             report.damped.push(figure);
         }
+        if !no_held_chord {
+            held_chord(&scaling, &mut report)?;
+        }
     }
     if let Some(path) = json {
         let text = serde_json::to_string_pretty(&report).expect("plain data serialises");
-        std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))?;
+        std::fs::write(&path, text + "\n")
+            .with_context(|| format!("writing {}", path.display()))?;
         eprintln!("wrote {}", path.display());
     }
+    println!("bench took {:.1} s in all", started.elapsed().as_secs_f64());
     Ok(())
+}
+
+/// What the engine of `piano` is, for the text: its name, the rate it steps at, how it holds
+/// the keys.
+fn engine_label<E: VoicePool>(engine: &str, piano: &Piano<E>) -> String {
+    let khz = 1e-3 / piano.instrument.step_s();
+    match engine {
+        "rk4" => format!("RK4 engine at {khz:.0} kHz (the reference)"),
+        _ => format!(
+            "exact engine at {khz:.0} kHz (each key's coupled modes, keys coupled through the board)"
+        ),
+    }
+}
+
+/// The cores a figure ran on, for the text.
+fn cores_label(cores: usize) -> &'static str {
+    if cores == 2 {
+        "two cores (voices split, the second on a helper thread)"
+    } else {
+        "one core"
+    }
 }
 
 /// The audio callback on engine `E` (on `cores` cores: 1, or 2 with a helper thread) with 1, 2,
@@ -188,7 +268,6 @@ fn callback<E: VoicePool>(
     seconds: f64,
     max_voices: usize,
     cores: usize,
-    label: &str,
     engine: &'static str,
     report: &mut Report,
 ) -> Result<()> {
@@ -204,11 +283,17 @@ fn callback<E: VoicePool>(
         let from_cache = cache.as_ref().map_or(0, |c| c.hits.load(Ordering::Relaxed)) - hits;
         if cores == 1 {
             println!(
-                "start-up ({engine}): {} keys built in {build_s:.2} s, {from_cache} read back from the cache of prepared keys",
+                "start-up ({} keyboard, {engine} engine): {} keys built in {build_s:.2} s, {from_cache} read back from the cache of prepared keys",
+                scaling.scaling.name,
                 keys.len()
             );
             report.startup.push(Startup {
                 engine,
+                scenario: format!(
+                    "the {} keyboard's {} keys prepared or read back from the cache, in a pool of {max_voices} voices",
+                    scaling.scaling.name,
+                    keys.len()
+                ),
                 keys: keys.len(),
                 build_s,
                 keys_from_cache: from_cache,
@@ -229,9 +314,13 @@ fn callback<E: VoicePool>(
     let settings = scaling.output_settings();
     let deadline = BLOCK as f64 / settings.rate_hz;
     println!(
-        "live callback ({label}), {BLOCK}-frame blocks at {:.0} kHz (deadline {:.2} ms), keys spread from A0 under the sustain pedal:",
+        "live callback: {} keyboard, {}, {}, {BLOCK}-frame blocks at {:.0} kHz (deadline {:.2} ms);\n  {} (N: each line's voices):",
+        scaling.scaling.name,
+        engine_label(engine, &piano),
+        cores_label(cores),
         settings.rate_hz / 1e3,
-        deadline * 1e3
+        deadline * 1e3,
+        loaded_scenario(None)
     );
     let mut within = 0;
     let mut voices = 1;
@@ -289,6 +378,7 @@ fn callback<E: VoicePool>(
             engine,
             cores,
             voices,
+            scenario: loaded_scenario(Some(voices)),
             median_x_deadline: median / deadline,
             p999_x_deadline: p999 / deadline,
             misses,
@@ -308,6 +398,7 @@ fn callback<E: VoicePool>(
     let (synth, _handle) = loaded_synth(&piano, settings, max_voices, BLOCK);
     report.memory.push(Memory {
         engine,
+        scenario: loaded_scenario(Some(max_voices)),
         bytes_per_voice: synth.piano().instrument.bytes_per_voice(),
         voices: max_voices,
         resident_bytes: resident_bytes(),
@@ -354,7 +445,10 @@ fn damped(keyboard: &str, model: FeltModel, seconds: f64, voices: usize) -> Resu
             let frame = v as u64 * 48;
             let _ = handle.schedule(Scheduled {
                 frame,
-                event: Event::NoteOn { note, velocity: 80 },
+                event: Event::NoteOn {
+                    note,
+                    velocity: VELOCITY,
+                },
             });
             if released == 1 {
                 let _ = handle.schedule(Scheduled {
@@ -371,19 +465,91 @@ fn damped(keyboard: &str, model: FeltModel, seconds: f64, voices: usize) -> Resu
         let (t, _) = block_times_s(&mut synth, BLOCK, settings.rate_hz, blocks);
         *median = percentile(&t, 0.5) / deadline;
     }
+    let scenario = format!(
+        "{voices} keys spread over {}–{} (those with dampers), struck 1 ms apart at velocity {VELOCITY}, no pedal; held: every key kept down; released: each key let go 10 ms after its strike, its felt's T60 set to 60 s; measured from 100 ms after the last strike, paced as a device runs them",
+        key_name(1),
+        key_name(damped_keys)
+    );
     println!(
-        "dampers down (exact, one core, {voices} voices of the {} keyboard, {BLOCK}-frame blocks, {model} felt): median {:.3} × deadline held, {:.3} × released (the felt on every string): {:.2} ×",
+        "dampers down ({} keyboard, exact engine, one core, {voices} voices, {BLOCK}-frame blocks, {model} felt): median {:.3} × deadline held, {:.3} × released (the felt on every string): {:.2} ×\n  {scenario}",
         scaling.scaling.name,
         medians[0],
         medians[1],
         medians[1] / medians[0]
     );
     Ok(DampedFigure {
+        keyboard: scaling.scaling.name.clone(),
         model,
         voices,
+        scenario,
         held_median_x_deadline: medians[0],
         damped_median_x_deadline: medians[1],
     })
+}
+
+/// The cost of a held chord over time: [`HELD_CHORD`] of `scaling`'s keys struck together
+/// under the sustain pedal on the exact engine, one core, and every callback from the strike to
+/// the last of [`HELD_CHORD_BOUNDS_S`] timed as a device runs them; the median of each window
+/// and the voices still simulated at its end. Whether the cost falls as the chord dies away is
+/// what the engine makes of decaying modes.
+fn held_chord(scaling: &LoadedScaling, report: &mut Report) -> Result<()> {
+    let keys: Vec<usize> = HELD_CHORD.iter().map(|&note| note as usize - 20).collect();
+    let cache = unacorda::keycache::KeyCache::from_env();
+    let piano = crate::keys_bar::building(cache.as_ref(), keys.len(), |_| {
+        Piano::<ExactPool>::build_with(scaling, &keys, keys.len(), cache.as_ref())
+    })?;
+    crate::warn_refused(cache.as_ref());
+    let settings = scaling.output_settings();
+    let deadline = BLOCK as f64 / settings.rate_hz;
+    let names: Vec<String> = keys.iter().map(|&k| key_name(k)).collect();
+    let end_s = HELD_CHORD_BOUNDS_S[HELD_CHORD_BOUNDS_S.len() - 1];
+    let scenario = format!(
+        "held chord: sustain down, {} struck together at velocity {VELOCITY} and held; every callback from the strike to {end_s:.0} s after it, paced as a device runs them",
+        names.join(" ")
+    );
+    println!(
+        "held chord over time: {} keyboard, {}, one core, {} voices, {BLOCK}-frame blocks at {:.0} kHz (deadline {:.2} ms);\n  {scenario}; median of each window after the strike:",
+        scaling.scaling.name,
+        engine_label("exact", &piano),
+        keys.len(),
+        settings.rate_hz / 1e3,
+        deadline * 1e3,
+    );
+    let (mut synth, _handle) = struck_chord_synth(&piano, settings, &HELD_CHORD);
+    let (windows, granted) =
+        windowed_block_times_s(&mut synth, BLOCK, settings.rate_hz, &HELD_CHORD_BOUNDS_S);
+    println!(
+        "  (real-time priority {})",
+        if granted {
+            "granted"
+        } else {
+            "refused: other work may preempt a block"
+        }
+    );
+    for w in windows {
+        if w.times_s.is_empty() {
+            continue;
+        }
+        let median = percentile(&w.times_s, 0.5);
+        println!(
+            "  {:4.1}–{:4.1} s after the strike: median {:7.3} ms ({:6.2} × deadline) over {} blocks, {} voices active at its end",
+            w.from_s,
+            w.to_s,
+            median * 1e3,
+            median / deadline,
+            w.times_s.len(),
+            w.active_voices
+        );
+        report.held_chord.push(HeldWindow {
+            scenario: scenario.clone(),
+            from_s: w.from_s,
+            to_s: w.to_s,
+            median_x_deadline: median / deadline,
+            blocks: w.times_s.len(),
+            active_voices: w.active_voices,
+        });
+    }
+    Ok(())
 }
 
 /// One c2 voice on each engine alone, the dense baseline and the denormal tail.
@@ -391,6 +557,9 @@ fn single_voice(seconds: f64, report: &mut Report) -> Result<()> {
     let c2 = Preset::resolve("c2")?;
     let spec = c2.unison_spec();
     let fast = voice_speed::<f64>(&spec, seconds);
+    // The c2 preset whatever the keyboard: the paper's Table 1 key on its own board.
+    let scenario = "the c2 preset alone (not --keyboard's keys): one voice struck at 2.5 m/s, its steps timed back to back from 10 ms after the strike";
+    println!("c2 voice: {scenario}");
     println!(
         "c2 voice, paper-faithful ({} × {} string modes, {} board modes, duplex damping (Eq. 13, applied through its exact rank-16 factor), RK4 in f64 at {:.0} kHz):",
         spec.strings.len(),
@@ -415,6 +584,7 @@ fn single_voice(seconds: f64, report: &mut Report) -> Result<()> {
     let mut voice = |engine, v: &unacorda::measure::VoiceSpeed, build_s| {
         report.voices.push(VoiceFigure {
             engine,
+            scenario: scenario.to_string(),
             real_time_factor: v.real_time_factor,
             flops_per_s: v.flops_per_s,
             build_s,
@@ -450,7 +620,7 @@ fn single_voice(seconds: f64, report: &mut Report) -> Result<()> {
     // that takes about `seconds`.
     let steps = ((seconds * spec.sample_rate_hz * fast.real_time_factor / 400.0) as usize).max(20);
     let dense = dense_real_time_factor(&spec, steps);
-    report.dense_real_time_factor = dense;
+    report.dense_real_time_factor = Some(dense);
     println!(
         "dense state-space baseline (Eq. 10–11 as written: A of order {}, faer mat-vec, RK4), same voice:\n  real-time factor {dense:.5}; unacorda is {:.0} × faster",
         2 * (spec.strings.len() * (spec.modes.modes_t + spec.modes.modes_p + spec.modes.modes_l)
@@ -461,11 +631,12 @@ fn single_voice(seconds: f64, report: &mut Report) -> Result<()> {
 
     let steps = ((seconds * spec.sample_rate_hz * fast.real_time_factor) as usize).max(100);
     let (sounding, ftz, plain) = denormal_tail_step_s(&spec, steps);
-    report.denormal_step_us = Denormals {
+    report.denormal_step_us = Some(Denormals {
+        scenario: "the c2 preset alone, struck at 2.5 m/s, its RK4 steps timed back to back: sounding from 50 ms after the strike, and in a tail (that state scaled to 1e-305)".to_string(),
         sounding: sounding * 1e6,
         tail_ftz: ftz * 1e6,
         tail_plain: plain * 1e6,
-    };
+    });
     println!(
         "denormals, same voice in a long silent tail (state scaled to ≤ 1e-305, mostly subnormal), µs per RK4 step:\n  sounding {:.2}; tail with FTZ/DAZ as in the audio thread {:.2} ({:.2} × sounding); tail without {:.2} ({:.1} × sounding)",
         sounding * 1e6,

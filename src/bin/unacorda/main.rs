@@ -122,27 +122,8 @@ enum Command {
     Devices,
     /// Measure the engine on this machine: real-time factor of one voice and of the dense
     /// state-space baseline, FLOP rate against the core's peak, callback times and voices within
-    /// the deadline, memory.
-    Bench {
-        /// Seconds spent on each measurement, 0.1–60.
-        #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
-        seconds: f64,
-        /// Largest voice count tried (also the pool size), 1–256.
-        #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES)]
-        voices: usize,
-        /// Also write every figure as JSON (per engine, core count and voice count: median and
-        /// p99.9 as fractions of the deadline, misses, blocks; real-time factors; start-up; memory).
-        #[arg(long, value_name = "FILE.json")]
-        json: Option<PathBuf>,
-        /// Time the callback of this engine only (default: every engine).
-        #[arg(long, value_parser = ["rk4", "exact"])]
-        engine: Option<String>,
-        /// Keyboard whose keys the callbacks play: built-in name (paper, the default: the figures
-        /// in docs/performance.md; concert) or path to a .toml file. The damped figure plays this
-        /// keyboard's damper felts, or the concert keyboard's where it has none (paper).
-        #[arg(long, default_value = "paper")]
-        keyboard: String,
-    },
+    /// the deadline, the cost of a held chord over time, memory; each figure with what it plays.
+    Bench(bench::BenchArgs),
     /// Regenerate the paper's Figures 2–6 (PNG + CSV): the board's mobility, full vs reduced, and
     /// a preset struck una corda vs normal.
     Figures {
@@ -529,19 +510,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Devices => live::devices()?,
         Command::Modes(args) => modes::modes(args)?,
         Command::Analyze(args) => analyze::analyze(args)?,
-        Command::Bench {
-            seconds,
-            voices,
-            json,
-            engine,
-            keyboard,
-        } => bench::bench(
-            seconds,
-            voices,
-            json.as_deref(),
-            engine.as_deref(),
-            &keyboard,
-        )?,
+        Command::Bench(args) => bench::bench(args)?,
         Command::Soundboard { input, out, points } => {
             let mut spec = unacorda::config::preset::load_board_spec(&input)?;
             let mut command = format!(
