@@ -33,6 +33,7 @@ fn main() {
             tail_s: 1.0,
             voices: unacorda::play::DEFAULT_VOICES,
             cores,
+            halo: false,
         };
         // The time between two blocks handed over is the second one's.
         let mut times = Vec::new();

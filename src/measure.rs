@@ -58,13 +58,18 @@ pub fn loaded_synth<E: VoicePool>(
 
 /// What [`loaded_synth`] plays with `voices` keys, in words: the scenario of a callback figure
 /// (`None`: with "N keys", a count given elsewhere).
-pub fn loaded_scenario(voices: Option<usize>) -> String {
+pub fn loaded_scenario(voices: Option<usize>, halo: bool) -> String {
     let keys = match voices {
         Some(1) => format!("1 key (A0) struck at velocity {VELOCITY}"),
         Some(n) => format!("{n} keys struck 1 ms apart at velocity {VELOCITY} spread from A0"),
         None => format!("N keys struck 1 ms apart at velocity {VELOCITY} spread from A0"),
     };
-    format!("pedalled: sustain down, {keys}, measured from 50 ms after the last strike")
+    let halo = if halo {
+        " with the halo (every key's strings undamped, those not struck ringing in sympathy)"
+    } else {
+        ""
+    };
+    format!("pedalled: sustain down{halo}, {keys}, measured from 50 ms after the last strike")
 }
 
 /// A pianist's chord held under the pedal (MIDI notes): C2 G2 E3 C4 E4 G4 C5, C major over
@@ -104,8 +109,10 @@ pub struct Window {
     pub to_s: f64,
     /// Each callback's time (s), sorted.
     pub times_s: Vec<f64>,
-    /// Voices simulated after the window's last callback.
+    /// Voices simulated after the window's last callback, and the modes they step (where the
+    /// engine says: [`VoicePool::modes_stepped`]).
     pub active_voices: usize,
+    pub modes_stepped: Option<usize>,
 }
 
 /// Time each of `blocks` callbacks of `frames` frames at `rate_hz` (s), sorted — as `play`'s audio
@@ -148,6 +155,7 @@ pub fn windowed_block_times_s<E: VoicePool>(
         // Each callback's start (s) and the voices simulated after it, beside its time.
         let mut started_s = Vec::with_capacity(blocks);
         let mut active = Vec::with_capacity(blocks);
+        let mut stepped = Vec::with_capacity(blocks);
         let mut out = vec![0f32; frames];
         let times = paced_unsorted_s(period, blocks, || {
             started_s.push(synth.frame() as f64 / rate_hz);
@@ -156,6 +164,7 @@ pub fn windowed_block_times_s<E: VoicePool>(
             let took = t.elapsed().as_secs_f64();
             let inst = &synth.piano().instrument;
             active.push((0..inst.n_voices()).filter(|&k| inst.is_active(k)).count());
+            stepped.push(inst.modes_stepped());
             took
         });
         bounds_s
@@ -171,6 +180,7 @@ pub fn windowed_block_times_s<E: VoicePool>(
                     to_s: w[1],
                     times_s,
                     active_voices: within.last().map_or(0, |&b| active[b]),
+                    modes_stepped: within.last().and_then(|&b| stepped[b]),
                 }
             })
             .collect()

@@ -18,6 +18,9 @@ pub struct Player {
     sustain: bool,
     sostenuto: bool,
     soft: bool,
+    /// Whether every key whose damper a pedal lifts rings in sympathy, struck or not (the
+    /// pedal's halo: [`Player::set_halo`]); else only the keys that hold a voice.
+    halo: bool,
 }
 
 impl Player {
@@ -37,7 +40,17 @@ impl Player {
             sustain: false,
             sostenuto: false,
             soft: false,
+            halo: false,
         }
+    }
+
+    /// Whether every key whose damper a pedal lifts takes a voice at rest and rings in sympathy
+    /// through the board — the halo of a grand's undamped strings around every note under the
+    /// sustain pedal, its cost a voice per undamped key (their modes above the board's reach
+    /// left to follow the bridge: [`crate::engine::VoiceModes::AsHeard`]) — or only the keys
+    /// that were struck (the default). Takes effect at the next pedal or key.
+    pub fn set_halo(&mut self, halo: bool) {
+        self.halo = halo;
     }
 
     /// Whether the soft pedal is down.
@@ -129,12 +142,7 @@ impl Player {
     /// keys held by a finger or a pedal, and never one already fading.
     fn voice_for_new_key(&self, instrument: &impl VoicePool) -> usize {
         let n = instrument.n_voices();
-        let free = |v: &usize| !instrument.is_active(*v) && !instrument.is_fading(*v);
-        if let Some(v) = (0..n)
-            .filter(free)
-            .find(|&v| instrument.key_of_voice(v).is_none())
-            .or_else(|| (0..n).find(free))
-        {
+        if let Some(v) = free_voice(instrument) {
             return v;
         }
         let rank = |v: usize| {
@@ -152,12 +160,26 @@ impl Player {
             .unwrap_or(0)
     }
 
-    /// Lift or drop one key's damper from the key and the pedals.
+    /// Lift or drop one key's damper from the key and the pedals. A key whose damper is lifted
+    /// rings in sympathy with the rest through the board; with the halo ([`Player::set_halo`])
+    /// one that holds no voice takes a free one at rest, where there is one (never a sounding
+    /// voice).
     fn settle_damper(&self, key: usize, instrument: &mut impl VoicePool) {
-        let Some(v) = self.bank_of_key[key].and_then(|b| instrument.voice_of_key(b)) else {
+        let Some(bank) = self.bank_of_key[key] else {
             return;
         };
         let lifted = self.lifted(key);
+        let v = match instrument.voice_of_key(bank) {
+            Some(v) => v,
+            None if lifted && self.halo => match free_voice(instrument) {
+                Some(v) => {
+                    instrument.assign(v, bank);
+                    v
+                }
+                None => return,
+            },
+            None => return,
+        };
         instrument.set_damper_voice(v, !lifted);
         // Strings whose damper is up ring in sympathy with the rest through the board.
         if lifted {
@@ -170,6 +192,16 @@ impl Player {
             self.settle_damper(key, instrument);
         }
     }
+}
+
+/// A voice neither sounding nor fading: one that never played first, else any.
+fn free_voice(instrument: &impl VoicePool) -> Option<usize> {
+    let n = instrument.n_voices();
+    let free = |v: &usize| !instrument.is_active(*v) && !instrument.is_fading(*v);
+    (0..n)
+        .filter(free)
+        .find(|&v| instrument.key_of_voice(v).is_none())
+        .or_else(|| (0..n).find(free))
 }
 
 /// Why a piano cannot be built.
@@ -199,6 +231,10 @@ pub struct Piano<E: VoicePool> {
 
 /// Default size of the voice pool.
 pub const DEFAULT_VOICES: usize = 64;
+
+/// Size of the voice pool with the pedal's halo ([`Player::set_halo`]) at least: every key of the
+/// keyboard, and room for the voices fading out as their keys are stolen.
+pub const HALO_VOICES: usize = 128;
 
 /// Largest voice pool the command line accepts.
 pub const MAX_VOICES: usize = 256;

@@ -24,7 +24,7 @@ use unacorda::analysis::stability::{one_step_map, step_eigenvalues, StepEigen};
 use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
 use unacorda::config::scaling::{parse_key, Scaling, KEYS};
 use unacorda::engine::exact::ExactPool;
-use unacorda::engine::{Rk4Pool, VoicePool};
+use unacorda::engine::{Rk4Pool, VoiceModes, VoicePool};
 use unacorda::midi::file::{parse, single_track_bytes, TimedEvent};
 use unacorda::midi::{Event, Pedal};
 use unacorda::play::Keyboard;
@@ -52,6 +52,9 @@ fn eigenvalues<E: VoicePool>(keys: &[usize], down: bool) -> (Vec<StepEigen>, f64
         .map(|&k| scaling.key_preset(k).unwrap().unison_spec())
         .collect();
     let mut pool = E::build_pool(&specs, keys.len(), rate).unwrap();
+    // Every mode of every key stepped (unstruck, a key steps by default only those the board
+    // drives, or none with its damper down).
+    pool.set_voice_modes(VoiceModes::All);
     for k in 0..keys.len() {
         pool.assign(k, k);
         pool.set_active(k, true);
@@ -208,6 +211,7 @@ fn quarter_seconds<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> Vec<f64>
         tail_s,
         voices: 32,
         cores: 1,
+        halo: false,
     };
     let r = render_midi_kept::<E>(keyboard, events, offline, |_| {}, None).unwrap();
     r.samples

@@ -115,6 +115,7 @@ fn offline<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> (Vec<f32>, Vec<f
         tail_s,
         voices: unacorda::play::DEFAULT_VOICES,
         cores: 1,
+        halo: false,
     };
     let r =
         unacorda::render::render_midi_kept::<E>(keyboard, events, offline, |_| {}, None).unwrap();

@@ -68,8 +68,9 @@ pub const ALIGN_FRAMES: u64 = 32;
 /// callbacks' ends, for the same reason: a voice reset a frame earlier would change what follows.
 pub const HOUSEKEEPING_FRAMES: u64 = 64;
 
-/// Silent voices are retired on this coarser grid (a multiple of [`HOUSEKEEPING_FRAMES`]): the
-/// offline render's blocks, so that its tails are as they were before the grid.
+/// Silent voices are retired, and what of a voice's strings has died away left out, on this
+/// coarser grid (a multiple of [`HOUSEKEEPING_FRAMES`]): the offline render's blocks, so that its
+/// tails are as they were before the grid.
 pub const RETIRE_FRAMES: u64 = 256;
 
 /// Counters the audio thread publishes (relaxed atomics: readable from any thread at any time).
@@ -425,6 +426,7 @@ impl<E: VoicePool> Synth<E> {
         self.guard_growth(self.driven_at_start);
         let inst = &mut self.piano.instrument;
         if self.frame.is_multiple_of(RETIRE_FRAMES) {
+            inst.shed_modes();
             inst.retire_silent(self.silence_j);
         }
         let active = (0..inst.n_voices()).filter(|&v| inst.is_active(v)).count() as u64;

@@ -26,8 +26,8 @@ pub use parallel::Pair;
 pub use pool::Policy;
 pub use rk4::Rk4Pool;
 pub use spec::{
-    BuildError, Direction, Energy, LinearState, Observation, Strike, UnisonSpec, CHANNELS,
-    MAX_STRINGS, SILENCE_J, STEAL_FADE_S,
+    BuildError, Direction, Energy, LinearState, Observation, Strike, UnisonSpec, VoiceModes,
+    CHANNELS, MAX_STRINGS, SILENCE_J, STEAL_FADE_S,
 };
 
 /// A pool of voices on one shared board, as the player and the audio callback drive it: RK4 at
@@ -82,6 +82,15 @@ pub trait VoicePool: Policy + Clone + Send + std::fmt::Debug + 'static {
     fn set_linear_state(&mut self, x: &[f64]);
     /// Mechanical energy of the strings, their contact springs and the board (J), hammers apart.
     fn mechanical_energy_j(&self) -> f64;
+    /// Modes the active voices step now, where the engine steps fewer than all of them (the
+    /// exact engine: [`exact::ExactPool::modes_stepped`]); `None` for an engine that always
+    /// steps every mode.
+    fn modes_stepped(&self) -> Option<usize> {
+        None
+    }
+    /// Which of their modes the voices step from now on ([`VoiceModes`]; by default as many
+    /// as the sound needs). An engine that steps them all ignores it.
+    fn set_voice_modes(&mut self, _modes: VoiceModes) {}
     /// Whether energy may enter the strings now: a hammer is in play (from the strike until it
     /// is released) or a stolen voice is fading (its contact springs change).
     fn is_driven(&self) -> bool {
@@ -149,7 +158,7 @@ impl StoredKey for exact::ExactKey {
 
 /// Both pools implement [`VoicePool`] with their own inherent methods.
 macro_rules! voice_pool {
-    ($t:ty, $key:ty, $rate:expr) => {
+    ($t:ty, $key:ty, $rate:expr $(, $extra:item)*) => {
         impl VoicePool for $t {
             type Key = $key;
             fn at_engine_rate(spec: UnisonSpec, output_rate_hz: f64) -> UnisonSpec {
@@ -198,12 +207,23 @@ macro_rules! voice_pool {
             fn mechanical_energy_j(&self) -> f64 {
                 <$t>::mechanical_energy_j(self)
             }
+            $($extra)*
         }
     };
 }
 
 voice_pool!(Rk4Pool, rk4::Rk4Key<f64>, |_| None::<f64>);
-voice_pool!(exact::ExactPool, exact::ExactKey, Some::<f64>);
+voice_pool!(
+    exact::ExactPool,
+    exact::ExactKey,
+    Some::<f64>,
+    fn set_voice_modes(&mut self, modes: VoiceModes) {
+        exact::ExactPool::set_voice_modes(self, modes)
+    },
+    fn modes_stepped(&self) -> Option<usize> {
+        Some(exact::ExactPool::modes_stepped(self))
+    }
+);
 
 /// What the offline renderer needs of a one-key engine: RK4 on [`Rk4Pool`] (the reference, at
 /// the paper's rate) or the exact engine on [`exact::ExactUnison`] (at the output rate).

@@ -13,7 +13,7 @@ use faer::{c64, Mat};
 /// block is real), with weight 2 folded into the output rows; real (overdamped) modes have weight 1.
 pub(crate) struct Modal {
     pub(crate) n: usize,
-    /// Kept eigenpairs `(column, weight)`.
+    /// Kept eigenpairs `(column, weight)`, in order of `|lambda|`.
     pub(crate) keep: Vec<(usize, f64)>,
     /// Each kept mode's eigenvalue `lambda` (1/s).
     pub(crate) lambda: Vec<c64>,
@@ -57,6 +57,12 @@ impl Modal {
                 }
             })
             .collect();
+        // In order of |lambda| (the natural frequency of a pair, the decay rate of a real mode):
+        // a voice keeps its modes as a prefix of this order and lets the rest follow the bridge
+        // quasi-statically ([`crate::engine::exact`]), which holds for the modes far above what
+        // drives them.
+        let mut keep = keep;
+        keep.sort_by(|a, b| s[a.0].norm().total_cmp(&s[b.0].norm()));
         let pairs = keep.iter().filter(|(_, w)| *w == 2.0).count();
         if 2 * pairs + (keep.len() - pairs) != 2 * n || !s.iter().all(|x| x.re.is_finite()) {
             return Err(BuildError::Modes);

@@ -112,6 +112,9 @@ pub trait Policy {
     /// leaves it.
     fn enter(&mut self, k: usize);
     fn leave(&mut self, k: usize);
+    /// Voice `k` (active, with a key) is about to be struck: an engine whose voices may step
+    /// fewer than all their modes takes the rest up here. By default nothing.
+    fn ready_to_strike(&mut self, _k: usize) {}
     /// Where the hammer starts on the first `struck` strings of voice `k`: the highest of their
     /// displacements at the striking point (a sounding key is struck in its motion).
     fn strike_contact_m(&self, k: usize, struck: usize) -> f64;
@@ -212,6 +215,7 @@ pub trait Policy {
         if !self.state(k).active {
             self.enter(k);
         }
+        self.ready_to_strike(k);
         let n = strike.strings_struck(self.key_strings(key));
         let s = self.state_mut(k);
         s.struck = [false; MAX_STRINGS];
@@ -251,6 +255,10 @@ pub trait Policy {
     /// every write of `damper_down` is followed by it. By default nothing, the engine reading
     /// `damper_down` as it steps.
     fn damper_moved(&mut self, _k: usize) {}
+
+    /// Let the voices leave out what of their strings has died away, where the engine can
+    /// (the exact engine's modes, [`crate::engine::VoiceModes::AsHeard`]). By default nothing.
+    fn shed_modes(&mut self) {}
 
     /// Stop simulating the voices that have fallen silent: strings and contact springs below
     /// `threshold_j`, no hammer, no fade, and either the damper down or no damper at all (strings

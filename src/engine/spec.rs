@@ -71,6 +71,20 @@ impl UnisonSpec {
     }
 }
 
+/// Which of its modes a voice steps. An engine that steps them all (RK4) ignores it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum VoiceModes {
+    /// As many as the sound needs: a chunk of modes that has died away is left to follow the
+    /// bridge quasi-statically, and a voice whose damper is lifted steps at least the modes the
+    /// board drives (every key ringing in sympathy costs only those).
+    #[default]
+    AsHeard,
+    /// Those each voice steps now, and no fewer from here on (a linear map of the pool as it is).
+    AsNow,
+    /// Every mode of every voice.
+    All,
+}
+
 /// How the hammer meets the unison.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Strike {

@@ -91,6 +91,7 @@ pub fn render_midi_with(
             tail_s,
             voices,
             cores: 1,
+            halo: false,
         },
         progress,
         Some(&mut tap),
@@ -122,13 +123,18 @@ pub fn render_midi_kept<E: crate::engine::VoicePool>(
 /// What a render calls after every output frame: `tap(instrument, frame)`.
 pub type Tap<'a, E> = &'a mut dyn FnMut(&E, u64);
 
-/// How an offline render runs: seconds of sound after the last event, the voice pool's size, and
-/// the cores the engine may use (1, or 2 with a helper thread, as `play`'s callback).
+/// How an offline render runs: seconds of sound after the last event, the voice pool's size, the
+/// cores the engine may use (1, or 2 with a helper thread, as `play`'s callback), and whether
+/// the pedal has its halo.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Offline {
     pub tail_s: f64,
     pub voices: usize,
     pub cores: usize,
+    /// The pedal's halo ([`crate::play::Player::set_halo`]): every key of the keyboard is
+    /// built and, under the sustain pedal, rings in sympathy (the pool then holds at least
+    /// [`crate::play::HALO_VOICES`]).
+    pub halo: bool,
 }
 
 /// A MIDI performance on the engine `E` (RK4 [`Rk4Pool`] or the exact engine
@@ -152,6 +158,7 @@ pub fn render_midi_into<E: crate::engine::VoicePool>(
         tail_s,
         voices,
         cores,
+        halo,
     } = offline;
     use crate::audio::synth::{Synth, EVENT_QUEUE};
     use crate::midi::{piano_key, Event};
@@ -170,9 +177,16 @@ pub fn render_midi_into<E: crate::engine::VoicePool>(
     if keys.is_empty() {
         return Err(RenderError::NoKeys);
     }
-    let voices = voices.min(keys.len());
+    // With the halo every key rings under the pedal, struck or not.
+    let (keys, voices) = if halo {
+        ((1..=88).collect(), voices.max(crate::play::HALO_VOICES))
+    } else {
+        let voices = voices.min(keys.len());
+        (keys, voices)
+    };
     let scaling = keyboard.scaling;
-    let piano = crate::play::Piano::<E>::build_with(scaling, &keys, voices, keyboard.cache)?;
+    let mut piano = crate::play::Piano::<E>::build_with(scaling, &keys, voices, keyboard.cache)?;
+    piano.player.set_halo(halo);
     let settings = scaling.output_settings();
     let (fs, channels) = (settings.rate_hz, settings.channels);
     let width = usize::from(channels);

@@ -18,7 +18,7 @@ use unacorda::measure::{
     loaded_scenario, loaded_synth, nominal_f64_peak, percentile, resident_bytes,
     struck_chord_synth, voice_speed, windowed_block_times_s, HELD_CHORD, VELOCITY,
 };
-use unacorda::play::{Piano, MAX_VOICES};
+use unacorda::play::{Piano, HALO_VOICES, MAX_VOICES};
 
 #[derive(clap::Args)]
 pub struct BenchArgs {
@@ -47,6 +47,10 @@ pub struct BenchArgs {
     /// `--engine exact` or no `--engine`.
     #[arg(long)]
     no_held_chord: bool,
+    /// With the pedal's halo: under the sustain pedal every key takes a voice and rings in
+    /// sympathy, struck or not (`play --halo`; the pool holds at least 128 voices).
+    #[arg(long)]
+    halo: bool,
 }
 
 /// Block length of the live figures (frames at 48 kHz).
@@ -150,6 +154,8 @@ struct HeldWindow {
     median_x_deadline: f64,
     blocks: usize,
     active_voices: usize,
+    /// Modes the active voices step at the window's end.
+    modes_stepped: Option<usize>,
 }
 
 /// Building the 88-key piano, what `play` does before it sounds.
@@ -182,6 +188,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         engine: only,
         keyboard,
         no_held_chord,
+        halo,
     } = args;
     let only = only.as_deref();
     if !(0.1..=60.0).contains(&seconds) {
@@ -212,7 +219,15 @@ pub fn bench(args: BenchArgs) -> Result<()> {
             "rk4" => callback::<Rk4Pool>,
             _ => callback::<ExactPool>,
         };
-        run(&scaling, seconds, max_voices, cores, engine, &mut report)?;
+        run(
+            &scaling,
+            seconds,
+            max_voices,
+            cores,
+            engine,
+            halo,
+            &mut report,
+        )?;
     }
     if only.is_none_or(|only| only == "exact") {
         // Felts whose decay it can lengthen: the keyboard's own, or the concert keyboard's where
@@ -227,7 +242,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
             report.damped.push(figure);
         }
         if !no_held_chord {
-            held_chord(&scaling, &mut report)?;
+            held_chord(&scaling, halo, &mut report)?;
         }
     }
     if let Some(path) = json {
@@ -252,6 +267,15 @@ fn engine_label<E: VoicePool>(engine: &str, piano: &Piano<E>) -> String {
     }
 }
 
+/// What the sustain pedal lifts, for the text.
+fn halo_label(halo: bool) -> &'static str {
+    if halo {
+        " with the halo (every key's strings undamped, those not struck ringing in sympathy)"
+    } else {
+        ""
+    }
+}
+
 /// The cores a figure ran on, for the text.
 fn cores_label(cores: usize) -> &'static str {
     if cores == 2 {
@@ -269,15 +293,22 @@ fn callback<E: VoicePool>(
     max_voices: usize,
     cores: usize,
     engine: &'static str,
+    halo: bool,
     report: &mut Report,
 ) -> Result<()> {
     let keys: Vec<usize> = (1..=KEYS).collect();
+    // With the halo, room for every key: under the pedal the keys not struck ring in sympathy.
+    let pool = if halo {
+        max_voices.max(HALO_VOICES)
+    } else {
+        max_voices
+    };
     let cache = unacorda::keycache::KeyCache::from_env();
     let build = |report: &mut Report| -> Result<Piano<E>> {
         let hits = cache.as_ref().map_or(0, |c| c.hits.load(Ordering::Relaxed));
         let started = std::time::Instant::now();
         let piano = crate::keys_bar::building(cache.as_ref(), keys.len(), |_| {
-            Piano::<E>::build_with(scaling, &keys, max_voices, cache.as_ref())
+            Piano::<E>::build_with(scaling, &keys, pool, cache.as_ref())
         })?;
         let build_s = started.elapsed().as_secs_f64();
         let from_cache = cache.as_ref().map_or(0, |c| c.hits.load(Ordering::Relaxed)) - hits;
@@ -290,7 +321,7 @@ fn callback<E: VoicePool>(
             report.startup.push(Startup {
                 engine,
                 scenario: format!(
-                    "the {} keyboard's {} keys prepared or read back from the cache, in a pool of {max_voices} voices",
+                    "the {} keyboard's {} keys prepared or read back from the cache, in a pool of {pool} voices",
                     scaling.scaling.name,
                     keys.len()
                 ),
@@ -310,6 +341,7 @@ fn callback<E: VoicePool>(
     {
         piano = build(report)?;
     }
+    piano.player.set_halo(halo);
     crate::warn_refused(cache.as_ref());
     let settings = scaling.output_settings();
     let deadline = BLOCK as f64 / settings.rate_hz;
@@ -320,7 +352,7 @@ fn callback<E: VoicePool>(
         cores_label(cores),
         settings.rate_hz / 1e3,
         deadline * 1e3,
-        loaded_scenario(None)
+        loaded_scenario(None, halo)
     );
     let mut within = 0;
     let mut voices = 1;
@@ -378,7 +410,7 @@ fn callback<E: VoicePool>(
             engine,
             cores,
             voices,
-            scenario: loaded_scenario(Some(voices)),
+            scenario: loaded_scenario(Some(voices), halo),
             median_x_deadline: median / deadline,
             p999_x_deadline: p999 / deadline,
             misses,
@@ -398,7 +430,7 @@ fn callback<E: VoicePool>(
     let (synth, _handle) = loaded_synth(&piano, settings, max_voices, BLOCK);
     report.memory.push(Memory {
         engine,
-        scenario: loaded_scenario(Some(max_voices)),
+        scenario: loaded_scenario(Some(max_voices), halo),
         bytes_per_voice: synth.piano().instrument.bytes_per_voice(),
         voices: max_voices,
         resident_bytes: resident_bytes(),
@@ -492,26 +524,32 @@ fn damped(keyboard: &str, model: FeltModel, seconds: f64, voices: usize) -> Resu
 /// the last of [`HELD_CHORD_BOUNDS_S`] timed as a device runs them; the median of each window
 /// and the voices still simulated at its end. Whether the cost falls as the chord dies away is
 /// what the engine makes of decaying modes.
-fn held_chord(scaling: &LoadedScaling, report: &mut Report) -> Result<()> {
-    let keys: Vec<usize> = HELD_CHORD.iter().map(|&note| note as usize - 20).collect();
+fn held_chord(scaling: &LoadedScaling, halo: bool, report: &mut Report) -> Result<()> {
+    // Every key of the keyboard: with the halo the keys not struck ring in sympathy.
+    let keys: Vec<usize> = (1..=KEYS).collect();
     let cache = unacorda::keycache::KeyCache::from_env();
-    let piano = crate::keys_bar::building(cache.as_ref(), keys.len(), |_| {
-        Piano::<ExactPool>::build_with(scaling, &keys, keys.len(), cache.as_ref())
+    let mut piano = crate::keys_bar::building(cache.as_ref(), keys.len(), |_| {
+        Piano::<ExactPool>::build_with(scaling, &keys, HALO_VOICES, cache.as_ref())
     })?;
+    piano.player.set_halo(halo);
     crate::warn_refused(cache.as_ref());
     let settings = scaling.output_settings();
     let deadline = BLOCK as f64 / settings.rate_hz;
-    let names: Vec<String> = keys.iter().map(|&k| key_name(k)).collect();
+    let names: Vec<String> = HELD_CHORD
+        .iter()
+        .map(|&note| key_name(note as usize - 20))
+        .collect();
     let end_s = HELD_CHORD_BOUNDS_S[HELD_CHORD_BOUNDS_S.len() - 1];
     let scenario = format!(
-        "held chord: sustain down, {} struck together at velocity {VELOCITY} and held; every callback from the strike to {end_s:.0} s after it, paced as a device runs them",
+        "held chord: sustain down{}, {} struck together at velocity {VELOCITY} and held; every callback from the strike to {end_s:.0} s after it, paced as a device runs them",
+        halo_label(halo),
         names.join(" ")
     );
     println!(
-        "held chord over time: {} keyboard, {}, one core, {} voices, {BLOCK}-frame blocks at {:.0} kHz (deadline {:.2} ms);\n  {scenario}; median of each window after the strike:",
+        "held chord over time: {} keyboard, {}, one core, {} struck, {BLOCK}-frame blocks at {:.0} kHz (deadline {:.2} ms);\n  {scenario}; median of each window after the strike:",
         scaling.scaling.name,
         engine_label("exact", &piano),
-        keys.len(),
+        HELD_CHORD.len(),
         settings.rate_hz / 1e3,
         deadline * 1e3,
     );
@@ -532,13 +570,15 @@ fn held_chord(scaling: &LoadedScaling, report: &mut Report) -> Result<()> {
         }
         let median = percentile(&w.times_s, 0.5);
         println!(
-            "  {:4.1}–{:4.1} s after the strike: median {:7.3} ms ({:6.2} × deadline) over {} blocks, {} voices active at its end",
+            "  {:4.1}–{:4.1} s after the strike: median {:7.3} ms ({:6.2} × deadline) over {} blocks, {} voices active at its end{}",
             w.from_s,
             w.to_s,
             median * 1e3,
             median / deadline,
             w.times_s.len(),
-            w.active_voices
+            w.active_voices,
+            w.modes_stepped
+                .map_or(String::new(), |m| format!(", stepping {m} modes"))
         );
         report.held_chord.push(HeldWindow {
             scenario: scenario.clone(),
@@ -547,6 +587,7 @@ fn held_chord(scaling: &LoadedScaling, report: &mut Report) -> Result<()> {
             median_x_deadline: median / deadline,
             blocks: w.times_s.len(),
             active_voices: w.active_voices,
+            modes_stepped: w.modes_stepped,
         });
     }
     Ok(())

@@ -32,6 +32,11 @@ pub struct PlayArgs {
     /// Size of the voice pool, 1–256.
     #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES, value_name = "N")]
     pub voices: usize,
+    /// The pedal's halo: under the sustain pedal every key's strings ring in sympathy, struck or
+    /// not (each undamped key takes a voice: the pool holds at least 128). About twice the work
+    /// of playing without it: check `unacorda bench --halo` before playing live.
+    #[arg(long)]
+    pub halo: bool,
     /// Keyboard: built-in name (concert, the default; paper, the paper's model) or path to a .toml file.
     #[arg(long, default_value = "concert")]
     pub keyboard: String,
@@ -158,9 +163,15 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     eprintln!("building {} keys on one soundboard…", keys.len());
     let started = std::time::Instant::now();
     let cache = unacorda::keycache::KeyCache::from_env();
-    let piano = crate::keys_bar::building(cache.as_ref(), keys.len(), |_| {
-        Piano::<E>::build_with(&scaling, &keys, args.voices, cache.as_ref())
+    let voices = if args.halo {
+        args.voices.max(unacorda::play::HALO_VOICES)
+    } else {
+        args.voices
+    };
+    let mut piano = crate::keys_bar::building(cache.as_ref(), keys.len(), |_| {
+        Piano::<E>::build_with(&scaling, &keys, voices, cache.as_ref())
     })?;
+    piano.player.set_halo(args.halo);
     if let Some(cache) = &cache {
         let (hits, stored) = (
             cache.hits.load(Ordering::Relaxed),
@@ -198,7 +209,7 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         output.channels,
         output.rate_hz,
         unacorda::config::output::channel_layout(settings.channels),
-        args.voices,
+        voices,
         if cores == 2 { "s" } else { "" }
     );
     let stop = Arc::new(AtomicBool::new(false));

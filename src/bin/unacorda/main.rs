@@ -49,6 +49,11 @@ enum Command {
         /// With --midi: size of the voice pool, 1–256 (the quietest voice is stolen when it is full).
         #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES, value_name = "N")]
         voices: usize,
+        /// With --midi: the pedal's halo — under the sustain pedal every key's strings ring in
+        /// sympathy, struck or not (each undamped key takes a voice: the pool holds at least 128;
+        /// about twice the work of a performance without it).
+        #[arg(long, requires = "midi")]
+        halo: bool,
         /// With --midi: refuse performances longer than this (s), 1–86400; a file whose tempo map
         /// or deltas make it last hours is more likely a mistake than a request.
         #[arg(
@@ -219,8 +224,7 @@ fn write_wav(out: &Path, rec: &Recording, full_scale_pa: f64, channels: u16) -> 
 fn render_midi_file<E: unacorda::engine::VoicePool>(
     scaling: &unacorda::config::scaling::LoadedScaling,
     events: &[unacorda::midi::file::TimedEvent],
-    tail: f64,
-    voices: usize,
+    offline: unacorda::render::Offline,
     path: &Path,
     out: &Path,
     length_s: f64,
@@ -240,13 +244,7 @@ fn render_midi_file<E: unacorda::engine::VoicePool>(
         scaling,
         cache: cache.as_ref(),
     };
-    // Both cores where the machine has two, as `play` does.
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get().min(2));
-    let offline = unacorda::render::Offline {
-        tail_s: tail,
-        voices,
-        cores,
-    };
+    let cores = offline.cores;
     // The keys the render prepares: those the file plays.
     let mut keys: Vec<usize> = events
         .iter()
@@ -343,6 +341,7 @@ fn run(cli: Cli) -> Result<()> {
             key,
             midi,
             voices,
+            halo,
             max_seconds,
             tail,
             keyboard,
@@ -380,12 +379,19 @@ fn run(cli: Cli) -> Result<()> {
                         length_s - tail
                     );
                 }
+                let offline = unacorda::render::Offline {
+                    tail_s: tail,
+                    voices,
+                    // Both cores where the machine has two, as `play` does.
+                    cores: std::thread::available_parallelism().map_or(1, |n| n.get().min(2)),
+                    halo,
+                };
                 return match integrator.unwrap_or(IntegratorArg::Exact) {
                     IntegratorArg::Rk4 => render_midi_file::<unacorda::engine::Rk4Pool>(
-                        &scaling, &events, tail, voices, &path, &out, length_s,
+                        &scaling, &events, offline, &path, &out, length_s,
                     ),
                     IntegratorArg::Exact => render_midi_file::<unacorda::engine::exact::ExactPool>(
-                        &scaling, &events, tail, voices, &path, &out, length_s,
+                        &scaling, &events, offline, &path, &out, length_s,
                     ),
                 };
             }

@@ -46,6 +46,8 @@ pub(crate) struct Steps {
     exchange: Exchange,
     pub(crate) volume: [[f64; CHANNELS]; BLOCK],
     pub(crate) board_volume: [[f64; CHANNELS]; BLOCK],
+    /// Each sample's total force on the board of the voices watched ([`Voice::watched`], N).
+    pub(crate) watched_n: [[f64; 3]; BLOCK],
 }
 
 /// One half of the voices' working values within the steps: the half's known modal force this
@@ -58,6 +60,7 @@ pub(crate) struct Half {
     sum: Vec<f64>,
     volume: [[f64; CHANNELS]; BLOCK],
     board_volume: [[f64; CHANNELS]; BLOCK],
+    watched_n: [[f64; 3]; BLOCK],
 }
 
 impl Steps {
@@ -69,6 +72,7 @@ impl Steps {
             sum: vec![0.0; m],
             volume: [[0.0; CHANNELS]; BLOCK],
             board_volume: [[0.0; CHANNELS]; BLOCK],
+            watched_n: [[0.0; 3]; BLOCK],
         };
         Steps {
             halves: [half.clone(), half],
@@ -77,6 +81,19 @@ impl Steps {
             exchange: Exchange::new(m),
             volume: [[0.0; CHANNELS]; BLOCK],
             board_volume: [[0.0; CHANNELS]; BLOCK],
+            watched_n: [[0.0; 3]; BLOCK],
+        }
+    }
+}
+
+impl Steps {
+    /// The block's first `len` samples of both halves' voices: their radiating source and the
+    /// watched voices' force, half 0's plus half 1's.
+    fn add_halves(&mut self, len: usize) {
+        let [h0, h1] = &self.halves;
+        for t in 0..len {
+            self.volume[t] = std::array::from_fn(|c| h0.volume[t][c] + h1.volume[t][c]);
+            self.watched_n[t] = std::array::from_fn(|d| h0.watched_n[t][d] + h1.watched_n[t][d]);
         }
     }
 }
@@ -92,6 +109,7 @@ impl Clone for Steps {
             exchange: Exchange::new(self.part.modes()),
             volume: self.volume,
             board_volume: self.board_volume,
+            watched_n: self.watched_n,
         }
     }
 }
@@ -170,6 +188,7 @@ pub(crate) fn begin(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
             continue;
         };
         let key = v.face(&cx.keys[key]);
+        let live = v.live_modes(key);
         match (v.damped(key), &key.damper) {
             (true, Some(damper)) => {
                 for (j, to) in damper.to.iter().enumerate() {
@@ -178,6 +197,7 @@ pub(crate) fn begin(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
                 free_block(
                     cx.simd,
                     &damper.block,
+                    live,
                     &key.ef,
                     &mut v.w,
                     &mut v.block_read,
@@ -188,7 +208,7 @@ pub(crate) fn begin(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
                 let out: &mut [[f64; BLOCK]; READS] = (&mut v.block_read[..READS])
                     .try_into()
                     .expect("the first reads are the undamped key's");
-                free_block(cx.simd, &key.block, &key.ef, &mut v.w, out, len);
+                free_block(cx.simd, &key.block, live, &key.ef, &mut v.w, out, len);
             }
         }
     }
@@ -201,9 +221,10 @@ pub(crate) fn end(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
     for v in voices.iter_mut() {
         if let (true, Some(key)) = (v.in_block, v.state.key) {
             let key = v.face(&cx.keys[key]);
+            let live = v.live_modes(key);
             match (v.damped(key), &key.damper) {
                 (true, Some(damper)) => {
-                    fold_block(cx.simd, &damper.block, &mut v.w, &v.block_inputs, len);
+                    fold_block(cx.simd, &damper.block, live, &mut v.w, &v.block_inputs, len);
                     for (j, to) in damper.to.iter().enumerate() {
                         to.add_to(&mut v.w, v.damper_n[j]);
                     }
@@ -212,7 +233,7 @@ pub(crate) fn end(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
                     let inputs: &Reversed<DIRECTIONS> = v.block_inputs[..DIRECTIONS]
                         .try_into()
                         .expect("the first inputs are the bridge's");
-                    fold_block(cx.simd, &key.block, &mut v.w, inputs, len);
+                    fold_block(cx.simd, &key.block, live, &mut v.w, inputs, len);
                 }
             }
             if cx.keep_energies {
@@ -223,52 +244,77 @@ pub(crate) fn end(cx: &Context<'_>, voices: &mut [Voice], len: usize) {
     }
 }
 
-/// Sample `t` of the voices up to the interface: a voice in the block from its free reads and
-/// its Markov parameters, any other by [`Voice::pre_step`] (its fade moving: a stolen voice's
-/// modes shrink with it); their known forces summed onto the shared modes in `half.known`.
-fn known(cx: &Context<'_>, voices: &mut [Voice], half: &mut Half, t: usize) {
+/// Sample `t` of voice `v` up to the interface: in the block, from its free reads and its Markov
+/// parameters, else by [`Voice::pre_step`] (its fade moving: a stolen voice's modes shrink with
+/// it); its known force summed onto the shared modes in `known`.
+#[inline(always)]
+fn pre(cx: &Context<'_>, v: &mut Voice, k: usize, t: usize, known: &mut [f64]) {
+    let key = v.face(&cx.keys[k]);
+    if v.in_block {
+        v.pre_block_step(key, t, cx.simd);
+    } else {
+        let before = v.state.coupling;
+        fade_step(&mut v.state, cx.fade_steps);
+        if v.state.coupling != before {
+            let ratio = if before > 0.0 {
+                v.state.coupling / before
+            } else {
+                0.0
+            };
+            v.w.scale(ratio);
+        }
+        v.pre_step(key, cx.simd);
+    }
+    let f = [v.known[1], v.known[2], v.known[3]];
+    cx.board.add_force(cx.simd, &cx.points[k], f, known);
+}
+
+/// The voices' first sample up to the interface ([`pre`]), their known forces in `half.known`.
+fn first(cx: &Context<'_>, voices: &mut [Voice], half: &mut Half) {
     half.known.iter_mut().for_each(|f| *f = 0.0);
     for v in voices.iter_mut() {
-        let (true, Some(k)) = (v.state.active, v.state.key) else {
-            continue;
-        };
-        let key = v.face(&cx.keys[k]);
-        if v.in_block {
-            v.pre_block_step(key, t, cx.simd);
-        } else {
-            let before = v.state.coupling;
-            fade_step(&mut v.state, cx.fade_steps);
-            if v.state.coupling != before {
-                let ratio = if before > 0.0 {
-                    v.state.coupling / before
-                } else {
-                    0.0
-                };
-                v.w.scale(ratio);
-            }
-            v.pre_step(key, cx.simd);
+        if let (true, Some(k)) = (v.state.active, v.state.key) {
+            pre(cx, v, k, 0, &mut half.known);
         }
-        let f = [v.known[1], v.known[2], v.known[3]];
-        cx.board
-            .add_force(cx.simd, &cx.points[k], f, &mut half.known);
     }
 }
 
 /// After the shared board has stepped: every voice reads its displacement at its bridge and
-/// finishes its step. Returns the voices' radiating source of each channel.
-fn finish(cx: &Context<'_>, voices: &mut [Voice], part: &BoardState) -> [f64; CHANNELS] {
-    let mut total = [0.0; CHANNELS];
+/// finishes step `t`, then (unless this was the block's last) takes the next sample up to the
+/// interface ([`pre`]), its known force in `half.known` — one pass over the voices a sample,
+/// each voice's bridge point and state brought in once for both. Writes the voices' radiating
+/// source of each channel to `half.volume[t]` and the watched voices' force to
+/// `half.watched_n[t]`.
+fn finish(
+    cx: &Context<'_>,
+    voices: &mut [Voice],
+    part: &BoardState,
+    half: &mut Half,
+    t: usize,
+    len: usize,
+) {
+    let next = (t + 1 < len).then_some(t + 1);
+    if next.is_some() {
+        half.known.iter_mut().for_each(|f| *f = 0.0);
+    }
+    let (mut total, mut watched) = ([0.0; CHANNELS], [0.0; 3]);
     for v in voices.iter_mut() {
         let (true, Some(k)) = (v.state.active, v.state.key) else {
             continue;
         };
-        let next = cx.board.at(part, &cx.points[k], cx.simd);
-        v.post_step(v.face(&cx.keys[k]), next);
+        let d = cx.board.at(part, &cx.points[k], cx.simd);
+        v.post_step(v.face(&cx.keys[k]), d);
         for (t, &r) in total.iter_mut().zip(&SOUND_READS) {
             *t += v.read[r];
         }
+        if v.watched {
+            watched.iter_mut().zip(v.force_n).for_each(|(w, f)| *w += f);
+        }
+        if let Some(t) = next {
+            pre(cx, v, k, t, &mut half.known);
+        }
     }
-    total
+    (half.volume[t], half.watched_n[t]) = (total, watched);
 }
 
 /// The shared modes' known force: half 0's plus half 1's, in that order on either core (so that
@@ -285,15 +331,16 @@ fn sum(first: &[f64], second: &[f64], total: &mut [f64]) {
 pub(crate) fn run(cx: &Context<'_>, voices: [&mut [Voice]; 2], steps: &mut Steps, len: usize) {
     let [v0, v1] = voices;
     let [h0, h1] = &mut steps.halves;
+    first(cx, v0, h0);
+    first(cx, v1, h1);
     for t in 0..len {
-        known(cx, v0, h0, t);
-        known(cx, v1, h1, t);
         sum(&h0.known, &h1.known, &mut h0.sum);
         let board = cx.board.step(&mut steps.part, &h0.sum, cx.simd);
-        let (first, second) = (finish(cx, v0, &steps.part), finish(cx, v1, &steps.part));
-        steps.volume[t] = std::array::from_fn(|c| first[c] + second[c]);
+        finish(cx, v0, &steps.part, h0, t, len);
+        finish(cx, v1, &steps.part, h1, t, len);
         steps.board_volume[t] = board;
     }
+    steps.add_halves(len);
 }
 
 /// Half `me` of the steps on two cores: its voices' `len` samples, meeting the other half each
@@ -308,8 +355,8 @@ fn run_half(
     me: usize,
     len: usize,
 ) {
+    first(cx, voices, half);
     for t in 0..len {
-        known(cx, voices, half, t);
         exchange.publish(me, t, &half.known);
         if !exchange.receive(me, t, &mut half.other) {
             return;
@@ -320,7 +367,7 @@ fn run_half(
         };
         sum(first, second, &mut half.sum);
         half.board_volume[t] = cx.board.step(part, &half.sum, cx.simd);
-        half.volume[t] = finish(cx, voices, part);
+        finish(cx, voices, part, half, t, len);
     }
 }
 
@@ -350,8 +397,7 @@ pub(crate) fn run_on_two(
         part,
         copy,
         exchange,
-        volume,
-        board_volume,
+        ..
     } = steps;
     copy.copy_from(part);
     exchange.reset();
@@ -367,10 +413,9 @@ pub(crate) fn run_on_two(
     if let Some(e) = mine.or(theirs) {
         resume_unwind(e);
     }
-    for t in 0..len {
-        volume[t] = std::array::from_fn(|c| h0.volume[t][c] + h1.volume[t][c]);
-    }
-    board_volume[..len].copy_from_slice(&h0.board_volume[..len]);
+    let board = steps.halves[0].board_volume;
+    steps.board_volume[..len].copy_from_slice(&board[..len]);
+    steps.add_halves(len);
     true
 }
 

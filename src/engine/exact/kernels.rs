@@ -6,6 +6,7 @@ use crate::engine::kernels::has_avx2_fma;
 use crate::engine::physics::damper::FELT_POINTS;
 use crate::engine::spec::{CHANNELS, MAX_STRINGS};
 use faer::c64;
+use std::ops::Range;
 
 /// A complex vector per mode, real and imaginary parts apart (the kernels' layout).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -64,6 +65,14 @@ impl Split {
         }
     }
 
+    /// `z += g u` on the modes in `range` (within `self`'s).
+    pub(crate) fn add_range_to(&self, z: &mut Split, u: f64, range: Range<usize>) {
+        for m in range {
+            z.re[m] += self.re[m] * u;
+            z.im[m] += self.im[m] * u;
+        }
+    }
+
     /// `z *= x`.
     pub(crate) fn scale(&mut self, x: f64) {
         self.re.iter_mut().for_each(|v| *v *= x);
@@ -88,38 +97,42 @@ pub(crate) const READS: usize = 5;
 /// The reads that are each channel's radiating source (left, right).
 pub(crate) const SOUND_READS: [usize; CHANNELS] = [0, 4];
 
-/// One pass over the first `e.len()` modes: `z <- e ⊙ z` (if `propagate`), then
+/// One pass over the first `n` modes (at most `e.len()`): `z <- e ⊙ z` (if `propagate`), then
 /// `z += sum_j g_j u_j` over the inputs, then `Re(r_i z)` for each row: 6 FLOP per mode to
 /// propagate, 4 per input and 4 per row.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn advance(
     fast: bool,
     propagate: bool,
+    n: usize,
     e: &Split,
     z: &mut Split,
     g: &[Split; DIRECTIONS],
     u: &[f64; DIRECTIONS],
     rows: &[Split; READS],
 ) -> [f64; READS] {
+    let n = n.min(e.len());
     #[cfg(target_arch = "x86_64")]
     if fast {
         // SAFETY: `fast` is set only where `has_avx2_fma()` found AVX2 and FMA.
-        return unsafe { advance_avx2(propagate, e, z, g, u, rows) };
+        return unsafe { advance_avx2(propagate, n, e, z, g, u, rows) };
     }
     let _ = fast;
-    dispatch::<false>(propagate, e, z, g, u, rows)
+    dispatch::<false>(propagate, n, e, z, g, u, rows)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn advance_avx2(
     propagate: bool,
+    n: usize,
     e: &Split,
     z: &mut Split,
     g: &[Split; DIRECTIONS],
     u: &[f64; DIRECTIONS],
     rows: &[Split; READS],
 ) -> [f64; READS] {
-    dispatch::<true>(propagate, e, z, g, u, rows)
+    dispatch::<true>(propagate, n, e, z, g, u, rows)
 }
 
 /// The variant without inputs where every input is zero (one key alone on the board, or before
@@ -127,6 +140,7 @@ unsafe fn advance_avx2(
 #[inline(always)]
 fn dispatch<const FMA: bool>(
     propagate: bool,
+    n: usize,
     e: &Split,
     z: &mut Split,
     g: &[Split; DIRECTIONS],
@@ -135,10 +149,10 @@ fn dispatch<const FMA: bool>(
 ) -> [f64; READS] {
     let inputs = u.iter().any(|&x| x != 0.0);
     match (propagate, inputs) {
-        (true, true) => pass::<FMA, true, true>(e, z, g, u, rows),
-        (true, false) => pass::<FMA, true, false>(e, z, g, u, rows),
-        (false, true) => pass::<FMA, false, true>(e, z, g, u, rows),
-        (false, false) => pass::<FMA, false, false>(e, z, g, u, rows),
+        (true, true) => pass::<FMA, true, true>(n, e, z, g, u, rows),
+        (true, false) => pass::<FMA, true, false>(n, e, z, g, u, rows),
+        (false, true) => pass::<FMA, false, true>(n, e, z, g, u, rows),
+        (false, false) => pass::<FMA, false, false>(n, e, z, g, u, rows),
     }
 }
 
@@ -154,13 +168,13 @@ pub(crate) fn fma<const FMA: bool>(a: f64, b: f64, c: f64) -> f64 {
 
 #[inline(always)]
 fn pass<const FMA: bool, const PROPAGATE: bool, const INPUT: bool>(
+    n: usize,
     e: &Split,
     z: &mut Split,
     g: &[Split; DIRECTIONS],
     u: &[f64; DIRECTIONS],
     rows: &[Split; READS],
 ) -> [f64; READS] {
-    let n = e.len();
     let (er, ei) = (&e.re[..n], &e.im[..n]);
     let (zr, zi) = (&mut z.re[..n], &mut z.im[..n]);
     let gr: [&[f64]; DIRECTIONS] = std::array::from_fn(|j| &g[j].re[..n]);
@@ -592,42 +606,46 @@ impl<const R: usize, const I: usize> BlockCoefficients<R, I> {
     }
 }
 
-/// `len` free steps of every mode, mode by mode (each mode's coefficients loaded once):
+/// `len` free steps of the first `n` modes (a multiple of [`WIDE`], at most
+/// [`BlockCoefficients::modes`]), mode by mode (each mode's coefficients loaded once):
 /// `out[i][t] = Re(r_i e^{t+1} z)` for `t < len` in single precision, then `z <- e^len ⊙ z` in
 /// double (`e_step` is the double-precision step, for a block shorter than [`BLOCK`]). `z` holds
-/// at least [`BlockCoefficients::modes`] modes.
+/// at least `n` modes.
 pub(crate) fn free_block<const R: usize, const I: usize>(
     simd: Simd,
     c: &BlockCoefficients<R, I>,
+    n: usize,
     e_step: &Split,
     z: &mut Split,
     out: &mut [[f64; BLOCK]; R],
     len: usize,
 ) {
+    assert!(n <= c.modes() && n.is_multiple_of(WIDE) && z.re.len() >= n && z.im.len() >= n);
     #[cfg(target_arch = "x86_64")]
     match simd {
         // SAFETY: `Simd::detect` chose these only where the CPU has them.
         Simd::Avx512 if R <= READS => {
-            return unsafe { free_block_avx512::<R, I, 2>(c, e_step, z, out, len) }
+            return unsafe { free_block_avx512::<R, I, 2>(c, n, e_step, z, out, len) }
         }
-        Simd::Avx512 => return unsafe { free_block_avx512::<R, I, 1>(c, e_step, z, out, len) },
-        Simd::Avx2 => return unsafe { free_block_avx2(c, e_step, z, out, len) },
+        Simd::Avx512 => return unsafe { free_block_avx512::<R, I, 1>(c, n, e_step, z, out, len) },
+        Simd::Avx2 => return unsafe { free_block_avx2(c, n, e_step, z, out, len) },
         Simd::Portable => {}
     }
     let _ = simd;
-    free_block_with::<false, R, I>(c, e_step, z, out, len)
+    free_block_with::<false, R, I>(c, n, e_step, z, out, len)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn free_block_avx2<const R: usize, const I: usize>(
     c: &BlockCoefficients<R, I>,
+    n: usize,
     e_step: &Split,
     z: &mut Split,
     out: &mut [[f64; BLOCK]; R],
     len: usize,
 ) {
-    free_block_with::<true, R, I>(c, e_step, z, out, len)
+    free_block_with::<true, R, I>(c, n, e_step, z, out, len)
 }
 
 /// `a b + c` in single precision, fused with `FMA`.
@@ -675,12 +693,12 @@ fn carry<const R: usize, const I: usize>(
 #[inline(always)]
 fn free_block_with<const FMA: bool, const R: usize, const I: usize>(
     c: &BlockCoefficients<R, I>,
+    n: usize,
     e_step: &Split,
     z: &mut Split,
     out: &mut [[f64; BLOCK]; R],
     len: usize,
 ) {
-    let n = c.modes();
     let mut acc = [[[0f32; LANES32]; BLOCK]; R];
     for base in (0..n).step_by(LANES32) {
         let mut er = [0f32; LANES32];
@@ -727,17 +745,16 @@ fn free_block_with<const FMA: bool, const R: usize, const I: usize>(
 #[target_feature(enable = "avx512f")]
 unsafe fn free_block_avx512<const R: usize, const I: usize, const W: usize>(
     c: &BlockCoefficients<R, I>,
+    n: usize,
     e_step: &Split,
     z: &mut Split,
     out: &mut [[f64; BLOCK]; R],
     len: usize,
 ) {
     use std::arch::x86_64::*;
-    let n = c.modes();
     let mut acc = [[_mm512_setzero_ps(); BLOCK]; R];
-    // SAFETY (every load and store below): `base + 16 W <= n`, the length of every coefficient
-    // (padded to WIDE, a multiple of 16 W) and at most that of `z` (sized for the largest key,
-    // padded).
+    // SAFETY (every load and store below): `base + 16 W <= n`, at most the length of every
+    // coefficient (padded to WIDE, a multiple of 16 W) and of `z` (asserted by `free_block`).
     let ld = |x: &[f32], at: usize| _mm512_loadu_ps(x.as_ptr().add(at));
     let ld64 = |x: &[f64], at: usize| {
         let lo = _mm512_cvtpd_ps(_mm512_loadu_pd(x.as_ptr().add(at)));
@@ -776,50 +793,53 @@ unsafe fn free_block_avx512<const R: usize, const I: usize, const W: usize>(
     }
 }
 
-/// Fold `len` steps of inputs into the modes, mode by mode: `z += sum_t e^{len-1-t} (sum_j g_j
-/// u_j(t))`, the sum formed in single precision (it starts from zero each block) and added in
-/// double — by superposition, what stepping the inputs in one at a time adds. The inputs are
-/// [`Reversed`].
+/// Fold `len` steps of inputs into the first `n` modes (as [`free_block`]), mode by mode: `z +=
+/// sum_t e^{len-1-t} (sum_j g_j u_j(t))`, the sum formed in single precision (it starts from zero
+/// each block) and added in double — by superposition, what stepping the inputs in one at a time
+/// adds. The inputs are [`Reversed`].
 pub(crate) fn fold_block<const R: usize, const I: usize>(
     simd: Simd,
     c: &BlockCoefficients<R, I>,
+    n: usize,
     z: &mut Split,
     u: &Reversed<I>,
     len: usize,
 ) {
+    assert!(n <= c.modes() && n.is_multiple_of(WIDE) && z.re.len() >= n && z.im.len() >= n);
     #[cfg(target_arch = "x86_64")]
     match simd {
         // SAFETY: `Simd::detect` chose these only where the CPU has them.
         Simd::Avx512 if I <= DIRECTIONS => {
-            return unsafe { fold_block_avx512::<R, I, 2>(c, z, u, len) }
+            return unsafe { fold_block_avx512::<R, I, 2>(c, n, z, u, len) }
         }
-        Simd::Avx512 => return unsafe { fold_block_avx512::<R, I, 1>(c, z, u, len) },
-        Simd::Avx2 => return unsafe { fold_block_avx2(c, z, u, len) },
+        Simd::Avx512 => return unsafe { fold_block_avx512::<R, I, 1>(c, n, z, u, len) },
+        Simd::Avx2 => return unsafe { fold_block_avx2(c, n, z, u, len) },
         Simd::Portable => {}
     }
     let _ = simd;
-    fold_block_with::<false, R, I>(c, z, u, len)
+    fold_block_with::<false, R, I>(c, n, z, u, len)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn fold_block_avx2<const R: usize, const I: usize>(
     c: &BlockCoefficients<R, I>,
+    n: usize,
     z: &mut Split,
     u: &Reversed<I>,
     len: usize,
 ) {
-    fold_block_with::<true, R, I>(c, z, u, len)
+    fold_block_with::<true, R, I>(c, n, z, u, len)
 }
 
 #[inline(always)]
 fn fold_block_with<const FMA: bool, const R: usize, const I: usize>(
     c: &BlockCoefficients<R, I>,
+    n: usize,
     z: &mut Split,
     u: &Reversed<I>,
     len: usize,
 ) {
-    let n = c.modes();
     let steps: [[f32; I]; BLOCK] =
         std::array::from_fn(|t| std::array::from_fn(|j| u[j][BLOCK - 1 - t]));
     for base in (0..n).step_by(LANES32) {
@@ -862,14 +882,14 @@ fn fold_block_with<const FMA: bool, const R: usize, const I: usize>(
 #[target_feature(enable = "avx512f")]
 unsafe fn fold_block_avx512<const R: usize, const I: usize, const W: usize>(
     c: &BlockCoefficients<R, I>,
+    n: usize,
     z: &mut Split,
     u: &Reversed<I>,
     len: usize,
 ) {
     use std::arch::x86_64::*;
-    let n = c.modes();
-    // SAFETY (every load and store below): `base + 16 W <= n`, the length of every coefficient
-    // (padded to WIDE) and at most that of `z`.
+    // SAFETY (every load and store below): `base + 16 W <= n`, at most the length of every
+    // coefficient (padded to WIDE) and of `z` (asserted by `fold_block`).
     let ld = |x: &[f32], at: usize| _mm512_loadu_ps(x.as_ptr().add(at));
     for base in (0..n).step_by(16 * W) {
         let h: [usize; W] = std::array::from_fn(|k| base + 16 * k);
@@ -911,70 +931,143 @@ unsafe fn fold_block_avx512<const R: usize, const I: usize, const W: usize>(
     }
 }
 
-/// A voice's energy `sum_m energy_m |w_m + sum_d shift_d,m D_d|^2` over its `n` modes (J): once
-/// or twice a block for every sounding voice (the pool's policy and its growth guard), so in the
-/// widest registers the machine has.
-pub(crate) fn energy(
-    simd: Simd,
-    w: &Split,
-    shift: &[Split; 3],
-    d: [f64; 3],
-    energy: &[f64],
-    n: usize,
-) -> f64 {
-    match simd {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: `Simd::detect` found AVX-512F (AVX2 + FMA) on this machine.
-        Simd::Avx512 => unsafe { energy_avx512(w, shift, d, energy, n) },
-        #[cfg(target_arch = "x86_64")]
-        Simd::Avx2 => unsafe { energy_avx2(w, shift, d, energy, n) },
-        _ => energy_with(w, shift, d, energy, n),
+/// What a voice's two energies read of its key, in single precision and padded to [`WIDE`]:
+/// per direction the shifts `a_d` (`z = w + a D`) and `a_d - follow_d` (the state about the
+/// strings' static deflection by `D`), and each mode's energy per `|z|^2` (J). Single precision
+/// halves what the pass brings from memory (the state and the sums stay in double): the energies
+/// are read after every housekeeping period for every sounding voice, and these coefficients are
+/// touched by nothing else.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct EnergyCoefficients {
+    pub(crate) settle: [Split32; DIRECTIONS],
+    pub(crate) unfollow: [Split32; DIRECTIONS],
+    pub(crate) weight: Vec<f32>,
+}
+
+impl EnergyCoefficients {
+    pub(crate) fn new(
+        settle: &[Split; DIRECTIONS],
+        unfollow: &[Split; DIRECTIONS],
+        weight: &[f64],
+    ) -> EnergyCoefficients {
+        let n = settle[0].len();
+        let mut w: Vec<f32> = weight[..n].iter().map(|&x| x as f32).collect();
+        w.resize(n.div_ceil(WIDE) * WIDE, 0.0);
+        EnergyCoefficients {
+            settle: std::array::from_fn(|d| Split32::new(&settle[d])),
+            unfollow: std::array::from_fn(|d| Split32::new(&unfollow[d])),
+            weight: w,
+        }
+    }
+
+    /// Modes of the pass (padded).
+    pub(crate) fn modes(&self) -> usize {
+        self.weight.len()
     }
 }
 
+/// The energies `[sum_m e_m |w_m + sum_d a_d,m D_d|^2, sum_m e_m |w_m + sum_d u_d,m D_d|^2]`
+/// (J; `a` the shift to `z`, `u` that about the static deflection: [`EnergyCoefficients`]) of
+/// the modes in `range` (whole lanes, within the padded modes and `w`), in one pass, in the
+/// widest registers the machine has.
+pub(crate) fn energies(
+    simd: Simd,
+    c: &EnergyCoefficients,
+    w: &Split,
+    d: [f64; 3],
+    range: Range<usize>,
+) -> [f64; 2] {
+    assert!(
+        range.start.is_multiple_of(LANES)
+            && range.end.is_multiple_of(LANES)
+            && range.end <= c.modes()
+            && range.end <= w.re.len().min(w.im.len())
+    );
+    match simd {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `Simd::detect` found AVX-512F (AVX2 + FMA) on this machine.
+        Simd::Avx512 => unsafe { energies_avx512(c, w, d, range) },
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx2 => unsafe { energies_avx2(c, w, d, range) },
+        _ => energies_with::<false>(c, w, d, range),
+    }
+}
+
+/// [`energies`] in AVX-512: eight modes a register, the coefficients widened to double as they
+/// are loaded.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn energy_avx512(w: &Split, shift: &[Split; 3], d: [f64; 3], e: &[f64], n: usize) -> f64 {
-    energy_with(w, shift, d, e, n)
+unsafe fn energies_avx512(
+    c: &EnergyCoefficients,
+    w: &Split,
+    d: [f64; 3],
+    range: Range<usize>,
+) -> [f64; 2] {
+    use std::arch::x86_64::*;
+    let dd = d.map(|x| _mm512_set1_pd(x));
+    let (mut es, mut eu) = (_mm512_setzero_pd(), _mm512_setzero_pd());
+    // SAFETY (every load below): `m + LANES <= range.end`, within `w` and every coefficient
+    // (asserted by `energies`).
+    let wide = |x: &[f32], m: usize| _mm512_cvtps_pd(_mm256_loadu_ps(x.as_ptr().add(m)));
+    for m in range.step_by(LANES) {
+        let (wr, wi) = (
+            _mm512_loadu_pd(w.re.as_ptr().add(m)),
+            _mm512_loadu_pd(w.im.as_ptr().add(m)),
+        );
+        let (mut sr, mut si, mut ur, mut ui) = (wr, wi, wr, wi);
+        for k in 0..DIRECTIONS {
+            sr = _mm512_fmadd_pd(wide(&c.settle[k].re, m), dd[k], sr);
+            si = _mm512_fmadd_pd(wide(&c.settle[k].im, m), dd[k], si);
+            ur = _mm512_fmadd_pd(wide(&c.unfollow[k].re, m), dd[k], ur);
+            ui = _mm512_fmadd_pd(wide(&c.unfollow[k].im, m), dd[k], ui);
+        }
+        let e = wide(&c.weight, m);
+        es = _mm512_fmadd_pd(e, _mm512_fmadd_pd(sr, sr, _mm512_mul_pd(si, si)), es);
+        eu = _mm512_fmadd_pd(e, _mm512_fmadd_pd(ur, ur, _mm512_mul_pd(ui, ui)), eu);
+    }
+    [_mm512_reduce_add_pd(es), _mm512_reduce_add_pd(eu)]
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn energy_avx2(w: &Split, shift: &[Split; 3], d: [f64; 3], e: &[f64], n: usize) -> f64 {
-    energy_with(w, shift, d, e, n)
+unsafe fn energies_avx2(
+    c: &EnergyCoefficients,
+    w: &Split,
+    d: [f64; 3],
+    range: Range<usize>,
+) -> [f64; 2] {
+    energies_with::<true>(c, w, d, range)
 }
 
 #[inline(always)]
-fn energy_with(w: &Split, shift: &[Split; 3], d: [f64; 3], energy: &[f64], n: usize) -> f64 {
-    const L: usize = 8;
-    let whole = n / L * L;
-    let [u0, u1, u2] = shift;
-    fn chunks(x: &[f64], whole: usize) -> std::slice::ChunksExact<'_, f64> {
-        x[..whole].chunks_exact(L)
-    }
-    let mut acc = [0.0; L];
-    for ((((((((wr, wi), r0), i0), r1), i1), r2), i2), e) in chunks(&w.re, whole)
-        .zip(chunks(&w.im, whole))
-        .zip(chunks(&u0.re, whole))
-        .zip(chunks(&u0.im, whole))
-        .zip(chunks(&u1.re, whole))
-        .zip(chunks(&u1.im, whole))
-        .zip(chunks(&u2.re, whole))
-        .zip(chunks(&u2.im, whole))
-        .zip(chunks(energy, whole))
-    {
+fn energies_with<const FMA: bool>(
+    c: &EnergyCoefficients,
+    w: &Split,
+    d: [f64; 3],
+    range: Range<usize>,
+) -> [f64; 2] {
+    const L: usize = LANES;
+    let lanes = |x: &[f32], m: usize| -> [f64; L] { std::array::from_fn(|l| f64::from(x[m + l])) };
+    let mut acc = [[0.0; L]; 2];
+    for m in range.step_by(L) {
+        let wr: &[f64; L] = w.re[m..m + L].try_into().expect("L modes");
+        let wi: &[f64; L] = w.im[m..m + L].try_into().expect("L modes");
+        let (mut sr, mut si, mut ur, mut ui) = (*wr, *wi, *wr, *wi);
+        for k in 0..DIRECTIONS {
+            let (ar, ai) = (lanes(&c.settle[k].re, m), lanes(&c.settle[k].im, m));
+            let (br, bi) = (lanes(&c.unfollow[k].re, m), lanes(&c.unfollow[k].im, m));
+            for l in 0..L {
+                sr[l] = fma::<FMA>(ar[l], d[k], sr[l]);
+                si[l] = fma::<FMA>(ai[l], d[k], si[l]);
+                ur[l] = fma::<FMA>(br[l], d[k], ur[l]);
+                ui[l] = fma::<FMA>(bi[l], d[k], ui[l]);
+            }
+        }
+        let e = lanes(&c.weight, m);
         for l in 0..L {
-            let re = wr[l] + r0[l] * d[0] + r1[l] * d[1] + r2[l] * d[2];
-            let im = wi[l] + i0[l] * d[0] + i1[l] * d[1] + i2[l] * d[2];
-            acc[l] += e[l] * (re * re + im * im);
+            acc[0][l] = fma::<FMA>(e[l], fma::<FMA>(sr[l], sr[l], si[l] * si[l]), acc[0][l]);
+            acc[1][l] = fma::<FMA>(e[l], fma::<FMA>(ur[l], ur[l], ui[l] * ui[l]), acc[1][l]);
         }
     }
-    let tail: f64 = (whole..n)
-        .map(|m| {
-            let re = w.re[m] + u0.re[m] * d[0] + u1.re[m] * d[1] + u2.re[m] * d[2];
-            let im = w.im[m] + u0.im[m] * d[0] + u1.im[m] * d[1] + u2.im[m] * d[2];
-            energy[m] * (re * re + im * im)
-        })
-        .sum();
-    acc.iter().sum::<f64>() + tail
+    acc.map(|a| a.iter().sum())
 }

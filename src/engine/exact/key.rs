@@ -14,8 +14,8 @@
 use super::interface::SHARED_BELOW_HZ;
 pub(crate) use super::kernels::DAMPER_CHANNELS;
 use super::kernels::{
-    BlockCoefficients, Split, Taps, BLOCK, DAMPED_INPUTS, DAMPED_READS, DIRECTIONS, FELT_ROWS,
-    READS, SOUND_READS,
+    BlockCoefficients, EnergyCoefficients, Split, Taps, BLOCK, DAMPED_INPUTS, DAMPED_READS,
+    DIRECTIONS, FELT_ROWS, READS, SOUND_READS, WIDE,
 };
 use crate::engine::modal::{input_weights, Modal};
 use crate::engine::physics::damper::FeltModel;
@@ -497,25 +497,184 @@ fn markov_parameters<const R: usize, const I: usize>(
     rows: &[&Split; R],
     inputs: &[&Split; I],
 ) -> Box<Taps<R, I>> {
-    let mut power: Vec<c64> = vec![c64::new(1.0, 0.0); e.len()];
-    let mut out = Box::new([[[0f32; 2 * BLOCK]; I]; R]);
-    for k in 0..BLOCK {
-        for (i, row) in rows.iter().enumerate() {
-            for (j, input) in inputs.iter().enumerate() {
-                out[i][j][BLOCK + k] = (0..e.len())
-                    .map(|m| {
-                        let r = c64::new(row.re[m], row.im[m]);
-                        let g = c64::new(input.re[m], input.im[m]);
-                        (r * power[m] * g).re
-                    })
-                    .sum::<f64>() as f32;
+    taps(&markov_sums(e, rows, inputs, 0..e.len()))
+}
+
+/// `Re(r_i e^k g_d)` for `k < BLOCK`, summed over the modes in `range`, in double precision.
+fn markov_sums<const R: usize, const I: usize>(
+    e: &[c64],
+    rows: &[&Split; R],
+    inputs: &[&Split; I],
+    range: Range<usize>,
+) -> Box<[[[f64; BLOCK]; I]; R]> {
+    let mut out = Box::new([[[0.0; BLOCK]; I]; R]);
+    for m in range {
+        let rg: [[c64; I]; R] = std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                c64::new(rows[i].re[m], rows[i].im[m]) * c64::new(inputs[j].re[m], inputs[j].im[m])
+            })
+        });
+        let mut power = c64::new(1.0, 0.0);
+        for k in 0..BLOCK {
+            for i in 0..R {
+                for j in 0..I {
+                    out[i][j][k] += (rg[i][j] * power).re;
+                }
             }
-        }
-        for (p, e) in power.iter_mut().zip(e) {
-            *p *= e;
+            power *= e[m];
         }
     }
     out
+}
+
+/// Markov sums in single precision, laid out for [`super::kernels::scatter`] (`BLOCK` zeros,
+/// then tap `k` at `BLOCK + k`).
+fn taps<const R: usize, const I: usize>(sums: &[[[f64; BLOCK]; I]; R]) -> Box<Taps<R, I>> {
+    let mut out = Box::new([[[0f32; 2 * BLOCK]; I]; R]);
+    for (out, sums) in out.iter_mut().zip(sums) {
+        for (out, sums) in out.iter_mut().zip(sums) {
+            for (o, &x) in out[BLOCK..].iter_mut().zip(sums) {
+                *o = x as f32;
+            }
+        }
+    }
+    out
+}
+
+/// A voice whose damper is lifted steps at least its modes below this frequency (Hz): the shared
+/// board drives its strings below [`SHARED_BELOW_HZ`], and a mode an octave above what drives it
+/// answers within `(1/2)^2` of quasi-statically ([`Prefix`]), which the modes left out are
+/// taken to do.
+pub(crate) const SYMPATHETIC_BELOW_HZ: f64 = 4.0 * SHARED_BELOW_HZ;
+
+/// A chunk of a voice's modes is left out once its energy about the strings' static deflection
+/// is under this fraction of the voice's (90 dB) ...
+pub(crate) const LEFT_BELOW: f64 = 1e-9;
+/// ... or under this energy (J), a thousandth of what a whole voice holds when it falls silent
+/// ([`crate::engine::SILENCE_J`]).
+pub(crate) const LEFT_UNDER_J: f64 = 1e-3 * crate::engine::SILENCE_J;
+
+/// A voice of the key that keeps only its first `modes` modes (a whole number of [`WIDE`]-mode
+/// chunks, in order of `|lambda|`: [`crate::engine::modal::Modal`]) and lets the rest follow the
+/// bridge quasi-statically. A mode far above what drives it answers `D` as
+/// `z = -(g_k D + g_c Ddot) / lambda - g_k Ddot / lambda^2` (its own transient long gone: the
+/// next terms go as `(omega / |lambda|)^2`), so the modes left out read as a stiffness and a
+/// damper on `D` — the strings' ends following the bridge, the contact springs' fastest modes —
+/// and cost nothing: `S_0 = -sum Re(r g_k / lambda)`, `S_1 = -sum Re(r (g_c / lambda + g_k /
+/// lambda^2))` over them, with `Ddot = (D^{n+1} - D^n) / h` over the step.
+#[derive(Debug, Clone)]
+pub(crate) struct Prefix {
+    /// Modes stepped (a multiple of [`WIDE`], at most the key's padded count).
+    pub(crate) modes: usize,
+    /// How the reads depend on `D^{n+1}` with the damper lifted: the modes kept
+    /// (`Re(r a_d)`), the contact springs' direct terms and the modes left out (`S_0 + S_1 / h`).
+    pub(crate) settle: Settle,
+    /// What `D^n` adds to each read through the modes left out (`-S_1 / h`).
+    pub(crate) known: [[f64; DIRECTIONS]; READS],
+    /// What `D` held adds to each read: the modes kept (`Re(r a_d)`) and left out (`S_0`).
+    pub(crate) held: [[f64; DIRECTIONS]; READS],
+    /// The kept modes' Markov parameters.
+    pub(crate) markov: Box<Taps<READS, DIRECTIONS>>,
+}
+
+/// What builds a key's [`Prefix`]es: its step, its reads and the inputs of `D`.
+struct Prefixes<'a> {
+    h: f64,
+    lambda: &'a [c64],
+    ef: &'a [c64],
+    reads: &'a [Split; READS],
+    settle: &'a [Split; DIRECTIONS],
+    beta: &'a [Split; DIRECTIONS],
+    bridge_input: &'a [[Split; 2]; 3],
+    feed_k: [f64; DIRECTIONS],
+    feed_c: [f64; DIRECTIONS],
+}
+
+impl Prefixes<'_> {
+    /// Every prefix of whole chunks, from none kept to all.
+    fn build(&self) -> Vec<Prefix> {
+        let n = self.lambda.len();
+        let chunks = n.div_ceil(WIDE);
+        let re = |a: c64, b: c64| (a * b).re;
+        let at = |s: &Split, m: usize| c64::new(s.re[m], s.im[m]);
+        // Per chunk: the kept modes' `Re(r a)`, the static terms `S_0`, `S_1` and the Markov sums.
+        type PerRead = [[f64; DIRECTIONS]; READS];
+        let mut kept: Vec<PerRead> = vec![[[0.0; DIRECTIONS]; READS]; chunks];
+        let mut s0 = kept.clone();
+        let mut s1 = kept.clone();
+        let rows: [&Split; READS] = std::array::from_fn(|i| &self.reads[i]);
+        let inputs: [&Split; DIRECTIONS] = std::array::from_fn(|d| &self.beta[d]);
+        let mut sums = Vec::with_capacity(chunks);
+        for c in 0..chunks {
+            let range = c * WIDE..((c + 1) * WIDE).min(n);
+            for m in range.clone() {
+                let l = self.lambda[m];
+                for i in 0..READS {
+                    let r = at(&self.reads[i], m);
+                    for d in 0..DIRECTIONS {
+                        let (gk, gc) = (
+                            at(&self.bridge_input[d][0], m),
+                            at(&self.bridge_input[d][1], m),
+                        );
+                        kept[c][i][d] += re(r, at(&self.settle[d], m));
+                        s0[c][i][d] -= re(r, gk / l);
+                        s1[c][i][d] -= re(r, gc / l + gk / (l * l));
+                    }
+                }
+            }
+            sums.push(markov_sums(self.ef, &rows, &inputs, range));
+        }
+        let total = |x: &[PerRead]| -> PerRead {
+            let mut t = [[0.0; DIRECTIONS]; READS];
+            for x in x {
+                for (t, x) in t.iter_mut().zip(x) {
+                    for (t, x) in t.iter_mut().zip(x) {
+                        *t += x;
+                    }
+                }
+            }
+            t
+        };
+        let h = self.h;
+        (0..=chunks)
+            .map(|p| {
+                let (live, left_s0, left_s1) =
+                    (total(&kept[..p]), total(&s0[p..]), total(&s1[p..]));
+                let z = |i: usize, d: usize| live[i][d] + left_s0[i][d] + left_s1[i][d] / h;
+                let mut markov = Box::new([[[0.0; BLOCK]; DIRECTIONS]; READS]);
+                for chunk in &sums[..p] {
+                    for (m, c) in markov.iter_mut().zip(chunk.iter()) {
+                        for (m, c) in m.iter_mut().zip(c) {
+                            for (m, c) in m.iter_mut().zip(c) {
+                                *m += c;
+                            }
+                        }
+                    }
+                }
+                Prefix {
+                    modes: (p * WIDE).min(n.div_ceil(WIDE) * WIDE),
+                    settle: Settle {
+                        force: std::array::from_fn(|i| {
+                            std::array::from_fn(|d| {
+                                let direct = if i == d {
+                                    self.feed_k[d] + self.feed_c[d] / h
+                                } else {
+                                    0.0
+                                };
+                                z(1 + i, d) - direct
+                            })
+                        }),
+                        volume: SOUND_READS.map(|r| std::array::from_fn(|d| z(r, d))),
+                    },
+                    known: std::array::from_fn(|i| std::array::from_fn(|d| -left_s1[i][d] / h)),
+                    held: std::array::from_fn(|i| {
+                        std::array::from_fn(|d| live[i][d] + left_s0[i][d])
+                    }),
+                    markov: taps(&markov),
+                }
+            })
+            .collect()
+    }
 }
 
 /// The step while the felt touches: ETDRK4 (Cox & Matthews) in `substeps` steps of `h` a sample,
@@ -616,8 +775,13 @@ pub struct ExactKey {
     pub(crate) settle: [Split; DIRECTIONS],
     pub(crate) beta: [Split; DIRECTIONS],
     pub(crate) hold: [Split; DIRECTIONS],
-    /// How the reads depend on `D^{n+1}`, damper lifted and down.
-    pub(crate) free: Settle,
+    /// Chunks holding every mode below [`SYMPATHETIC_BELOW_HZ`]: what a voice whose damper is
+    /// lifted steps at least.
+    pub(crate) sympathetic: usize,
+    /// A voice keeping each whole number of chunks of its modes, from none to all
+    /// ([`Prefix`]: the damper lifted, or a modal felt down); how the reads depend on
+    /// `D^{n+1}` with a coupled felt down (every mode kept).
+    pub(crate) prefixes: Vec<Prefix>,
     pub(crate) damped: Settle,
     /// `Re(r a_d)` of each string's striking-point row, and of each force and bridge-velocity row
     /// (what `D` adds to them beside `w`).
@@ -630,15 +794,17 @@ pub struct ExactKey {
     pub(crate) force_settle: Vec<[[f64; DIRECTIONS]; 3]>,
     pub(crate) velocity_settle: [[f64; DIRECTIONS]; 3],
     /// Per direction, the modes' static response to a unit `D` held (a key joining a moving
-    /// board starts on it, not jolted by its contact springs), and `a_d - follow_d` (`w` plus
-    /// these times `D` is the state about that static deflection: [`super::voice::Voice::energy_j`]).
+    /// board starts on it, not jolted by its contact springs).
     pub(crate) follow: [Split; 3],
-    pub(crate) unfollow: [Split; 3],
-    /// The block loops' coefficients: `e`, the reads and the inputs `beta_d`; what a unit of
-    /// `D_d` entering at one step adds to each read `k` steps later, `Re(r_i e^k beta_d)`
-    /// (a block advanced freely, mode by mode, gets its input back by superposition).
+    /// What the voice's energies read ([`super::voice::Voice::energies_now_j`]): the shifts
+    /// `a_d` and `a_d - follow_d` (`w` plus these times `D` is the state about the strings'
+    /// static deflection by `D`) and each mode's energy per `|z|^2`.
+    pub(crate) energy: EnergyCoefficients,
+    /// The block loops' coefficients: `e`, the reads and the inputs `beta_d` (what a unit of
+    /// `D_d` entering at one step adds to each read `k` steps later, `Re(r_i e^k beta_d)`, is
+    /// each prefix's: a block advanced freely, mode by mode, gets its input back by
+    /// superposition).
     pub(crate) block: BlockCoefficients<READS, DIRECTIONS>,
-    pub(crate) markov: Box<Taps<READS, DIRECTIONS>>,
     /// The damper felt coupled in full ([`FeltModel::Coupled`]), or the same key with the
     /// felt on its modes' decay ([`FeltModel::Modal`], [`KeyModes::with_felt`]), stepped whenever
     /// its damper is down: it reads, drives and costs as this one. At most one of them; neither
@@ -720,19 +886,26 @@ impl ExactKey {
         let n_s = modes.force_row.len() as f64;
         let feed_k = std::array::from_fn(|d| n_s * spec.contact.stiffness_n_m[d]);
         let feed_c = std::array::from_fn(|d| n_s * spec.contact.damping_n_s_m[d]);
-        let free = Settle {
-            force: std::array::from_fn(|i| {
-                std::array::from_fn(|d| {
-                    let direct = if i == d {
-                        feed_k[d] + feed_c[d] / h
-                    } else {
-                        0.0
-                    };
-                    reads[1 + i].read(&settle[d]) - direct
-                })
-            }),
-            volume: SOUND_READS.map(|r| std::array::from_fn(|d| reads[r].read(&settle[d]))),
-        };
+        let prefixes = Prefixes {
+            h,
+            lambda: &modes.lambda,
+            ef: &ef,
+            reads: &reads,
+            settle: &settle,
+            beta: &beta,
+            bridge_input: &modes.bridge_input,
+            feed_k,
+            feed_c,
+        }
+        .build();
+        let free = prefixes.last().expect("the prefix of every mode").settle;
+        let below = 2.0 * std::f64::consts::PI * SYMPATHETIC_BELOW_HZ;
+        let sympathetic = modes
+            .lambda
+            .iter()
+            .filter(|l| l.norm() < below)
+            .count()
+            .div_ceil(WIDE);
         let undamped = Undamped {
             weights: &weights,
             h,
@@ -785,9 +958,9 @@ impl ExactKey {
         });
         let rows: [&Split; READS] = std::array::from_fn(|i| &reads[i]);
         let inputs: [&Split; DIRECTIONS] = std::array::from_fn(|d| &beta[d]);
-        let markov = markov_parameters(&ef, &rows, &inputs);
         let ef = Split::new(&ef);
         let block = BlockCoefficients::new(&ef, &rows, &inputs);
+        let energy = EnergyCoefficients::new(&settle, &unfollow, &modes.energy);
         ExactKey {
             n_strings: modes.force_row.len(),
             h,
@@ -799,7 +972,8 @@ impl ExactKey {
             settle,
             beta,
             hold,
-            free,
+            sympathetic,
+            prefixes,
             damped,
             strike_settle,
             strike_velocity_row,
@@ -807,9 +981,8 @@ impl ExactKey {
             force_settle,
             velocity_settle,
             follow,
-            unfollow,
+            energy,
             block,
-            markov,
             damper,
             modal_felt: None,
             hammer: spec.hammer,
@@ -836,13 +1009,19 @@ impl ExactKey {
         self.damper.is_some() || self.modal_felt.is_some()
     }
 
-    /// How the reads depend on `D^{n+1}` with the coupled felt down or lifted.
-    pub(crate) fn settle_for(&self, damper_down: bool) -> &Settle {
+    /// How the reads depend on `D^{n+1}` with the coupled felt down (every mode kept) or a
+    /// voice keeping `chunks` chunks of its modes.
+    pub(crate) fn settle_for(&self, damper_down: bool, chunks: usize) -> &Settle {
         if damper_down && self.damper.is_some() {
             &self.damped
         } else {
-            &self.free
+            &self.prefixes[chunks].settle
         }
+    }
+
+    /// Chunks of [`WIDE`] modes (the last one padded).
+    pub(crate) fn chunks(&self) -> usize {
+        self.prefixes.len() - 1
     }
 
     /// Bytes of the coefficients a voice steps with.
@@ -852,10 +1031,13 @@ impl ExactKey {
             + self.modal_felt.as_ref().map_or(0, |f| f.bytes());
         // ef, and the contact step's eh and ef; per string the strike row, drive_f, three force
         // rows; reads, settle, beta, hold, follow, the bridge velocity rows; the block's f32
-        // copies and e^BLOCK; the Markov taps; the energy; the stored modes (a dozen rows more).
+        // copies and e^BLOCK; the energies' f32 shifts and weights; the Markov taps; the energy;
+        // the stored modes (a dozen rows more).
         (3 + self.n_strings * 7 + READS + 4 * DIRECTIONS + 3 + 12) * split
             + (1 + READS + DIRECTIONS) * split / 2
             + split
+            + 2 * DIRECTIONS * split / 2
+            + split / 4
             + 8 * BLOCK * READS * DIRECTIONS
             + 8 * self.n_modes()
             + damper

@@ -63,6 +63,8 @@ impl ExactUnison {
         let key = ExactKey::new(spec)?;
         let modes = key.n_modes();
         let mut pool = ExactPool::from_keys(std::slice::from_ref(spec), vec![key], 1)?;
+        // Every mode stepped: the key's forces are read string by string.
+        pool.set_voice_modes(crate::engine::VoiceModes::All);
         pool.assign(0, 0);
         pool.set_active(0, true);
         let modes = modes + pool.shared_modes();

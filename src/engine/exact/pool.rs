@@ -5,11 +5,11 @@
 use super::block::{begin, end, run, run_on_two, Context, Steps};
 use super::interface::{HeardSource, SharedBoard, SOURCE_DELAY_STEPS};
 use super::kernels::{Simd, BLOCK};
-use super::key::ExactKey;
+use super::key::{ExactKey, LEFT_BELOW, LEFT_UNDER_J};
 use super::voice::Voice;
 use crate::engine::pool::{Policy, VoiceState};
 use crate::engine::spec::{
-    BuildError, LinearState, Observation, UnisonSpec, CHANNELS, STEAL_FADE_S,
+    BuildError, LinearState, Observation, UnisonSpec, VoiceModes, CHANNELS, STEAL_FADE_S,
 };
 use crate::engine::Pair;
 use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
@@ -35,6 +35,8 @@ pub struct ExactPool {
     heard: HeardSource,
     /// The board's radiating source of each channel after the last step, as heard (m^3/s).
     radiated_m3_s: [f64; CHANNELS],
+    /// Which of their modes the voices step ([`VoiceModes`]).
+    voice_modes: VoiceModes,
 }
 
 impl ExactPool {
@@ -85,7 +87,38 @@ impl ExactPool {
             simd: Simd::detect(),
             heard: HeardSource::new(),
             radiated_m3_s: [0.0; CHANNELS],
+            voice_modes: VoiceModes::default(),
         })
+    }
+
+    /// Which of their modes the voices step from now on ([`VoiceModes`]); every active voice
+    /// takes up at once what that asks ([`ExactPool::take_up`]).
+    pub fn set_voice_modes(&mut self, modes: VoiceModes) {
+        self.voice_modes = modes;
+        for k in 0..self.voices.len() {
+            self.take_up(k);
+        }
+    }
+
+    /// Voice `k` (if active) steps the chunks of modes it must from now on: all of them while a
+    /// hammer touches, a coupled felt is down or the pool steps every mode; at least those the
+    /// board drives while its damper is lifted ([`ExactKey::sympathetic`]). Between steps only.
+    fn take_up(&mut self, k: usize) {
+        let v = &mut self.voices[k];
+        let (true, Some(key)) = (v.state.active, v.state.key) else {
+            return;
+        };
+        let face = v.face(&self.keys[key]);
+        let want = if v.state.hammer_on || v.damped(face) || self.voice_modes == VoiceModes::All {
+            face.chunks()
+        } else if !v.state.damper_down {
+            face.sympathetic
+        } else {
+            0
+        };
+        if want > v.live {
+            v.keep_chunks(face, want);
+        }
     }
 
     pub fn step_s(&self) -> f64 {
@@ -105,6 +138,9 @@ impl ExactPool {
     /// One step of every active voice, each one sample at a time ([`Voice::pre_step`],
     /// [`Voice::post_step`]), the interface solved between.
     pub fn step(&mut self) {
+        for k in 0..self.voices.len() {
+            self.take_up(k);
+        }
         self.sync_loads();
         for v in self.voices.iter_mut() {
             (v.in_block, v.energies) = (false, None);
@@ -129,6 +165,38 @@ impl ExactPool {
     /// fade does (so that its next key starts between blocks); the voices split in two halves
     /// over two cores through `pair` (the same result bit for bit: [`ExactPool::block`]).
     pub fn run(&mut self, sound: &mut [[f64; CHANNELS]], pair: Option<&dyn Pair>) {
+        self.run_watched(sound, None, pair);
+    }
+
+    /// Modes the active voices step now (each voice's chunks, the last one padded): what their
+    /// block passes cost, beside the coupling and the shared board.
+    pub fn modes_stepped(&self) -> usize {
+        self.voices
+            .iter()
+            .filter_map(|v| match (v.state.active, v.state.key) {
+                (true, Some(key)) => Some(v.live_modes(&self.keys[key])),
+                _ => None,
+            })
+            .sum()
+    }
+
+    /// Which voices' forces on the board [`ExactPool::run_watched`] sums: those for which
+    /// `watched(voice)` holds.
+    pub fn watch(&mut self, watched: impl Fn(usize) -> bool) {
+        for (k, v) in self.voices.iter_mut().enumerate() {
+            v.watched = watched(k);
+        }
+    }
+
+    /// [`ExactPool::run`], also writing after each step the total force on the board of the
+    /// voices watched ([`ExactPool::watch`]; N, per direction) to `watched_n` (as long as
+    /// `sound`): what a set of strings does to the board, sample by sample.
+    pub fn run_watched(
+        &mut self,
+        sound: &mut [[f64; CHANNELS]],
+        mut watched_n: Option<&mut [[f64; 3]]>,
+        pair: Option<&dyn Pair>,
+    ) {
         let mut done = 0;
         while done < sound.len() {
             let fade = self
@@ -141,6 +209,9 @@ impl ExactPool {
             let n = (sound.len() - done).min(BLOCK).min(fade);
             let last = done + n == sound.len();
             self.block(&mut sound[done..done + n], pair, last);
+            if let Some(w) = watched_n.as_deref_mut() {
+                w[done..done + n].copy_from_slice(&self.steps.watched_n[..n]);
+            }
             self.finish_fades();
             done += n;
         }
@@ -159,15 +230,15 @@ impl ExactPool {
     fn sync_loads(&mut self) {
         for v in self.voices.iter_mut() {
             let want = match (v.state.active, v.state.key) {
-                (true, Some(key)) => Some((key, v.state.damper_down)),
+                (true, Some(key)) => Some((key, v.state.damper_down, v.live)),
                 _ => None,
             };
             if want == v.loads {
                 continue;
             }
-            let settle = |(key, down): (usize, bool)| {
+            let settle = |(key, down, live): (usize, bool, usize)| {
                 let face = self.keys[key].face_for(down);
-                face.settle_for(down).force
+                face.settle_for(down, live).force
             };
             match (v.loads, want) {
                 (Some(old), Some(new)) if old.0 == new.0 => {
@@ -198,6 +269,9 @@ impl ExactPool {
     /// The last block of a run (`last`) keeps each voice's energies for the policy
     /// ([`Voice::energies`]).
     fn block(&mut self, out: &mut [[f64; CHANNELS]], pair: Option<&dyn Pair>, last: bool) {
+        for k in 0..self.voices.len() {
+            self.take_up(k);
+        }
         self.sync_loads();
         let len = out.len();
         for v in self.voices.iter_mut() {
@@ -223,7 +297,7 @@ impl ExactPool {
         let pass_work = |v: &Voice| match (v.in_block, v.state.key) {
             (true, Some(key)) => {
                 let key = v.face(&self.keys[key]);
-                key.n_modes() * if v.damped(key) { 3 } else { 1 }
+                v.live_modes(key) * if v.damped(key) { 3 } else { 1 }
             }
             _ => 0,
         };
@@ -299,7 +373,8 @@ impl ExactPool {
         state + self.keys.iter().map(ExactKey::bytes).max().unwrap_or(0)
     }
 
-    /// The linear state: per active voice its modes (real, imaginary, shifted: [`super::key`])
+    /// The linear state: per active voice the modes it steps (real, imaginary, shifted:
+    /// [`super::key`])
     /// and what it remembers (`D^n`, the damper's force); then the shared board (modes, force).
     pub fn linear_state(&self) -> LinearState {
         let mut state = LinearState::default();
@@ -308,9 +383,9 @@ impl ExactPool {
                 continue;
             };
             let key = &self.keys[key];
-            let n = key.n_modes();
-            state.push(Some(k), &v.w.re[..n], &key.modes.energy);
-            state.push(Some(k), &v.w.im[..n], &key.modes.energy);
+            let n = v.live_modes(key).min(key.n_modes());
+            state.push(Some(k), &v.w.re[..n], &key.modes.energy[..n]);
+            state.push(Some(k), &v.w.im[..n], &key.modes.energy[..n]);
             let mut rest = v.d.to_vec();
             rest.extend_from_slice(&v.damper_n);
             state.push(Some(k), &rest, &vec![0.0; rest.len()]);
@@ -331,7 +406,8 @@ impl ExactPool {
             let (true, Some(key)) = (v.state.active, v.state.key) else {
                 continue;
             };
-            let n = self.keys[key].n_modes();
+            let key = &self.keys[key];
+            let n = v.live_modes(key).min(key.n_modes());
             v.energies = None;
             v.w.re[..n].copy_from_slice(take(n));
             v.w.im[..n].copy_from_slice(take(n));
@@ -346,7 +422,7 @@ impl ExactPool {
     }
 
     /// Mechanical energy of every active key's modes about their static deflection by the board
-    /// ([`Voice::dynamic_energy_j`]) and of the shared board (J, cycle-averaged per mode).
+    /// ([`Voice::energies_now_j`]) and of the shared board (J, cycle-averaged per mode).
     pub fn mechanical_energy_j(&self) -> f64 {
         let keys = self
             .voices
@@ -402,7 +478,7 @@ fn step_work(keys: &[ExactKey], v: &Voice) -> usize {
     match (v.in_block, v.damped(key)) {
         (true, false) => 16,
         (true, true) => 64,
-        (false, _) => key.n_modes() / 2,
+        (false, _) => v.live_modes(key) / 2,
     }
 }
 
@@ -501,6 +577,7 @@ impl Policy for ExactPool {
         if let Some(key) = v.state.key {
             v.follow_damper(&self.keys[key]);
         }
+        self.take_up(k);
     }
 
     /// The voice's coefficients are its key's (an index); its state starts at rest.
@@ -515,6 +592,9 @@ impl Policy for ExactPool {
     /// A voice joins the board as it moves: its strings at their static deflection by the change
     /// in the board's motion under them since they left, its force added to the board's.
     fn enter(&mut self, k: usize) {
+        // Active from here on (the policy marks it so after this hook).
+        self.voices[k].state.active = true;
+        self.take_up(k);
         let v = &mut self.voices[k];
         let Some(key) = v.state.key else {
             return;
@@ -523,10 +603,11 @@ impl Policy for ExactPool {
         let part = &mut self.steps.part;
         let now = self.board.at(part, point, self.simd);
         v.energies = None;
+        let live = v.live_modes(key).min(key.n_modes());
         for d in 0..3 {
             let change = now[d] - v.d[d];
-            key.follow[d].add_to(&mut v.w, change);
-            key.settle[d].add_to(&mut v.w, -change);
+            key.follow[d].add_range_to(&mut v.w, change, 0..live);
+            key.settle[d].add_range_to(&mut v.w, -change, 0..live);
         }
         v.d = now;
         v.d_before = now;
@@ -539,6 +620,40 @@ impl Policy for ExactPool {
         if let Some(key) = v.state.key {
             let part = &mut self.steps.part;
             self.board.join(part, &self.points[key], v.force_n, -1.0);
+        }
+    }
+
+    /// Every voice whose steps are linear leaves out the chunks of modes that have died away
+    /// ([`Voice::shed`]), keeping those the board drives while its damper is lifted; nothing
+    /// where every mode is stepped, or while a coupled felt is down.
+    fn shed_modes(&mut self) {
+        if self.voice_modes != VoiceModes::AsHeard {
+            return;
+        }
+        for v in self.voices.iter_mut() {
+            let (true, Some(key)) = (v.state.active, v.state.key) else {
+                continue;
+            };
+            let face = v.face(&self.keys[key]);
+            if !v.is_linear() || v.damped(face) {
+                continue;
+            }
+            let keep = if v.state.damper_down {
+                0
+            } else {
+                face.sympathetic
+            };
+            v.shed(face, keep, LEFT_BELOW, LEFT_UNDER_J, self.simd);
+        }
+    }
+
+    /// A struck voice steps every mode (the hammer drives them all), those it had left out
+    /// taken up as they stood ([`Voice::keep_chunks`]).
+    fn ready_to_strike(&mut self, k: usize) {
+        let v = &mut self.voices[k];
+        if let Some(key) = v.state.key {
+            let face = v.face(&self.keys[key]);
+            v.keep_chunks(face, face.chunks());
         }
     }
 
@@ -690,6 +805,8 @@ mod tests {
     fn a_modal_felt_falling_or_rising_moves_nothing_at_that_instant() {
         let (specs, rate) = keyboard_keys("concert", &["C2", "C3"]);
         let mut pool = ExactPool::build_pool(&specs, 2, rate).unwrap();
+        // Every mode stepped: what is observed string by string is then the whole state.
+        pool.set_voice_modes(VoiceModes::All);
         for k in 0..2 {
             assert!(pool.keys[k].modal_felt.is_some() && pool.keys[k].damper.is_none());
             pool.assign(k, k);
@@ -708,8 +825,20 @@ mod tests {
             let obs = pool.observe_voice(k);
             let mut x = obs.bridge_velocity_m_s.to_vec();
             x.extend(obs.bridge_force_n.iter().flatten());
+            // The energy at `z = w + a D` in double precision throughout (the policy's, from
+            // single-precision shifts, rounds otherwise in each face).
             let v = &pool.voices[k];
-            x.push(v.energy_j(v.face(&pool.keys[k]), pool.simd));
+            let key = v.face(&pool.keys[k]);
+            let energy: f64 = (0..key.n_modes())
+                .map(|m| {
+                    let z = (0..3).fold((v.w.re[m], v.w.im[m]), |(re, im), d| {
+                        let a = &key.settle[d];
+                        (re + a.re[m] * v.d[d], im + a.im[m] * v.d[d])
+                    });
+                    key.modes.energy[m] * (z.0 * z.0 + z.1 * z.1)
+                })
+                .sum();
+            x.push(energy);
             x
         };
         for (k, name) in [(0, "C2"), (1, "C3")] {
@@ -771,6 +900,7 @@ mod tests {
             assert!(board.is_stereo());
         }
         let mut blocks = ExactPool::build_pool(&specs, 3, rate).unwrap();
+        blocks.set_voice_modes(VoiceModes::All);
         for k in 0..3 {
             blocks.assign(k, k);
             blocks.set_active(k, true);

@@ -50,8 +50,16 @@ pub(crate) struct Voice {
     pub(crate) block_read: [[f64; BLOCK]; DAMPED_READS],
     pub(crate) block_inputs: Reversed<DAMPED_INPUTS>,
     pub(crate) pending: Pending<DAMPED_READS>,
-    /// What the interface holds for this voice: its key's `Z`, damper down or lifted.
-    pub(crate) loads: Option<(usize, bool)>,
+    /// Chunks of the key's modes stepped ([`super::key::Prefix`]): the rest follow the bridge
+    /// quasi-statically, their part of `w` zero. Every chunk while a hammer touches or a coupled
+    /// felt is down; as few as the sound needs otherwise ([`Voice::shed`]).
+    pub(crate) live: usize,
+    /// Whether its total force on the board is summed with the other watched voices', sample
+    /// by sample ([`super::pool::ExactPool::run_watched`]).
+    pub(crate) watched: bool,
+    /// What the interface holds for this voice: its key's `Z`, damper down or lifted, with its
+    /// chunks stepped.
+    pub(crate) loads: Option<(usize, bool, usize)>,
     /// [`Voice::energy_j`] and [`Voice::dynamic_energy_j`] as the last block's end left the
     /// voice, worked out there by the core that advanced it (its modes still in that core's
     /// cache); `None` once anything else has moved it since. The pool's policy reads them after
@@ -79,6 +87,8 @@ impl Voice {
             block_read: [[0.0; BLOCK]; DAMPED_READS],
             block_inputs: [[0.0; BLOCK]; DAMPED_INPUTS],
             pending: [[0.0; BLOCK]; DAMPED_READS],
+            live: 0,
+            watched: false,
             loads: None,
             energies: None,
         }
@@ -109,9 +119,10 @@ impl Voice {
             return;
         }
         let (from, to) = (key.face_for(self.modal_felt), key.face_for(want));
+        let live = self.live_modes(from).min(from.n_modes());
         for d in 0..DIRECTIONS {
-            from.settle[d].add_to(&mut self.w, self.d[d]);
-            to.settle[d].add_to(&mut self.w, -self.d[d]);
+            from.settle[d].add_range_to(&mut self.w, self.d[d], 0..live);
+            to.settle[d].add_range_to(&mut self.w, -self.d[d], 0..live);
         }
         self.modal_felt = want;
         self.energies = None;
@@ -125,17 +136,69 @@ impl Voice {
     /// The total contact force on the board with the strings as they are and the bridge held at
     /// `D` (no slope): what a joining voice adds to the board.
     pub(crate) fn static_force_n(&self, key: &ExactKey) -> [f64; 3] {
+        let held = &key.prefixes[self.live].held;
         std::array::from_fn(|i| {
-            let direct: f64 = (0..DIRECTIONS)
-                .map(|d| key.reads[1 + i].read(&key.settle[d]) * self.d[d])
-                .sum();
+            let direct: f64 = (0..DIRECTIONS).map(|d| held[1 + i][d] * self.d[d]).sum();
             key.reads[1 + i].read(&self.w) + direct - key.feed_k[i] * self.d[i]
         })
+    }
+
+    /// Modes stepped (of `key`, the face the voice steps with): [`Voice::live`] chunks, the last
+    /// one padded.
+    pub(crate) fn live_modes(&self, key: &ExactKey) -> usize {
+        key.prefixes[self.live].modes
+    }
+
+    /// Step `chunks` chunks of `key`'s modes from now on: a chunk taken up starts as the
+    /// quasi-static response to `D` it stood for (`z = follow D`, so `w = (follow - a) D`); one
+    /// left out is set to zero. Between steps only.
+    pub(crate) fn keep_chunks(&mut self, key: &ExactKey, chunks: usize) {
+        let (from, to) = (self.live_modes(key), key.prefixes[chunks].modes);
+        let n = key.n_modes();
+        if to > from {
+            let range = from.min(n)..to.min(n);
+            for d in 0..DIRECTIONS {
+                key.follow[d].add_range_to(&mut self.w, self.d[d], range.clone());
+                key.settle[d].add_range_to(&mut self.w, -self.d[d], range.clone());
+            }
+        } else {
+            self.w.re[to..from].fill(0.0);
+            self.w.im[to..from].fill(0.0);
+        }
+        self.live = chunks;
+        self.energies = None;
+    }
+
+    /// Leave out the top chunks of modes that have died away — whose energy about the strings'
+    /// static deflection by `D` is under `left_below` of the voice's, or under `left_under_j` —
+    /// keeping at least `keep` chunks. The modes left out go on answering `D` quasi-statically
+    /// ([`super::key::Prefix`]); what they carried beyond that is dropped. Between steps only.
+    pub(crate) fn shed(
+        &mut self,
+        key: &ExactKey,
+        keep: usize,
+        left_below: f64,
+        left_under_j: f64,
+        simd: Simd,
+    ) {
+        let floor = (left_below * self.energies_j(key, simd)[1]).max(left_under_j);
+        let mut live = self.live;
+        while live > keep {
+            let chunk = key.prefixes[live - 1].modes..key.prefixes[live].modes;
+            if kernels::energies(simd, &key.energy, &self.w, self.d, chunk)[1] >= floor {
+                break;
+            }
+            live -= 1;
+        }
+        if live < self.live {
+            self.keep_chunks(key, live);
+        }
     }
 
     /// Strings, board modes and everything they remember at rest.
     pub(crate) fn rest(&mut self) {
         self.w.fill_zero();
+        self.live = 0;
         self.d = [0.0; 3];
         self.d_before = [0.0; 3];
         self.force_n = [0.0; 3];
@@ -146,23 +209,6 @@ impl Voice {
         self.energies = None;
     }
 
-    /// Mechanical energy of the key's modes (J, cycle-averaged per mode) at `z = w + a D`: what
-    /// the pool's policy weighs (a voice falls silent, is stolen, runs away), its contact springs
-    /// counted as stretched by the board's motion `D` under them — so that a damped key is not
-    /// retired while the board still moves it (taken off, it would no longer damp the board).
-    pub(crate) fn energy_j(&self, key: &ExactKey, simd: Simd) -> f64 {
-        self.energy_about(key, &key.settle, simd)
-    }
-
-    /// The same about the strings' static deflection by `D` (`z` less `follow D`): the energy that
-    /// only falls when nothing drives the pool, but for the coupling's exchanges between keys
-    /// ([`super::pool::ExactPool::mechanical_energy_j`]). Measured from `z` itself it would count
-    /// every contact spring as stretched by `D` (`k_c D^2 / 2` each, although the strings' ends
-    /// follow the bridge): a damped key beside a loud C1 then seemed to gain 2e-3 J from nothing.
-    pub(crate) fn dynamic_energy_j(&self, key: &ExactKey, simd: Simd) -> f64 {
-        self.energy_about(key, &key.unfollow, simd)
-    }
-
     /// `[energy_j, dynamic_energy_j]`: as the last block's end left them if nothing has moved
     /// the voice since, else worked out now.
     pub(crate) fn energies_j(&self, key: &ExactKey, simd: Simd) -> [f64; 2] {
@@ -170,21 +216,20 @@ impl Voice {
             .unwrap_or_else(|| self.energies_now_j(key, simd))
     }
 
-    /// `[energy_j, dynamic_energy_j]` worked out now.
+    /// Worked out now: the mechanical energy of the key's modes (J, cycle-averaged per mode) at
+    /// `z = w + a D` — what the pool's policy weighs (a voice falls silent, is stolen, runs
+    /// away), its contact springs counted as stretched by the board's motion `D` under them, so
+    /// that a damped key is not retired while the board still moves it (taken off, it would no
+    /// longer damp the board) — and the same about the strings' static deflection by `D` (`z`
+    /// less `follow D`): the energy that only falls when nothing drives the pool, but for the
+    /// coupling's exchanges between keys ([`super::pool::ExactPool::mechanical_energy_j`]).
+    /// Measured from `z` itself that would count every contact spring as stretched by `D`
+    /// (`k_c D^2 / 2` each, although the strings' ends follow the bridge): a damped key beside a
+    /// loud C1 then seemed to gain 2e-3 J from nothing. One pass over the modes
+    /// ([`kernels::energies`]).
     pub(crate) fn energies_now_j(&self, key: &ExactKey, simd: Simd) -> [f64; 2] {
-        [self.energy_j(key, simd), self.dynamic_energy_j(key, simd)]
-    }
-
-    /// `sum_m energy_m |w_m + sum_d u_d,m D_d|^2` ([`kernels::energy`]).
-    fn energy_about(&self, key: &ExactKey, shift: &[Split; 3], simd: Simd) -> f64 {
-        kernels::energy(
-            simd,
-            &self.w,
-            shift,
-            self.d,
-            &key.modes.energy,
-            key.n_modes(),
-        )
+        let live = self.live_modes(key);
+        kernels::energies(simd, &key.energy, &self.w, self.d, 0..live)
     }
 
     /// String `s`'s displacement at the striking point (m).
@@ -231,6 +276,7 @@ impl Voice {
             advance(
                 fast,
                 false,
+                key.n_modes(),
                 &key.ef,
                 &mut self.w,
                 &key.hold,
@@ -238,7 +284,17 @@ impl Voice {
                 &key.reads,
             )
         } else {
-            advance(fast, true, &key.ef, &mut self.w, &key.beta, &dn, &key.reads)
+            let live = self.live_modes(key);
+            advance(
+                fast,
+                true,
+                live,
+                &key.ef,
+                &mut self.w,
+                &key.beta,
+                &dn,
+                &key.reads,
+            )
         };
         if let (true, Some(damper)) = (self.state.damper_down, &key.damper) {
             let r = damper.channels;
@@ -311,7 +367,7 @@ impl Voice {
                     .try_into()
                     .expect("the first reads are the undamped key's");
                 let x: [f32; DIRECTIONS] = std::array::from_fn(|d| x[d]);
-                scatter(simd, &key.markov, &x, t, pending);
+                scatter(simd, &key.prefixes[self.live].markov, &x, t, pending);
                 for (i, r) in read.iter_mut().enumerate() {
                     *r = self.block_read[i][t] + f64::from(pending[i][t]);
                 }
@@ -320,10 +376,15 @@ impl Voice {
         self.known = self.with_feed(key, read);
     }
 
-    /// The force's part from the contact dampers' `c D^n / h` (the slope's known end).
+    /// What `D^n` adds to the reads beside the modes stepped: the contact dampers' `c D^n / h`
+    /// in the force (the slope's known end) and the modes left out's answer to the slope.
     fn with_feed(&self, key: &ExactKey, mut read: [f64; READS]) -> [f64; READS] {
         for d in 0..DIRECTIONS {
             read[1 + d] += key.feed_c[d] * self.d[d] / key.h;
+        }
+        let known = &key.prefixes[self.live].known;
+        for (r, known) in read.iter_mut().zip(known) {
+            *r += (0..DIRECTIONS).map(|d| known[d] * self.d[d]).sum::<f64>();
         }
         read
     }
@@ -332,7 +393,7 @@ impl Voice {
     /// damper's force and its input, the hammer's release.
     pub(crate) fn post_step(&mut self, key: &ExactKey, next: [f64; 3]) {
         let damped = self.damped(key);
-        let settle = key.settle_for(damped);
+        let settle = key.settle_for(damped, self.live);
         if let (true, Some(damper)) = (damped, &key.damper) {
             let before = self.damper_n;
             for j in 0..damper.channels {
