@@ -574,21 +574,23 @@ fn bench_writes_every_printed_figure_as_json() {
     assert!(text.contains("live callback: concert keyboard, exact engine"));
     // The held chord: each window's median and voices as printed, in order, over the 10 s after
     // the strike.
-    let held: Vec<(f64, u64)> = text
+    let held: Vec<(f64, u64, u64)> = text
         .lines()
         .filter(|l| l.contains("after the strike: median"))
         .map(|l| {
             let open = l.find('(').unwrap();
             let median = l[open + 1..].split('×').next().unwrap().trim().parse();
-            let voices = l
-                .split(", ")
-                .last()
-                .unwrap()
-                .split(' ')
-                .next()
-                .unwrap()
-                .parse();
-            (median.unwrap(), voices.unwrap())
+            // "…, 7 voices active at its end, stepping 2848 modes"
+            let number_of = |segment: &str| -> u64 {
+                let part = l.split(", ").find(|p| p.contains(segment)).unwrap();
+                let word = part.split(' ').find(|w| w.parse::<u64>().is_ok()).unwrap();
+                word.parse().unwrap()
+            };
+            (
+                median.unwrap(),
+                number_of("voices active"),
+                number_of("modes"),
+            )
         })
         .collect();
     let windows = report["held_chord"].as_array().unwrap();
@@ -597,13 +599,14 @@ fn bench_writes_every_printed_figure_as_json() {
     assert_eq!(windows.len(), held.len());
     assert_eq!(windows[0]["from_s"], 0.0);
     assert_eq!(windows[4]["to_s"], 10.0);
-    for (w, (median, voices)) in windows.iter().zip(&held) {
+    for (w, (median, voices, modes)) in windows.iter().zip(&held) {
         let json = w["median_x_deadline"].as_f64().unwrap();
         assert!(
             (json - median).abs() <= 0.0051,
             "printed {median}, JSON {w}"
         );
         assert_eq!(w["active_voices"].as_u64(), Some(*voices), "{w}");
+        assert_eq!(w["modes_stepped"].as_u64(), Some(*modes), "{w}");
         assert!(w["scenario"]
             .as_str()
             .unwrap()

@@ -1,7 +1,7 @@
 //! The plugin's parameters: the three pedals, the output gain and the velocity curve
 //! (automatable, applied within the block at their event's frame), the keyboard, the voice pool's
-//! size and the integrator (not automatable: a change rebuilds the piano in the background,
-//! [`crate::rebuild`]). Values are shared between the main thread and the audio thread as atomics.
+//! size, the integrator and the pedal's halo (not automatable: a change rebuilds the piano in the
+//! background, [`crate::rebuild`]). Values are shared between the main thread and the audio thread as atomics.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -34,6 +34,7 @@ pub const VELOCITY_CURVE: usize = 4;
 pub const KEYBOARD: usize = 5;
 pub const VOICES: usize = 6;
 pub const INTEGRATOR: usize = 7;
+pub const HALO: usize = 8;
 
 /// The built-in keyboards the `keyboard` parameter chooses from (its values 0, 1).
 pub const KEYBOARDS: [&str; 2] = ["concert", "paper"];
@@ -57,7 +58,7 @@ const fn switch(id: u32, name: &'static str, key: &'static str) -> Spec {
 }
 
 /// Every parameter, in the order hosts list them.
-pub const PARAMS: [Spec; 8] = [
+pub const PARAMS: [Spec; 9] = [
     switch(1, "Sustain pedal", "sustain"),
     switch(2, "Sostenuto pedal", "sostenuto"),
     switch(3, "Soft pedal (una corda)", "soft"),
@@ -124,10 +125,24 @@ pub const PARAMS: [Spec; 8] = [
         choices: Some(&INTEGRATORS),
         since_version: 2,
     },
+    // Under the sustain pedal every key's strings ring in sympathy, struck or not
+    // (`unacorda::play::Player::set_halo`); the pool then holds at least HALO_VOICES voices.
+    Spec {
+        id: 9,
+        name: "Pedal halo (every undamped string rings)",
+        key: "halo",
+        min: 0.0,
+        max: 1.0,
+        default: 0.0,
+        stepped: true,
+        automatable: false,
+        choices: None,
+        since_version: 3,
+    },
 ];
 
 /// The parameters whose change rebuilds the piano.
-pub const REBUILDS: [usize; 3] = [KEYBOARD, VOICES, INTEGRATOR];
+pub const REBUILDS: [usize; 4] = [KEYBOARD, VOICES, INTEGRATOR, HALO];
 
 /// The index of the parameter with CLAP id `id`.
 pub fn index_of(id: u32) -> Option<usize> {
@@ -202,9 +217,20 @@ impl Values {
         REBUILDS.map(|i| self.get(i))
     }
 
-    /// The voice pool's size chosen.
+    /// The voice pool's size: as chosen, and with the halo room for every key
+    /// ([`unacorda::play::HALO_VOICES`]).
     pub fn voices(&self) -> usize {
-        self.get(VOICES) as usize
+        let chosen = self.get(VOICES) as usize;
+        if self.halo() {
+            chosen.max(unacorda::play::HALO_VOICES)
+        } else {
+            chosen
+        }
+    }
+
+    /// Whether the pedal's halo is on.
+    pub fn halo(&self) -> bool {
+        self.on(HALO)
     }
 }
 

@@ -37,6 +37,17 @@ pub struct Prepared {
     pub oversampling: u32,
 }
 
+impl Prepared {
+    /// With the pedal's halo or without ([`unacorda::play::Player::set_halo`]).
+    pub fn with_halo(mut self, halo: bool) -> Self {
+        match &mut self.piano {
+            Pianos::Exact(piano) => piano.player.set_halo(halo),
+            Pianos::Rk4(piano) => piano.player.set_halo(halo),
+        }
+        self
+    }
+}
+
 /// A prepared piano's keyboard, engine rate (Hz), pool size and integrator.
 type Key = (&'static str, u32, usize, Integrator);
 /// A piano as built, with the output settings of its keyboard.

@@ -98,7 +98,7 @@ impl Engine {
     }
 }
 
-/// A change of keyboard, pool size or integrator while active ([`crate::rebuild`]).
+/// A change of keyboard, pool size, integrator or halo while active ([`crate::rebuild`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Rebuilding {
     /// Playing what was built.
@@ -130,7 +130,8 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             config.sample_rate,
             values.voices(),
             values.integrator(),
-        );
+        )
+        .map(|prepared| prepared.with_halo(values.halo()));
         for warning in crate::prepare::take_warnings() {
             main_thread.warn(&warning);
         }

@@ -2,7 +2,8 @@
 //! parameter by its key. A DAW project is untrusted input: a load refuses (and changes nothing)
 //! what is not this format, a newer version, an unknown or missing field or a value out of its
 //! range, saying which; the text is at most [`MAX_STATE_BYTES`]. An older version's state gives
-//! the parameters it did not save their defaults (version 1: `integrator`, exact).
+//! the parameters it did not save their defaults (version 1: `integrator`, exact; versions 1–2:
+//! `halo`, off).
 
 use crate::params::{Values, PARAMS};
 use std::fmt::Write as _;
@@ -10,7 +11,7 @@ use std::fmt::Write as _;
 /// The format's name, first in every state.
 pub const FORMAT: &str = "unacorda-clap";
 /// The version this build writes and the newest it reads.
-pub const VERSION: i64 = 2;
+pub const VERSION: i64 = 3;
 /// Largest state read (a real one is ~250 bytes).
 pub const MAX_STATE_BYTES: usize = 64 * 1024;
 
@@ -132,7 +133,7 @@ pub fn load(bytes: &[u8]) -> Result<[f64; PARAMS.len()], StateError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::params::{GAIN_DB, INTEGRATOR, KEYBOARD, SOFT, VELOCITY_CURVE, VOICES};
+    use crate::params::{GAIN_DB, HALO, INTEGRATOR, KEYBOARD, SOFT, VELOCITY_CURVE, VOICES};
 
     #[test]
     fn a_state_round_trips_exactly() {
@@ -143,6 +144,7 @@ mod tests {
         values.set(KEYBOARD, 1.0);
         values.set(VOICES, 17.0);
         values.set(INTEGRATOR, 1.0);
+        values.set(HALO, 1.0);
         let text = save(&values);
         println!("{text}");
         let back = load(text.as_bytes()).unwrap();
@@ -159,16 +161,22 @@ mod tests {
                 good.replace("unacorda-clap", "other-synth"),
                 "another plugin",
             ),
-            (good.replace("version = 2", "version = 3"), "newer than"),
+            (good.replace("version = 3", "version = 4"), "newer than"),
             (
                 good.replace("\"exact\"", "\"euler\""),
                 "one of [\"exact\", \"rk4\"]",
             ),
-            // Version 1 did not save the integrator.
+            // Version 1 did not save the integrator, nor version 2 the halo.
             (
-                good.replace("version = 2", "version = 1"),
+                good.replace("version = 3", "version = 1")
+                    .replace("halo = 0\n", ""),
                 "`integrator` is not known",
             ),
+            (
+                good.replace("version = 3", "version = 2"),
+                "`halo` is not known",
+            ),
+            (good.replace("halo = 0", "halo = 2"), "`halo` is 2"),
             (good.replace("voices = 64", "voices = 0"), "`voices` is 0"),
             (
                 good.replace("gain_db = 0.0", "gain_db = nan"),
@@ -195,6 +203,7 @@ mod tests {
         let v1 = "format = \"unacorda-clap\"\nversion = 1\nsustain = 1\nsostenuto = 0\nsoft = 0\ngain_db = -3.5\nvelocity_curve = 1.0\nkeyboard = \"paper\"\nvoices = 32\n";
         let back = load(v1.as_bytes()).unwrap();
         assert_eq!(back[INTEGRATOR], 0.0);
+        assert_eq!(back[HALO], 0.0);
         assert_eq!(
             (back[KEYBOARD], back[VOICES], back[GAIN_DB]),
             (1.0, 32.0, -3.5)

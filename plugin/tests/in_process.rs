@@ -103,8 +103,8 @@ fn as_piano_events(script: &[(u64, Play)]) -> Vec<TimedEvent> {
 }
 
 /// The offline render of `events` on the concert keyboard on the engine `E` (`render --offline
-/// --midi`'s path, one core): both channels.
-fn offline<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> (Vec<f32>, Vec<f32>) {
+/// --midi`'s path, one core), with the pedal's halo or not: both channels.
+fn offline<E: VoicePool>(events: &[TimedEvent], tail_s: f64, halo: bool) -> (Vec<f32>, Vec<f32>) {
     let scaling = unacorda::config::scaling::Scaling::resolve("concert").unwrap();
     let cache = unacorda::keycache::KeyCache::from_env();
     let keyboard = unacorda::play::Keyboard {
@@ -115,7 +115,7 @@ fn offline<E: VoicePool>(events: &[TimedEvent], tail_s: f64) -> (Vec<f32>, Vec<f
         tail_s,
         voices: unacorda::play::DEFAULT_VOICES,
         cores: 1,
-        halo: false,
+        halo,
     };
     let r =
         unacorda::render::render_midi_kept::<E>(keyboard, events, offline, |_| {}, None).unwrap();
@@ -146,7 +146,7 @@ fn ports_parameters_and_state() {
             p.0, p.1, p.2, p.3, p.4
         );
     }
-    assert_eq!(params.len(), 8);
+    assert_eq!(params.len(), 9);
     assert!(params.iter().any(|p| p.1.contains("Soft pedal")));
 
     let state = host::save(&mut plugin);
@@ -175,7 +175,7 @@ fn ports_parameters_and_state() {
     );
     for bad in [
         changed.replace("unacorda-clap", "someone-else"),
-        changed.replace("version = 2", "version = 7"),
+        changed.replace("version = 3", "version = 7"),
         changed.replace("voices = 64", "voices = 100000"),
     ] {
         let e = host::load(&mut plugin, bad.as_bytes()).unwrap_err();
@@ -203,7 +203,7 @@ fn plays_exactly_like_the_offline_render_in_any_blocks_without_allocating() {
     let script = script();
     let tail_s = 0.2;
     let events = as_piano_events(&script);
-    let (left, right) = offline::<ExactPool>(&events, tail_s);
+    let (left, right) = offline::<ExactPool>(&events, tail_s, false);
     let frames = left.len();
     let blocks = [1, 4096, 17, 333, 2, 1000, 95, 31, 64, 3, 512, 777];
     let heard = active.run(frames + latency, &blocks, &script, checked);
@@ -269,7 +269,7 @@ fn a_hosts_thread_pool_lends_a_core_and_a_serial_one_gets_its_tasks_back() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let script = script();
     let events = as_piano_events(&script);
-    let (left, right) = offline::<ExactPool>(&events, 0.1);
+    let (left, right) = offline::<ExactPool>(&events, 0.1, false);
     for threads in [Threads::Parallel, Threads::Serial] {
         let mut plugin = host::instantiate_with(&entry(), threads, checked);
         let mut active = host::activate(&mut plugin, RATE_HZ);
@@ -362,7 +362,7 @@ fn the_rk4_integrator_plays_like_its_offline_render() {
     let latency = unacorda::audio::aligned::LATENCY_FRAMES as usize;
     let script: Vec<_> = script().into_iter().take(6).collect();
     let events = as_piano_events(&script);
-    let (left, right) = offline::<Rk4Pool>(&events, 0.1);
+    let (left, right) = offline::<Rk4Pool>(&events, 0.1, false);
     let heard = active.run(left.len() + latency, &[1, 333, 64, 4096], &script, checked);
     assert_eq!(heard.allocations, 0, "process() allocated");
     let tail = host::tail(&mut active).unwrap();
@@ -378,6 +378,37 @@ fn the_rk4_integrator_plays_like_its_offline_render() {
         tail >= i32::MAX as u32,
         "an infinite tail (CLAP: INT32_MAX or more)"
     );
+    host::deactivate(&mut plugin, active);
+}
+
+/// With the pedal's halo (a state's `halo = 1`) the plugin plays as `render --midi --halo`: under
+/// the sustain pedal every key takes a voice and rings in sympathy, in a pool of at least 128;
+/// and not as without it.
+#[test]
+fn the_pedal_halo_plays_like_its_offline_render() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut plugin = instance();
+    let state = String::from_utf8(host::save(&mut plugin))
+        .unwrap()
+        .replace("halo = 0", "halo = 1");
+    host::load(&mut plugin, state.as_bytes()).unwrap();
+    let mut active = host::activate(&mut plugin, RATE_HZ);
+    let latency = host::latency(&mut plugin) as usize;
+    let script = script();
+    let events = as_piano_events(&script);
+    let (left, right) = offline::<ExactPool>(&events, 0.1, true);
+    let heard = active.run(left.len() + latency, &[64, 333, 1, 4096], &script, checked);
+    assert_eq!(heard.allocations, 0, "process() allocated");
+    equals_offline("exact with the halo", &heard, latency, [&left, &right]);
+    let (without, _) = offline::<ExactPool>(&events, 0.1, false);
+    let energy =
+        |x: &mut dyn Iterator<Item = f32>| x.map(|v| f64::from(v) * f64::from(v)).sum::<f64>();
+    let halo_db = 10.0
+        * (energy(&mut left.iter().zip(&without).map(|(a, b)| a - b))
+            / energy(&mut without.iter().copied()))
+        .log10();
+    println!("the halo's part of the sound (left, the difference re the render without it): {halo_db:.1} dB");
+    assert!(halo_db > -60.0, "the halo changes nothing: {halo_db:.1} dB");
     host::deactivate(&mut plugin, active);
 }
 
