@@ -349,3 +349,98 @@ fn bad_midi_files_are_errors_that_name_the_file() {
         assert!(e.starts_with(name));
     }
 }
+
+/// The live input's queue flooded while the audio thread is held up: 4 096 strikes of C4 fill it
+/// (each played, a key struck again and again), then the releases of C4, E4 and G4 and the
+/// sustain pedal down and up arrive, and one more strike. The releases wait in the backlog and
+/// are queued, late, once the audio thread has emptied the queue; the strike is dropped and
+/// counted. Every key then falls silent under its damper and its voice is retired: none is
+/// stuck.
+#[test]
+fn a_flooded_queue_keeps_every_release() {
+    use unacorda::audio::synth::{Scheduled, Synth, EVENT_QUEUE};
+    use unacorda::config::scaling::{parse_key, Scaling};
+    use unacorda::engine::exact::ExactPool;
+    use unacorda::engine::Policy;
+    use unacorda::play::Piano;
+    let scaling = Scaling::resolve("concert").unwrap();
+    let names = ["C4", "E4", "G4"];
+    let keys: Vec<usize> = names.iter().map(|n| parse_key(n).unwrap()).collect();
+    let piano = Piano::<ExactPool>::build(&scaling, &keys, 8).unwrap();
+    let settings = scaling.output_settings();
+    let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
+    let note = |k: usize| (k + 20) as u8;
+    for &k in &keys {
+        handle.schedule_live(Scheduled {
+            frame: 0,
+            event: Event::NoteOn {
+                note: note(k),
+                velocity: 90,
+            },
+        });
+    }
+    let mut out = vec![0f32; 512];
+    for _ in 0..40 {
+        synth.process(&mut out, 2);
+    }
+    // The audio thread held up: nothing is taken from the queue while it fills.
+    let frame = synth.frame();
+    let mut offered = 0;
+    while handle.backlog.dropped_note_ons == 0 && handle.backlog.is_empty() {
+        handle.schedule_live(Scheduled {
+            frame,
+            event: Event::NoteOn {
+                note: note(keys[0]),
+                velocity: 40,
+            },
+        });
+        offered += 1;
+    }
+    let mut late = vec![];
+    for &k in &keys {
+        late.push(Event::NoteOff { note: note(k) });
+    }
+    for down in [true, false] {
+        late.push(Event::Pedal {
+            pedal: Pedal::Sustain,
+            down,
+        });
+    }
+    late.push(Event::NoteOn {
+        note: note(keys[1]),
+        velocity: 100,
+    });
+    for event in late {
+        handle.schedule_live(Scheduled { frame, event });
+    }
+    let waiting = handle.backlog.clone();
+    println!(
+        "queue of {EVENT_QUEUE}: {offered} strikes offered before it was full; waiting: {waiting:?}"
+    );
+    assert!(!waiting.is_empty(), "the releases should wait");
+    // The audio thread runs again; the input's thread queues what waits as it has room.
+    let mut sounding = usize::MAX;
+    for block in 0..((4.0 * settings.rate_hz) as usize / 256) {
+        synth.process(&mut out, 2);
+        handle.flush_backlog(synth.frame());
+        if block * 256 >= (3.0 * settings.rate_hz) as usize {
+            let pool = &synth.piano().instrument;
+            sounding = (0..pool.n_voices()).filter(|&v| pool.is_active(v)).count();
+        }
+    }
+    let b = &handle.backlog;
+    println!(
+        "after 4 s: {} strikes dropped, {} releases queued late, {sounding} voices sounding",
+        b.dropped_note_ons, b.delayed
+    );
+    assert!(b.is_empty());
+    assert_eq!(
+        b.dropped_note_ons, 2,
+        "the strike that found the queue full and the one behind the releases"
+    );
+    assert_eq!(
+        b.delayed, 4,
+        "three note-offs and the pedal's last position"
+    );
+    assert_eq!(sounding, 0, "a key is stuck");
+}

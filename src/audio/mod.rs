@@ -1,10 +1,12 @@
-//! The sound shell: decimation to the output rate, the audio thread's engine ([`synth`]), a
+//! The sound shell: decimation to the output rate, the audio thread's engine ([`synth`]) and what
+//! a full event queue keeps for it ([`backlog`]), a
 //! host's blocks of any length realigned to the synth's grid ([`aligned`]), the audio device
 //! (`device`, feature `device`), the helper thread that lends the callback a second core
 //! ([`helper`]) or a host's thread pool that does ([`host_pool`]), real-time priority
 //! ([`priority`]) and WAV files.
 
 pub mod aligned;
+pub mod backlog;
 pub mod clock;
 pub mod decimate;
 #[cfg(feature = "device")]

@@ -7,6 +7,7 @@
 //! [-1, 1] leaves it: a voice that blows up is reset within the block, and a soft clipper bounds
 //! the output.
 
+use super::backlog::Backlog;
 use super::clock::Clock;
 use super::helper::Helper;
 use super::radiate::{soft_clip, Monopole, KNEE};
@@ -138,6 +139,9 @@ pub struct SynthHandle<E: VoicePool> {
     returned: Receiver<Box<Piano<E>>>,
     pub clock: Arc<Clock>,
     pub stats: Arc<Stats>,
+    /// The releases a full queue could not take from [`SynthHandle::schedule_live`], and the
+    /// strikes it dropped.
+    pub backlog: Backlog,
 }
 
 /// Why the synth cannot be set up.
@@ -199,6 +203,7 @@ impl<E: VoicePool> Synth<E> {
             returned: returned_rx,
             clock,
             stats,
+            backlog: Backlog::default(),
         };
         Ok((synth, handle))
     }
@@ -504,6 +509,29 @@ impl<E: VoicePool> SynthHandle<E> {
     /// Queue an event; returns it back if the queue is full.
     pub fn schedule(&mut self, event: Scheduled) -> Result<(), Scheduled> {
         self.events.try_push(event)
+    }
+
+    /// Queue a live event (one that cannot wait for room), never losing a release: what a full
+    /// queue cannot take waits in [`SynthHandle::backlog`] (a release) or is dropped and counted
+    /// there (a strike). Releases already waiting go first; while any still waits a new event
+    /// joins them rather than overtake them.
+    pub fn schedule_live(&mut self, event: Scheduled) {
+        self.flush_backlog(event.frame);
+        if !self.backlog.is_empty() {
+            self.backlog.keep(event.event);
+        } else if let Err(refused) = self.events.try_push(event) {
+            self.backlog.keep(refused.event);
+        }
+    }
+
+    /// Queue the releases waiting in the backlog, at `frame`, as far as the queue has room.
+    pub fn flush_backlog(&mut self, frame: u64) {
+        while let Some(event) = self.backlog.next() {
+            if self.events.try_push(Scheduled { frame, event }).is_err() {
+                return;
+            }
+            self.backlog.taken(event);
+        }
     }
 
     /// Queue `events[next..]` (times from `start_frame`) as far as the queue has room; returns

@@ -247,8 +247,13 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     }
     loop {
         std::thread::sleep(Duration::from_millis(5));
-        if let (Some((events, start, next)), Ok(mut handle)) = (&mut feed, shared.lock()) {
-            *next = handle.schedule_timed(events, *next, *start);
+        if let Ok(mut handle) = shared.lock() {
+            if let Some((events, start, next)) = &mut feed {
+                *next = handle.schedule_timed(events, *next, *start);
+            }
+            // Releases a full queue could not take from the MIDI input, queued once it has room.
+            let now = handle.clock.frame_at(Instant::now());
+            handle.flush_backlog(now);
         }
         if last_watch.elapsed() >= Duration::from_secs(1) {
             last_watch = Instant::now();
@@ -299,12 +304,16 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         }
     }
     let wall = started.elapsed().as_secs_f64();
+    let backlog = shared
+        .lock()
+        .map(|handle| handle.backlog.clone())
+        .unwrap_or_default();
     let s = &output.stats;
     let callbacks = s.callbacks.load(Ordering::Relaxed).max(1);
     let block = s.max_frames.load(Ordering::Relaxed);
     let deadline_ms = block as f64 / settings.rate_hz * 1e3;
     eprintln!(
-        "{} callbacks ({} frames) of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {xruns} xruns reported by the device; device reopened {reopened} times; {} late events; {} voices reset; at most {} voices sounding; output peak {:.1} dBFS, {} samples soft-clipped; {} engine runs on two cores, {} on one because the helper thread was late",
+        "{} callbacks ({} frames) of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {xruns} xruns reported by the device; device reopened {reopened} times; {} late events; {} voices reset; at most {} voices sounding; output peak {:.1} dBFS, {} samples soft-clipped; {} engine runs on two cores, {} on one because the helper thread was late; a full event queue dropped {} strikes and queued {} releases late",
         s.callbacks.load(Ordering::Relaxed),
         stats.frames.load(Ordering::Relaxed),
         s.busy_ns.load(Ordering::Relaxed) as f64 / callbacks as f64 * 1e-6,
@@ -319,6 +328,8 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         stats.clipped.load(Ordering::Relaxed),
         stats.two_core_runs.load(Ordering::Relaxed),
         stats.helper_late.load(Ordering::Relaxed),
+        backlog.dropped_note_ons,
+        backlog.delayed,
     );
     Ok(())
 }
@@ -368,8 +379,8 @@ fn connect_midi<E: VoicePool>(
                 for &b in bytes {
                     if let Some(event) = parser.push(b) {
                         let frame = clock.frame_at(now);
-                        // A full queue (4096 events in flight) drops the event rather than block.
-                        let _ = handle.schedule(Scheduled { frame, event });
+                        // A full queue keeps the releases for later and drops a strike.
+                        handle.schedule_live(Scheduled { frame, event });
                     }
                 }
             },

@@ -1,0 +1,155 @@
+//! What a full event queue could not take from a live input, kept until it has room again.
+//!
+//! A live input (a MIDI keyboard's callback) cannot wait for the audio thread: when the queue is
+//! full (the audio thread held up by a device hiccup or a slow rebuild) an event must be kept or
+//! dropped at once. A lost note-off is a stuck note and a lost pedal release a piano that never
+//! stops ringing, so every release is kept — a key's note-off once per key, each pedal's latest
+//! position, all-notes-off, all-sound-off and reset — and queued, late, as soon as there is room.
+//! A strike that finds the queue full (or releases still waiting ahead of it) is dropped and
+//! counted: played late it would no longer be the note the pianist played. No allocation: the
+//! backlog is a fixed set of flags.
+
+use crate::midi::{Event, Pedal};
+
+/// The pedals in the order the backlog keeps them.
+const PEDALS: [Pedal; 3] = [Pedal::Sustain, Pedal::Sostenuto, Pedal::Soft];
+
+/// Releases waiting for room in the queue, and what the queue has cost (written by the thread
+/// that schedules live events; read by it for the summary).
+#[derive(Debug, Default, Clone, PartialEq)]
+pub struct Backlog {
+    /// Notes whose note-off waits, one bit per MIDI note.
+    note_offs: u128,
+    /// Each pedal's latest position not yet queued ([`PEDALS`] order).
+    pedals: [Option<bool>; 3],
+    all_sound_off: bool,
+    all_notes_off: bool,
+    reset_controllers: bool,
+    /// Strikes dropped because the queue was full.
+    pub dropped_note_ons: u64,
+    /// Releases and pedal moves queued late, once the queue had room.
+    pub delayed: u64,
+}
+
+impl Backlog {
+    /// Whether nothing waits.
+    pub fn is_empty(&self) -> bool {
+        self.note_offs == 0
+            && self.pedals.iter().all(Option::is_none)
+            && !(self.all_sound_off || self.all_notes_off || self.reset_controllers)
+    }
+
+    /// Keep `event`, which the queue had no room for: a release until there is room, a strike
+    /// counted and dropped.
+    pub fn keep(&mut self, event: Event) {
+        match event {
+            Event::NoteOn { .. } => self.dropped_note_ons += 1,
+            // A MIDI note is a data byte, 0–127: one bit each.
+            Event::NoteOff { note } => self.note_offs |= 1u128 << (note & 0x7F),
+            Event::Pedal { pedal, down } => {
+                let i = PEDALS.iter().position(|&p| p == pedal).unwrap_or(0);
+                self.pedals[i] = Some(down);
+            }
+            Event::AllSoundOff => self.all_sound_off = true,
+            Event::AllNotesOff => self.all_notes_off = true,
+            Event::ResetControllers => self.reset_controllers = true,
+        }
+    }
+
+    /// The next event waiting (silencing first, then the keys, then the pedals), without taking
+    /// it: [`Backlog::taken`] once the queue has accepted it.
+    pub fn next(&self) -> Option<Event> {
+        if self.all_sound_off {
+            return Some(Event::AllSoundOff);
+        }
+        if self.all_notes_off {
+            return Some(Event::AllNotesOff);
+        }
+        if self.reset_controllers {
+            return Some(Event::ResetControllers);
+        }
+        if self.note_offs != 0 {
+            let note = self.note_offs.trailing_zeros() as u8;
+            return Some(Event::NoteOff { note });
+        }
+        PEDALS
+            .iter()
+            .zip(&self.pedals)
+            .find_map(|(&pedal, down)| down.map(|down| Event::Pedal { pedal, down }))
+    }
+
+    /// `event` (the one [`Backlog::next`] gave) is queued: no longer waiting.
+    pub fn taken(&mut self, event: Event) {
+        match event {
+            Event::AllSoundOff => self.all_sound_off = false,
+            Event::AllNotesOff => self.all_notes_off = false,
+            Event::ResetControllers => self.reset_controllers = false,
+            Event::NoteOff { note } => self.note_offs &= !(1u128 << (note & 0x7F)),
+            Event::Pedal { pedal, .. } => {
+                let i = PEDALS.iter().position(|&p| p == pedal).unwrap_or(0);
+                self.pedals[i] = None;
+            }
+            Event::NoteOn { .. } => return,
+        }
+        self.delayed += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_release_is_kept_once_and_strikes_are_counted() {
+        let mut b = Backlog::default();
+        for event in [
+            Event::NoteOn {
+                note: 60,
+                velocity: 90,
+            },
+            Event::NoteOff { note: 60 },
+            Event::NoteOff { note: 60 },
+            Event::NoteOff { note: 127 },
+            Event::NoteOff { note: 0 },
+            Event::Pedal {
+                pedal: Pedal::Sustain,
+                down: true,
+            },
+            Event::Pedal {
+                pedal: Pedal::Sustain,
+                down: false,
+            },
+            Event::Pedal {
+                pedal: Pedal::Soft,
+                down: true,
+            },
+            Event::AllNotesOff,
+        ] {
+            b.keep(event);
+        }
+        let mut out = vec![];
+        while let Some(e) = b.next() {
+            b.taken(e);
+            out.push(e);
+        }
+        assert_eq!(
+            out,
+            [
+                Event::AllNotesOff,
+                Event::NoteOff { note: 0 },
+                Event::NoteOff { note: 60 },
+                Event::NoteOff { note: 127 },
+                Event::Pedal {
+                    pedal: Pedal::Sustain,
+                    down: false
+                },
+                Event::Pedal {
+                    pedal: Pedal::Soft,
+                    down: true
+                },
+            ]
+        );
+        assert!(b.is_empty());
+        assert_eq!((b.dropped_note_ons, b.delayed), (1, 6));
+    }
+}
