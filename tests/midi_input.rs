@@ -444,3 +444,67 @@ fn a_flooded_queue_keeps_every_release() {
     );
     assert_eq!(sounding, 0, "a key is stuck");
 }
+
+/// A plugin host's path (`audio::Aligned`): more events inside one 32-frame cell than the queue
+/// holds — 4 096 strikes of C4, then C4 E4 G4's note-offs and one more strike. The releases wait
+/// for the next cell; the keys fall silent; nothing waits and every voice is retired 3–4 s later.
+#[test]
+fn a_hosts_flood_inside_one_cell_keeps_every_release() {
+    use std::sync::atomic::Ordering;
+    use unacorda::audio::synth::{Synth, EVENT_QUEUE};
+    use unacorda::audio::Aligned;
+    use unacorda::config::scaling::{parse_key, Scaling};
+    use unacorda::engine::exact::ExactPool;
+    use unacorda::engine::Policy;
+    use unacorda::play::Piano;
+    let scaling = Scaling::resolve("concert").unwrap();
+    let keys: Vec<usize> = ["C4", "E4", "G4"]
+        .iter()
+        .map(|n| parse_key(n).unwrap())
+        .collect();
+    let piano = Piano::<ExactPool>::build(&scaling, &keys, 8).unwrap();
+    let settings = scaling.output_settings();
+    let (synth, handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
+    let stats = handle.stats.clone();
+    let mut host = Aligned::new(synth, handle, 2);
+    let note = |k: usize| (k + 20) as u8;
+    let mut out = vec![0f32; 2 * 64];
+    for &k in &keys {
+        host.schedule(Event::NoteOn {
+            note: note(k),
+            velocity: 90,
+        });
+    }
+    host.process(&mut out);
+    let mut refused = 0;
+    for _ in 0..EVENT_QUEUE {
+        refused += usize::from(!host.schedule(Event::NoteOn {
+            note: note(keys[0]),
+            velocity: 40,
+        }));
+    }
+    for &k in &keys {
+        refused += usize::from(!host.schedule(Event::NoteOff { note: note(k) }));
+    }
+    refused += usize::from(!host.schedule(Event::NoteOn {
+        note: note(keys[1]),
+        velocity: 100,
+    }));
+    let late = stats.late_events.load(Ordering::Relaxed);
+    let mut sounding = usize::MAX;
+    for block in 0..((4.0 * settings.rate_hz) as usize / 64) {
+        host.process(&mut out);
+        if block * 64 >= (3.0 * settings.rate_hz) as usize {
+            let pool = &host.synth().piano().instrument;
+            sounding = (0..pool.n_voices()).filter(|&v| pool.is_active(v)).count();
+        }
+    }
+    println!(
+        "{} events inside one cell into a queue of {EVENT_QUEUE}: {refused} not queued at once ({late} counted late), {sounding} voices sounding 3–4 s later",
+        EVENT_QUEUE + keys.len() + 1
+    );
+    assert_eq!(refused, late as usize);
+    assert!(refused > keys.len(), "the queue should have been full");
+    assert!(host.is_silent(), "something still waits or sounds");
+    assert_eq!(sounding, 0, "a key is stuck");
+}

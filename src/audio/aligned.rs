@@ -8,7 +8,6 @@
 use super::synth::{Scheduled, Synth, SynthHandle, ALIGN_FRAMES};
 use crate::engine::{Pair, VoicePool};
 use crate::midi::Event;
-use ringbuf::traits::Producer;
 use std::sync::atomic::Ordering;
 
 /// How far the output lags the events: one cell of the grid.
@@ -53,17 +52,17 @@ impl<E: VoicePool> Aligned<E> {
     }
 
     /// Play `event` at the next frame the host will be handed (heard [`LATENCY_FRAMES`] later).
-    /// When the queue is full (thousands of events inside one cell) the event is dropped and
-    /// counted in [`Stats::late_events`]; returns whether it was queued.
+    /// When the queue is full (thousands of events inside one cell) a release waits and is
+    /// queued with the next cell, a strike is dropped ([`SynthHandle::schedule_live`]), and
+    /// either is counted in [`Stats::late_events`]; returns whether it was queued now.
     pub fn schedule(&mut self, event: Event) -> bool {
-        let queued = self
-            .handle
-            .events
-            .try_push(Scheduled {
-                frame: self.handed,
-                event,
-            })
-            .is_ok();
+        let dropped = self.handle.backlog.dropped_note_ons;
+        self.handle.schedule_live(Scheduled {
+            frame: self.handed,
+            event,
+        });
+        let backlog = &self.handle.backlog;
+        let queued = backlog.is_empty() && backlog.dropped_note_ons == dropped;
         if !queued {
             self.handle
                 .stats
@@ -86,6 +85,8 @@ impl<E: VoicePool> Aligned<E> {
         let mut out = &mut out[..whole];
         while !out.is_empty() {
             if self.taken == cell_frames {
+                // Releases a full queue kept, queued before the cell is rendered.
+                self.handle.flush_backlog(self.handed);
                 // Every event up to this cell's end has been scheduled: its last frame is the
                 // frame the host is handed now, less the latency.
                 self.synth.process_on(&mut self.cell, ch, pair);
@@ -104,7 +105,9 @@ impl<E: VoicePool> Aligned<E> {
     /// is waiting and the cell being handed out is below the 24-bit floor.
     pub fn is_silent(&self) -> bool {
         let floor = f32::EPSILON;
-        self.cell.iter().all(|s| s.abs() < floor) && self.synth.is_quiet()
+        self.cell.iter().all(|s| s.abs() < floor)
+            && self.synth.is_quiet()
+            && self.handle.backlog.is_empty()
     }
 
     /// Silence every voice at once (a host's reset): keys up, pedals up, strings and board at
