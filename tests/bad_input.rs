@@ -443,6 +443,27 @@ fn missing_files_are_named_once() {
     assert_refused(&cases, Some(wav));
 }
 
+/// Flags the command line's parser refuses — a value that is not a number, a required flag
+/// missing, an unknown flag — exit with status 1 like every other bad input, nothing written;
+/// `--help` with 0.
+#[test]
+fn unparsable_flags_exit_with_status_1() {
+    let dir = tempfile::tempdir().unwrap();
+    let wav = dir.path().join("out.wav");
+    let wav = wav.to_str().unwrap();
+    let cases: [(&[&str], &str); 3] = [
+        (
+            &["render", "--offline", "--seconds", "abc", "--out", wav],
+            "abc",
+        ),
+        (&["render", "--offline", "--key", "C4"], "--out"),
+        (&["play", "--no-such-flag"], "--no-such-flag"),
+    ];
+    assert_refused(&cases, Some(wav));
+    let (code, _) = cli(&["render", "--help"]);
+    assert_eq!(code, Some(0), "--help is not an error");
+}
+
 #[test]
 fn play_refuses_bad_flags_and_missing_devices() {
     let cases: [(&[&str], &str); 4] = [

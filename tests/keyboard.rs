@@ -511,3 +511,22 @@ fn a_keyboard_stands_its_keys_on_the_soundboard_it_names() {
     assert!(e.contains("missing.txt"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Key names in any case, sharps or flats; numbers 1–88; nothing else.
+#[test]
+fn key_names_are_read_in_any_case() {
+    for (names, key) in [
+        (&["C4", "c4", "40"][..], 40),
+        (&["Bb3", "bb3", "BB3", "A#3", "a#3"][..], 38),
+        (&["Db2", "db2", "DB2", "C#2", "c#2"][..], 17),
+        (&["A0", "a0", "1"][..], 1),
+        (&["C8", "c8", "88"][..], 88),
+    ] {
+        for name in names {
+            assert_eq!(parse_key(name), Some(key), "{name}");
+        }
+    }
+    for name in ["H4", "h4", "c9", "Cb", "", "89", "0", "cbb4", "C#"] {
+        assert_eq!(parse_key(name), None, "{name}");
+    }
+}

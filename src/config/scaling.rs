@@ -300,7 +300,8 @@ pub fn equal_tempered_hz(key: usize) -> f64 {
     440.0 * 2f64.powf((key as f64 - 49.0) / 12.0)
 }
 
-/// Key number of a name (`C4`, `Bb3`, `Db2`; flats or sharps) or of a number 1–88.
+/// Key number of a name (`C4`, `Bb3`, `Db2`; flats or sharps, in any case: `c4`, `bb3`, `DB2`)
+/// or of a number 1–88.
 pub fn parse_key(text: &str) -> Option<usize> {
     if let Ok(k) = text.parse::<usize>() {
         return (1..=KEYS).contains(&k).then_some(k);
@@ -314,6 +315,15 @@ pub fn parse_key(text: &str) -> Option<usize> {
     let split = text.find(|c: char| c.is_ascii_digit() || c == '-')?;
     let (pitch, octave) = text.split_at(split);
     let octave: i32 = octave.parse().ok()?;
+    // The letter in capitals, an accidental after it `#` or `b` whatever the case it was typed.
+    let mut chars = pitch.chars();
+    let pitch: String = chars
+        .next()
+        .map(|c| c.to_ascii_uppercase())
+        .into_iter()
+        .chain(chars.map(|c| if c == 'B' { 'b' } else { c }))
+        .collect();
+    let pitch = pitch.as_str();
     let pc = names
         .iter()
         .position(|n| *n == pitch)

@@ -324,7 +324,19 @@ fn render_midi_file<E: unacorda::engine::VoicePool>(
 }
 
 fn main() -> std::process::ExitCode {
-    match run(Cli::parse()) {
+    // Bad flags exit with status 1, as every other bad input does (clap's own is 2); help and
+    // version with 0.
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let _ = e.print();
+            return match e.use_stderr() {
+                true => std::process::ExitCode::FAILURE,
+                false => std::process::ExitCode::SUCCESS,
+            };
+        }
+    };
+    match run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
