@@ -9,8 +9,8 @@ bash scripts/deps.sh
 out=demo-out
 mkdir -p "$out"
 cargo build --release --locked
-./target/release/unacorda render --offline --preset c2 --seconds 6 --out "$out/c2_normal.wav"
-./target/release/unacorda render --offline --preset c2 --una-corda --seconds 6 --out "$out/c2_una_corda.wav"
+./target/release/unacorda render --preset c2 --seconds 6 --out "$out/c2_normal.wav"
+./target/release/unacorda render --preset c2 --una-corda --seconds 6 --out "$out/c2_una_corda.wav"
 ./target/release/unacorda figures --preset c2 --out-dir "$out"
-./target/release/unacorda render --offline --midi assets/midi/demo.mid --out "$out/demo_phrase.wav"
+./target/release/unacorda render --midi assets/midi/demo.mid --out "$out/demo_phrase.wav"
 echo "demo written to $out/"

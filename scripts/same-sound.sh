@@ -14,7 +14,7 @@ out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 cargo build --release --locked --bin unacorda
 bin=./target/release/unacorda
-render() { "$bin" render --offline "$@" >/dev/null 2>&1; }
+render() { "$bin" render "$@" >/dev/null 2>&1; }
 for integrator in rk4 exact; do
   render --preset c2 --seconds 4 --integrator "$integrator" --out "$out/c2_normal_$integrator.wav"
   render --preset c2 --una-corda --seconds 4 --integrator "$integrator" --out "$out/c2_una_corda_$integrator.wav"

@@ -1,8 +1,11 @@
 //! Malformed presets, assets and command lines: clear errors that name the file, the line or
 //! field and what was expected; a non-zero exit; no panic; no output file.
 
+mod support;
+
 use std::path::Path;
 use std::process::Command;
+use support::cli;
 use unacorda::config::preset::Preset;
 use unacorda::config::scaling::Scaling;
 
@@ -181,23 +184,6 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
     assert!(e.contains("/dev/zero") && e.contains("longer than 1048576 bytes"));
 }
 
-/// Run the CLI; returns (exit status, stderr).
-fn cli(args: &[&str]) -> (Option<i32>, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_unacorda"))
-        .args(args)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    println!(
-        "unacorda {}\n  → exit {:?}: {}",
-        args.join(" "),
-        out.status.code(),
-        stderr.trim()
-    );
-    assert!(!stderr.contains("panicked"), "the CLI must not panic");
-    (out.status.code(), stderr)
-}
-
 /// Each command fails, its message contains the needle, and `out` (if any) was not written.
 fn assert_refused(cases: &[(&[&str], &str)], out: Option<&str>) {
     for &(args, needle) in cases {
@@ -253,7 +239,10 @@ fn cli_rejects_bad_input_without_writing() {
             &["render", "--offline", "--velocity", "40", "--out", wav],
             "--velocity 40",
         ),
-        (&["render", "--out", wav], "--offline"),
+        (
+            &["render", "--key", "C4", "--release-at", "31", "--out", wav],
+            "--release-at 31",
+        ),
         (
             &["figures", "--seconds", "0", "--out-dir", wav],
             "--seconds",

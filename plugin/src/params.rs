@@ -66,23 +66,21 @@ pub const PARAMS: [Spec; 9] = [
         id: 4,
         name: "Output gain (dB)",
         key: "gain_db",
-        min: -60.0,
-        max: 12.0,
+        min: *unacorda::config::output::GAIN_DB.start(),
+        max: *unacorda::config::output::GAIN_DB.end(),
         default: 0.0,
         stepped: false,
         automatable: true,
         choices: None,
         since_version: 1,
     },
-    // MIDI velocity v becomes 127 (v/127)^curve before the hammer's speed is found from it
-    // (unacorda::midi::hammer_speed_m_s): above 1 a harder touch is needed for the same
-    // loudness, below 1 a lighter one.
+    // unacorda::midi::curved_velocity: MIDI velocity v becomes 127 (v/127)^curve.
     Spec {
         id: 5,
         name: "Velocity curve (exponent)",
         key: "velocity_curve",
-        min: 0.25,
-        max: 4.0,
+        min: *unacorda::midi::VELOCITY_CURVE.start(),
+        max: *unacorda::midi::VELOCITY_CURVE.end(),
         default: 1.0,
         stepped: false,
         automatable: true,
@@ -234,15 +232,6 @@ impl Values {
     }
 }
 
-/// MIDI velocity `v` (1–127) through the velocity curve `exponent`; 1 leaves it as it is.
-pub fn curved_velocity(v: u8, exponent: f64) -> u8 {
-    if exponent == 1.0 {
-        return v;
-    }
-    let x = f64::from(v.clamp(1, 127)) / 127.0;
-    (127.0 * x.powf(exponent)).round().clamp(1.0, 127.0) as u8
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -254,16 +243,5 @@ mod tests {
             assert_eq!(p.clamp(p.default), p.default, "{}", p.key);
         }
         assert_eq!(index_of(0), None);
-    }
-
-    #[test]
-    fn the_velocity_curve_is_monotonic_and_identity_at_one() {
-        for e in [0.25, 0.5, 1.0, 2.0, 4.0] {
-            let v: Vec<u8> = (1..=127).map(|v| curved_velocity(v, e)).collect();
-            assert!(v.windows(2).all(|w| w[1] >= w[0]), "exponent {e}");
-            assert_eq!((v[0].max(1), v[126]), (v[0], 127));
-        }
-        assert!((1..=127).all(|v| curved_velocity(v, 1.0) == v));
-        assert!(curved_velocity(64, 2.0) < 64 && curved_velocity(64, 0.5) > 64);
     }
 }

@@ -2,7 +2,7 @@
 //! realigned to its grid ([`Aligned`]), the output gain, and sleep when nothing sounds. Never
 //! allocates, locks or prints in `process` (the plugin's tests run it under `assert_no_alloc`).
 
-use crate::params::{curved_velocity, GAIN_DB, REBUILDS, SOFT, SOSTENUTO, SUSTAIN, VELOCITY_CURVE};
+use crate::params::{GAIN_DB, REBUILDS, SOFT, SOSTENUTO, SUSTAIN, VELOCITY_CURVE};
 use crate::prepare::Pianos;
 use crate::{MainThread, Shared};
 use clack_extensions::tail::TailLength;
@@ -17,7 +17,7 @@ use unacorda::audio::synth::EVENT_QUEUE;
 use unacorda::audio::{Aligned, Synth};
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Pair, Rk4Pool, VoicePool};
-use unacorda::midi::{map_channel_message, Event, Pedal};
+use unacorda::midi::{curved_velocity, map_channel_message, Event, Pedal};
 
 /// The ring-out the tail reports: how long the slowest mode takes to fall this far (dB), from a
 /// fortissimo's level to below the 24-bit floor.
@@ -317,13 +317,7 @@ impl Processor<'_> {
             }),
             Some(CoreEventSpace::Midi(e)) => {
                 let [status, data1, data2] = e.data();
-                match map_channel_message(status, data1, data2) {
-                    Some(Event::NoteOn { note, velocity }) => Some(Event::NoteOn {
-                        note,
-                        velocity: curved_velocity(velocity, curve),
-                    }),
-                    other => other,
-                }
+                map_channel_message(status, data1, data2).map(|e| e.with_velocity_curve(curve))
             }
             Some(CoreEventSpace::ParamValue(e)) => {
                 let index = e

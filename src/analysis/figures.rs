@@ -36,6 +36,17 @@ const COLORS: [RGBColor; 3] = [
     RGBColor(214, 39, 40),
 ];
 
+/// A tick label as a reader writes the number: `100`, `0.5`, `1.25` (never `100.0` or
+/// `0.30000000000000004`).
+fn tick(v: &f64) -> String {
+    let rounded = format!("{v:.6}");
+    let trimmed = rounded.trim_end_matches('0').trim_end_matches('.');
+    match trimmed {
+        "-0" => "0".to_owned(),
+        t => t.to_owned(),
+    }
+}
+
 /// Register the bundled DejaVu Sans so that text needs no system fonts.
 fn register_font() {
     static DONE: OnceLock<()> = OnceLock::new();
@@ -118,6 +129,7 @@ pub fn figure2(
                 .configure_mesh()
                 .x_desc("frequency (Hz)")
                 .y_desc("m/(N s)")
+                .x_label_formatter(&tick)
                 .y_label_formatter(&|v| format!("{v:.0e}"))
                 .label_style((FONT, 12))
                 .draw()?;
@@ -188,8 +200,8 @@ pub fn partial_decay(
             .configure_mesh()
             .x_desc("key (1 = A0, 40 = C4, 88 = C8)")
             .y_desc("T60 (s)")
-            .x_label_formatter(&|v| format!("{v:.0}"))
-            .y_label_formatter(&|v| format!("{v}"))
+            .x_label_formatter(&tick)
+            .y_label_formatter(&tick)
             .label_style((FONT, 13))
             .draw()?;
         chart.draw_series(keys.iter().map(|&(k, fast, slow)| {
@@ -358,19 +370,28 @@ fn figure3(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
             .configure_mesh()
             .x_desc("time (ms)")
             .y_desc("force (N)")
+            .x_label_formatter(&tick)
+            .y_label_formatter(&tick)
             .label_style((FONT, 15))
             .draw()?;
+        // The normal strike's two strings meet the hammer almost alike: the first is drawn wide
+        // and the second dashed over it, so that both show where they coincide.
         for (i, (label, data)) in series.iter().enumerate() {
             let color = COLORS[i];
-            chart
-                .draw_series(LineSeries::new(
-                    (0..n).map(|k| (uc.time_s(k) * 1e3, data[k])),
-                    color.stroke_width(2),
-                ))?
-                .label(*label)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
+            let width = if i == 1 { 6 } else { 2 };
+            let points = (0..n).map(|k| (uc.time_s(k) * 1e3, data[k]));
+            let drawn = if i == 2 {
+                let style = color.stroke_width(width);
+                chart.draw_series(DashedLineSeries::new(points, 6, 4, style))?
+            } else {
+                chart.draw_series(LineSeries::new(points, color.stroke_width(width)))?
+            };
+            drawn.label(*label).legend(move |(x, y)| {
+                // Dashed as its curve (a gap of 0: one stroke for the others).
+                let (dash, gap) = if i == 2 { (6, 4) } else { (24, 0) };
+                let style = color.stroke_width(width);
+                plotters::element::DashedPathElement::new([(x, y), (x + 24, y)], dash, gap, style)
+            });
         }
         chart
             .configure_series_labels()
@@ -407,7 +428,11 @@ fn draw_band(
         .y_label_area_size(55)
         .build_cartesian_2d(0.0..t_end, -y..y)?;
     let mut mesh = chart.configure_mesh();
-    mesh.label_style((FONT, 11)).y_desc("N").disable_x_mesh();
+    mesh.label_style((FONT, 11))
+        .y_desc("N")
+        .x_label_formatter(&tick)
+        .y_label_formatter(&tick)
+        .disable_x_mesh();
     if x_label {
         mesh.x_desc("time (s)");
     }
@@ -538,8 +563,9 @@ fn band_grid(
     ])
 }
 
-/// A perceptually ordered colour map (viridis, five stops), `x` in [0, 1].
-fn colormap(x: f64) -> RGBColor {
+/// A perceptually ordered colour map (viridis, five stops), `x` in [0, 1]: Fig. 6's colours
+/// and its colour bar's.
+pub fn colormap(x: f64) -> RGBColor {
     const STOPS: [(f64, f64, f64); 5] = [
         (68.0, 1.0, 84.0),
         (59.0, 82.0, 139.0),
@@ -555,7 +581,38 @@ fn colormap(x: f64) -> RGBColor {
     RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
 }
 
-/// Figure 6: spectrograms of the transmitted T force, first 4 s, up to 4 kHz.
+/// The width of Fig. 6's colour bar with its labels (px).
+const COLOUR_BAR_PX: u32 = 110;
+
+/// A vertical colour bar of [`colormap`] from `lo_db` (bottom) to `hi_db` (top), labelled in dB.
+fn colour_bar(area: &DrawingArea<BitMapBackend, Shift>, lo_db: f64, hi_db: f64) -> Result2<()> {
+    let mut chart = ChartBuilder::on(area)
+        .caption("dB re 1 N", (FONT, 14))
+        .margin_top(10)
+        .margin_bottom(10)
+        .margin_right(10)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0.0..1.0, lo_db..hi_db)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .label_style((FONT, 12))
+        .draw()?;
+    let steps = 256;
+    let step_db = (hi_db - lo_db) / steps as f64;
+    chart.draw_series((0..steps).map(|i| {
+        let db = lo_db + i as f64 * step_db;
+        let c = colormap((i as f64 + 0.5) / steps as f64);
+        Rectangle::new([(0.0, db), (1.0, db + step_db)], c.filled())
+    }))?;
+    Ok(())
+}
+
+/// Figure 6: spectrograms of the transmitted T force, first 4 s, up to 4 kHz, with their colour
+/// bar.
 fn figure6(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf>, FigureError> {
     let fs = uc.rate_hz;
     let n_fft = 4096;
@@ -588,10 +645,12 @@ fn figure6(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
         root.fill(&WHITE)?;
         let (title, body) = root.split_vertically(40);
         title.titled(
-            &format!("Fig. 6 — spectrogram of the transmitted T force (dB, top {top:.0} dB re 1 N, {range_db:.0} dB range)"),
+            &format!("Fig. 6 — spectrogram of the transmitted T force (dB re 1 N, {range_db:.0} dB range)"),
             (FONT, 20),
         )?;
-        let panels = body.split_evenly((1, 2));
+        let (spectra, bar) = body.split_horizontally(body.dim_in_pixel().0 - COLOUR_BAR_PX);
+        colour_bar(&bar, top - range_db, top)?;
+        let panels = spectra.split_evenly((1, 2));
         for (panel, (label, rows)) in panels
             .iter()
             .zip([("(a) una corda", &s_uc), ("(b) normal", &s_n)])
@@ -607,6 +666,8 @@ fn figure6(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
                 .disable_mesh()
                 .x_desc("time (s)")
                 .y_desc("frequency (Hz)")
+                .x_label_formatter(&tick)
+                .y_label_formatter(&tick)
                 .label_style((FONT, 13))
                 .draw()?;
             chart.draw_series(rows.iter().enumerate().flat_map(|(i, row)| {
@@ -631,6 +692,20 @@ fn figure6(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tick_labels_read_as_numbers_are_written() {
+        for (v, label) in [
+            (100.0, "100"),
+            (1000.0, "1000"),
+            (0.1 + 0.2, "0.3"),
+            (1.25, "1.25"),
+            (-0.0, "0"),
+            (-20.0, "-20"),
+        ] {
+            assert_eq!(tick(&v), label, "{v}");
+        }
+    }
 
     #[test]
     fn pixel_columns_hold_every_sample_once() {

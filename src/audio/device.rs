@@ -23,7 +23,7 @@ pub struct OutputInfo {
 /// Why audio output cannot start.
 #[derive(Debug, thiserror::Error)]
 pub enum DeviceError {
-    #[error("no audio output device{}: run `unacorda devices` to list them, or render offline with `unacorda render --offline`", .0.as_ref().map(|n| format!(" matches {n:?}")).unwrap_or_default())]
+    #[error("no audio output device{}: run `unacorda devices` to list them, or render to a file with `unacorda render`", .0.as_ref().map(|n| format!(" matches {n:?}")).unwrap_or_default())]
     NotFound(Option<String>),
     #[error("audio device {device}: no 32-bit float output at {rate_hz} Hz (it offers {offers}); `unacorda devices` lists the others (alsa:null plays without a sound card)")]
     Format {
@@ -58,8 +58,17 @@ pub enum MidiError {
     QueueGone,
 }
 
+/// Keep alsa-lib's own error lines (`ALSA lib seq_hw.c:…`) off standard error on this thread:
+/// what failed is said once, by the error this module returns. alsa-lib writes them into a buffer
+/// instead, replaced (and the last one freed) at each call.
+fn quiet_alsa() {
+    #[cfg(target_os = "linux")]
+    let _ = alsa::Output::local_error_handler();
+}
+
 /// Every output device of the default host, with whether it can play at `rate_hz`.
 pub fn output_devices(rate_hz: u32) -> Result<Vec<OutputInfo>, DeviceError> {
+    quiet_alsa();
     let host = cpal::default_host();
     let default_id = host
         .default_output_device()
@@ -88,6 +97,7 @@ pub fn output_devices(rate_hz: u32) -> Result<Vec<OutputInfo>, DeviceError> {
 /// Linux it needs the ALSA sequencer, `/dev/snd/seq`).
 pub fn midi_input() -> Result<(midir::MidiInput, Vec<midir::MidiInputPort>, Vec<String>), MidiError>
 {
+    quiet_alsa();
     let input =
         midir::MidiInput::new("unacorda").map_err(|e| MidiError::Unavailable(e.to_string()))?;
     let ports = input.ports();
@@ -230,16 +240,13 @@ impl<E: VoicePool> Output<E> {
 /// `rate_hz` with `buffer` frames per callback (`None`: the device's default), and start `synth`
 /// in its callback, which counts into `stats`. On failure the synth is returned with the error
 /// (boxed: the error stays small).
-pub fn start<E: VoicePool>(
-    synth: Synth<E>,
+/// The output `device` names (`None`: the default), its id and the channel count it plays
+/// 32-bit float at `rate_hz` with — or why there is none.
+fn find_output(
     device: Option<&str>,
     rate_hz: u32,
-    buffer: Option<u32>,
-    stats: Arc<CallbackStats>,
-) -> Result<Output<E>, Refused<E>> {
-    if let Err(e) = check_buffer(buffer) {
-        return Err((e, Some(Box::new(synth))));
-    }
+) -> Result<(cpal::Device, String, u16), DeviceError> {
+    quiet_alsa();
     let host = cpal::default_host();
     let chosen = match device {
         None => host.default_output_device(),
@@ -251,23 +258,37 @@ pub fn start<E: VoicePool>(
             })
         }),
     };
-    let Some(chosen) = chosen else {
-        return Err((
-            DeviceError::NotFound(device.map(str::to_owned)),
-            Some(Box::new(synth)),
-        ));
-    };
+    let chosen = chosen.ok_or_else(|| DeviceError::NotFound(device.map(str::to_owned)))?;
     let id = chosen.id().map_or_else(|_| "?".into(), |id| id.to_string());
-    let channels = match f32_config(&chosen, rate_hz) {
-        Ok(ch) => ch,
-        Err(offers) => {
-            let e = DeviceError::Format {
-                device: id,
-                rate_hz,
-                offers,
-            };
-            return Err((e, Some(Box::new(synth))));
-        }
+    match f32_config(&chosen, rate_hz) {
+        Ok(channels) => Ok((chosen, id, channels)),
+        Err(offers) => Err(DeviceError::Format {
+            device: id,
+            rate_hz,
+            offers,
+        }),
+    }
+}
+
+/// Check that the output `device` names exists and plays 32-bit float at `rate_hz`, before
+/// anything costly is built for it; its id.
+pub fn check_output(device: Option<&str>, rate_hz: u32) -> Result<String, DeviceError> {
+    find_output(device, rate_hz).map(|(_, id, _)| id)
+}
+
+pub fn start<E: VoicePool>(
+    synth: Synth<E>,
+    device: Option<&str>,
+    rate_hz: u32,
+    buffer: Option<u32>,
+    stats: Arc<CallbackStats>,
+) -> Result<Output<E>, Refused<E>> {
+    if let Err(e) = check_buffer(buffer) {
+        return Err((e, Some(Box::new(synth))));
+    }
+    let (chosen, id, channels) = match find_output(device, rate_hz) {
+        Ok(found) => found,
+        Err(e) => return Err((e, Some(Box::new(synth)))),
     };
     let config = cpal::StreamConfig {
         channels,

@@ -10,6 +10,16 @@ pub fn channel_layout(channels: u16) -> &'static str {
     }
 }
 
+/// The output gain a front end may set (dB): from near silence to a quiet keyboard brought up
+/// into the soft clipper's knee.
+pub const GAIN_DB: std::ops::RangeInclusive<f64> = -60.0..=12.0;
+
+/// The sound pressure heard as full scale once `gain_db` is applied before the soft clipper: a
+/// gain of `g` dB is a full scale `g` dB lower.
+pub fn full_scale_with_gain(full_scale_pa: f64, gain_db: f64) -> f64 {
+    full_scale_pa * 10f64.powf(-gain_db / 20.0)
+}
+
 /// Output stage settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OutputSettings {

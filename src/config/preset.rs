@@ -668,6 +668,13 @@ impl LoadedPreset {
         self.preset.simulation.output_rate_hz as f64
     }
 
+    /// An output gain (dB, [`crate::config::output::GAIN_DB`]) before the soft clipper: the
+    /// preset's full scale lowered by it.
+    pub fn set_gain_db(&mut self, gain_db: f64) {
+        let r = &mut self.preset.radiation;
+        r.full_scale_pa = crate::config::output::full_scale_with_gain(r.full_scale_pa, gain_db);
+    }
+
     /// Both channels heard at `radiation.listener`, the stereo pair set aside (a front end's
     /// `--mono`).
     pub fn make_mono(&mut self) {

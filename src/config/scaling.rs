@@ -769,6 +769,13 @@ impl LoadedScaling {
         self.radiation().output_settings(self.base.output_rate_hz())
     }
 
+    /// An output gain (dB, [`crate::config::output::GAIN_DB`]) before the soft clipper: the
+    /// keyboard's full scale lowered by it.
+    pub fn set_gain_db(&mut self, gain_db: f64) {
+        let pa = self.radiation().full_scale_pa;
+        self.scaling.full_scale_pa = Some(crate::config::output::full_scale_with_gain(pa, gain_db));
+    }
+
     /// Every key heard at the keyboard's `listener` in both channels, the stereo pair set aside
     /// (a front end's `--mono`).
     pub fn make_mono(&mut self) {

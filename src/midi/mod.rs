@@ -40,6 +40,20 @@ pub fn hammer_speed_m_s(velocity: u8) -> Option<f64> {
     Some(ln_speed.exp())
 }
 
+/// The velocity curve's exponents a front end may set: MIDI velocity `v` becomes
+/// `127 (v/127)^exponent` before the hammer's speed is found from it ([`curved_velocity`]).
+pub const VELOCITY_CURVE: std::ops::RangeInclusive<f64> = 0.25..=4.0;
+
+/// MIDI velocity `v` (1–127) through the velocity curve `exponent` ([`VELOCITY_CURVE`]): above 1 a
+/// harder touch is needed for the same loudness, below 1 a lighter one; 1 leaves it as it is.
+pub fn curved_velocity(v: u8, exponent: f64) -> u8 {
+    if exponent == 1.0 {
+        return v;
+    }
+    let x = f64::from(v.clamp(1, 127)) / 127.0;
+    (127.0 * x.powf(exponent)).round().clamp(1.0, 127.0) as u8
+}
+
 /// Piano key 1 (A0) to 88 (C8) of a MIDI note number, `None` off the keyboard.
 pub fn piano_key(note: u8) -> Option<usize> {
     (21..=108).contains(&note).then(|| (note - 20) as usize)
@@ -65,6 +79,20 @@ pub enum Event {
     AllNotesOff,
     AllSoundOff,
     ResetControllers,
+}
+
+impl Event {
+    /// The event with a note-on's velocity through the velocity curve `exponent`
+    /// ([`curved_velocity`]); any other event as it is.
+    pub fn with_velocity_curve(self, exponent: f64) -> Event {
+        match self {
+            Event::NoteOn { note, velocity } => Event::NoteOn {
+                note,
+                velocity: curved_velocity(velocity, exponent),
+            },
+            other => other,
+        }
+    }
 }
 
 /// The piano event of a channel message (`status` with its channel nibble), if it has one.
@@ -105,6 +133,17 @@ pub fn map_channel_message(status: u8, data1: u8, data2: u8) -> Option<Event> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_velocity_curve_is_monotonic_and_identity_at_one() {
+        for e in [0.25, 0.5, 1.0, 2.0, 4.0] {
+            let v: Vec<u8> = (1..=127).map(|v| curved_velocity(v, e)).collect();
+            assert!(v.windows(2).all(|w| w[1] >= w[0]), "exponent {e}");
+            assert_eq!((v[0].max(1), v[126]), (v[0], 127));
+        }
+        assert!((1..=127).all(|v| curved_velocity(v, 1.0) == v));
+        assert!(curved_velocity(64, 2.0) < 64 && curved_velocity(64, 0.5) > 64);
+    }
 
     #[test]
     fn curve_passes_its_anchors_and_rises_at_every_step() {

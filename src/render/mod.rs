@@ -8,4 +8,4 @@ pub use performance::{
     render_midi, render_midi_into, render_midi_kept, render_midi_with, Offline, Performance,
     RenderError, Rendered, OFFLINE_BLOCK,
 };
-pub use strike::{simulate, simulate_with, Frame, Recording, Renderer};
+pub use strike::{simulate, simulate_with, Frame, Length, Recording, Renderer, RING_OUT_WINDOW_S};

@@ -213,24 +213,86 @@ pub fn simulate(
     )
 }
 
-/// [`simulate`] with the chosen integrator.
+/// How long a strike is recorded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Length {
+    /// This many seconds.
+    Seconds(f64),
+    /// Until the note has rung out: the sound's level (both channels' pressure, over
+    /// [`RING_OUT_WINDOW_S`] windows) `floor_db` under its loudest window, or `max_s`, whichever
+    /// comes first.
+    RingOut { floor_db: f64, max_s: f64 },
+}
+
+impl From<f64> for Length {
+    fn from(seconds: f64) -> Length {
+        Length::Seconds(seconds)
+    }
+}
+
+/// The window a ringing-out note's level is read over (s): long enough to span a few periods of
+/// the lowest key's fundamental, so that a beat or a period's shape does not end it early.
+pub const RING_OUT_WINDOW_S: f64 = 0.1;
+
+/// [`simulate`] with the chosen integrator, for `length` ([`Length`]; seconds convert into it).
 pub fn simulate_with(
     preset: &LoadedPreset,
     integrator: Integrator,
     strike: Strike,
     release_s: Option<f64>,
-    seconds: f64,
+    length: impl Into<Length>,
     progress: impl FnMut(f64),
 ) -> Result<Recording, BuildError> {
+    let length = length.into();
     match integrator {
-        Integrator::Rk4 => record(Renderer::new(preset)?, strike, release_s, seconds, progress),
+        Integrator::Rk4 => record(Renderer::new(preset)?, strike, release_s, length, progress),
         Integrator::Exact => record(
             Renderer::exact(preset)?,
             strike,
             release_s,
-            seconds,
+            length,
             progress,
         ),
+    }
+}
+
+/// The level of a note as it rings out, window by window: when it has fallen `floor_db` under
+/// its loudest window.
+struct RingOut {
+    floor_db: f64,
+    window: usize,
+    at: usize,
+    energy: f64,
+    loudest: f64,
+}
+
+impl RingOut {
+    fn new(floor_db: f64, rate_hz: f64) -> RingOut {
+        RingOut {
+            floor_db,
+            window: ((RING_OUT_WINDOW_S * rate_hz).round() as usize).max(1),
+            at: 0,
+            energy: 0.0,
+            loudest: 0.0,
+        }
+    }
+
+    /// Take one frame; `Some(dB under the loudest window)` when a window ends (infinite while
+    /// nothing has sounded: a strike too soft to move the strings has rung out at once).
+    fn push(&mut self, f: &Frame) -> Option<f64> {
+        self.energy += f.pressure_pa * f.pressure_pa + f.pressure_right_pa * f.pressure_right_pa;
+        self.at += 1;
+        if self.at < self.window {
+            return None;
+        }
+        let e = std::mem::take(&mut self.energy);
+        self.at = 0;
+        self.loudest = self.loudest.max(e);
+        Some(if self.loudest > 0.0 {
+            -10.0 * (e / self.loudest).max(1e-30).log10()
+        } else {
+            f64::INFINITY
+        })
     }
 }
 
@@ -238,21 +300,37 @@ fn record<E: Engine>(
     mut r: Renderer<E>,
     strike: Strike,
     release_s: Option<f64>,
-    seconds: f64,
+    length: Length,
     mut progress: impl FnMut(f64),
 ) -> Result<Recording, BuildError> {
     r.strike(strike);
-    let n = (seconds * r.output_rate_hz()).round() as usize;
-    let release_frame = release_s.map(|s| (s * r.output_rate_hz()).round() as usize);
+    let rate_hz = r.output_rate_hz();
+    let (seconds, mut ring) = match length {
+        Length::Seconds(s) => (s, None),
+        Length::RingOut { floor_db, max_s } => (max_s, Some(RingOut::new(floor_db, rate_hz))),
+    };
+    let n = (seconds * rate_hz).round() as usize;
+    let release_frame = release_s.map(|s| (s * rate_hz).round() as usize);
     let mut frames = Vec::with_capacity(n);
-    let every = (r.output_rate_hz() as usize / 20).max(1);
+    let every = (rate_hz as usize / 20).max(1);
+    // How far the note has fallen towards the floor, for the progress of a ring-out.
+    let mut fallen = 0.0f64;
     for k in 0..n {
         if Some(k) == release_frame {
             r.instrument_mut().set_damper(true);
         }
-        frames.push(r.next_frame());
+        let frame = r.next_frame();
+        frames.push(frame);
+        if let Some(ring) = &mut ring {
+            if let Some(under_db) = ring.push(&frame) {
+                if under_db >= ring.floor_db {
+                    break;
+                }
+                fallen = fallen.max(under_db / ring.floor_db);
+            }
+        }
         if k % every == 0 {
-            progress(k as f64 / n as f64);
+            progress((k as f64 / n as f64).max(fallen.min(1.0)));
         }
     }
     progress(1.0);

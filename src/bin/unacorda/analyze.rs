@@ -121,6 +121,25 @@ fn analyse_key(scaling: &LoadedScaling, key: usize) -> Result<KeyFigures> {
     Ok(KeyFigures { key, heard })
 }
 
+/// What the table writes where a figure is not there (no such partial among the modes, or
+/// nothing measured in the recording).
+const MISSING: &str = "n/a";
+
+/// The table's legend, under it.
+const LEGEND: &str = "columns: key 1 (A0) to 88 (C8); target Hz, the key's pitch in the tuning; \
+stretch ¢, that target against equal temperament; tuner ¢ (n), the pitch a tuner hears against \
+the target, fitted on n of partials 2–8 ((1st): on the first alone); fit B, the fitted \
+inharmonicity; p1 ¢, the first partial against the target; p1 and p2 T60, the partial's fastest \
+to slowest string mode (s); recorded p1 T60, the recorded grand's first partial, early to late \
+decay (s); n/a, no such partial among the modes, or not measured";
+
+/// Why the model's T60 and the recording's are not the same figure.
+const BY_DESIGN: &str = "note: the model's T60 is each mode's own; the recording's is the \
+sound of the first partial, in which the unison's modes mix (the fastest early, the slowest late) \
+and the board and the room colour it: a single-string bass key has one slow mode where the \
+recording's partial falls fast early. `analyze --render` measures a rendered strike as the \
+recording was measured.";
+
 pub fn analyze(args: AnalyzeArgs) -> Result<()> {
     let keys = parse_keys(&args.keys)?;
     if keys.is_empty() {
@@ -138,16 +157,16 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
     );
     let _ = writeln!(
         out,
-        "{:>4} {:<4} {:>9} {:>9} {:>10} {:>9} {:>9} {:>17} {:>17} {:>19}",
+        "{:>4} {:<4} {:>9} {:>9} {:>11} {:>9} {:>9} {:>17} {:>17} {:>20}",
         "key",
         "name",
         "target Hz",
         "stretch ¢",
-        "tuner ¢",
+        "tuner ¢ (n)",
         "fit B",
-        "partial1 ¢",
-        "partial 1 T60 (s)",
-        "partial 2 T60 (s)",
+        "p1 ¢",
+        "p1 T60 (s)",
+        "p2 T60 (s)",
         "recorded p1 T60 (s)"
     );
     let mut csv = String::from(
@@ -158,17 +177,17 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
     }
     csv.push('\n');
     let t60 = |p: Option<&Partial>| {
-        p.map_or("-".to_string(), |p| {
-            format!("{:.2}–{:.2}", p.t60_min_s, p.t60_max_s)
+        p.map_or(MISSING.to_string(), |p| {
+            format!("{:.2} to {:.2}", p.t60_min_s, p.t60_max_s)
         })
     };
     for f in &figures {
         let first = f.partial(1).map(|p| cents(p.freq_hz, f.heard.target_hz));
         let show =
-            |x: Option<f64>, digits: usize| x.map_or("-".into(), |x| format!("{x:+.digits$}"));
+            |x: Option<f64>, digits: usize| x.map_or(MISSING.into(), |x| format!("{x:+.digits$}"));
         let _ = writeln!(
             out,
-            "{:>4} {:<4} {:>9.3} {:>+9.1} {:>10} {:>9} {:>9} {:>17} {:>17} {:>19}",
+            "{:>4} {:<4} {:>9.3} {:>+9.1} {:>11} {:>9} {:>9} {:>17} {:>17} {:>20}",
             f.key,
             key_name(f.key),
             f.heard.target_hz,
@@ -179,13 +198,13 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
             },
             f.heard
                 .pitch
-                .map_or("-".into(), |p| format!("{:.2e}", p.inharmonicity)),
+                .map_or(MISSING.into(), |p| format!("{:.2e}", p.inharmonicity)),
             show(first, 1),
             t60(f.partial(1)),
             t60(f.partial(2)),
-            recorded::recorded_key(f.key).map_or(String::new(), |r| {
-                let t = |x: Option<f64>| x.map_or("-".into(), |x| format!("{x:.2}"));
-                format!("{}–{}", t(r.p1_t60_s.0), t(r.p1_t60_s.1))
+            recorded::recorded_key(f.key).map_or(MISSING.into(), |r| {
+                let t = |x: Option<f64>| x.map_or(MISSING.into(), |x| format!("{x:.2}"));
+                format!("{} to {}", t(r.p1_t60_s.0), t(r.p1_t60_s.1))
             }),
         );
         let opt = |x: Option<f64>| x.map_or(String::new(), |x| x.to_string());
@@ -215,6 +234,7 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
         }
         csv.push('\n');
     }
+    let _ = writeln!(out, "{LEGEND}\n{BY_DESIGN}");
     // The rows of issue 17's table that the modes answer.
     let tuned = figures
         .iter()
@@ -245,7 +265,7 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
     );
     let _ = writeln!(
         out,
-        "partial 1 T60, fastest – slowest mode (s): {}",
+        "partial 1 T60, fastest to slowest mode (s): {}",
         figures
             .iter()
             .filter(|f| [1, 16, 28, 40, 52, 64, 76, 88].contains(&f.key))

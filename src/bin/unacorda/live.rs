@@ -3,7 +3,7 @@
 use crate::IntegratorArg;
 use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use unacorda::audio::device::{self, midi_input, output_devices, CallbackStats, Fault, MidiError};
@@ -16,6 +16,11 @@ use unacorda::play::{Piano, MAX_VOICES};
 
 /// The flags of `play`.
 #[derive(clap::Args)]
+#[command(after_help = "Examples:
+  unacorda play                                   the first MIDI keyboard, the default device
+  unacorda play --midi-in 1 --device hw:1,0       a chosen keyboard and sound card (`unacorda devices`)
+  unacorda play --midi assets/midi/chorale.mid    a file in real time
+  unacorda play --buffer 128 --voices 32          lower latency on a slower machine")]
 pub struct PlayArgs {
     /// MIDI input port: its number in `unacorda devices` or part of its name (default: the first).
     #[arg(long, value_name = "PORT")]
@@ -61,6 +66,8 @@ pub struct PlayArgs {
     /// work (default: 2 where the machine has them).
     #[arg(long, value_name = "N")]
     pub cores: Option<usize>,
+    #[command(flatten)]
+    pub levels: crate::levels::Levels,
     /// Fault test: report the device as lost after this many callbacks, as cpal would on unplug.
     #[arg(long, value_name = "N", hide = true)]
     pub lose_device_after: Option<u64>,
@@ -145,6 +152,7 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         }
     }
     device::check_buffer(args.buffer)?;
+    args.levels.check()?;
     let available = std::thread::available_parallelism().map_or(1, |n| n.get());
     let cores = args.cores.unwrap_or(available.min(2));
     if !(1..=2).contains(&cores) {
@@ -152,13 +160,23 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
     }
     // Read the file first: a bad file should fail before the keys are built.
     let file_events = match &args.midi {
-        Some(path) => Some(unacorda::midi::file::read_file(path)?),
+        Some(path) => {
+            let mut events = unacorda::midi::file::read_file(path)?;
+            for e in &mut events {
+                e.event = e.event.with_velocity_curve(args.levels.velocity_curve);
+            }
+            Some(events)
+        }
         None => None,
     };
     let mut scaling = Scaling::resolve(&args.keyboard)?;
     if args.mono {
         scaling.make_mono();
     }
+    scaling.set_gain_db(args.levels.gain_db);
+    let settings = scaling.output_settings();
+    // The device before the keys: a wrong name or format fails in a moment, not after the build.
+    device::check_output(args.device.as_deref(), settings.rate_hz as u32)?;
     let keys: Vec<usize> = (1..=KEYS).collect();
     eprintln!("building {} keys on one soundboard…", keys.len());
     let started = std::time::Instant::now();
@@ -186,8 +204,8 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         }
     }
     crate::warn_refused(cache.as_ref());
-    let settings = scaling.output_settings();
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE)?;
+    let filter_delay_frames = synth.decimation_delay_frames();
     if cores == 2 {
         synth.use_second_core()?;
         synth.ask_real_time_priority();
@@ -235,13 +253,18 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
             eprintln!("playing {} events from the file ({length:.1} s)", events.len());
             feed = Some((events, 0, next));
         }
-        None => match connect_midi(args.midi_in.as_deref(), &shared) {
+        None => match connect_midi(args.midi_in.as_deref(), &shared, args.levels.velocity_curve) {
             Ok((connection, name)) => {
                 eprintln!("MIDI input: {name} — play; Ctrl-C stops");
                 midi_link = Some(MidiLink::Connected(connection, name));
             }
             Err(reason) => eprintln!(
-                "{reason}\nno MIDI input: the engine runs silent until Ctrl-C; use --midi FILE to play a file in real time"
+                "{reason}\nno MIDI input: the engine runs silent {}; use --midi FILE to play a file in real time",
+                match (args.seconds, args.callbacks) {
+                    (Some(s), _) => format!("for {s} s"),
+                    (None, Some(n)) => format!("for {n} callbacks"),
+                    (None, None) => "until Ctrl-C".to_owned(),
+                }
             ),
         },
     }
@@ -257,7 +280,7 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         }
         if last_watch.elapsed() >= Duration::from_secs(1) {
             last_watch = Instant::now();
-            midi_link = midi_link.map(|l| l.watch(&shared));
+            midi_link = midi_link.map(|l| l.watch(&shared, args.levels.velocity_curve));
         }
         let n = output.stats.callbacks.load(Ordering::Relaxed);
         if args.lose_device_after.is_some_and(|after| n >= after) && !injected {
@@ -308,30 +331,105 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
         .lock()
         .map(|handle| handle.backlog.clone())
         .unwrap_or_default();
-    let s = &output.stats;
-    let callbacks = s.callbacks.load(Ordering::Relaxed).max(1);
-    let block = s.max_frames.load(Ordering::Relaxed);
-    let deadline_ms = block as f64 / settings.rate_hz * 1e3;
-    eprintln!(
-        "{} callbacks ({} frames) of up to {block} frames ({deadline_ms:.2} ms each) in {wall:.1} s: mean {:.2} ms, max {:.2} ms, {} over their deadline; {xruns} xruns reported by the device; device reopened {reopened} times; {} late events; {} voices reset; at most {} voices sounding; output peak {:.1} dBFS, {} samples soft-clipped; {} engine runs on two cores, {} on one because the helper thread was late; a full event queue dropped {} strikes and queued {} releases late",
-        s.callbacks.load(Ordering::Relaxed),
-        stats.frames.load(Ordering::Relaxed),
-        s.busy_ns.load(Ordering::Relaxed) as f64 / callbacks as f64 * 1e-6,
-        s.max_ns.load(Ordering::Relaxed) as f64 * 1e-6,
-        s.overruns.load(Ordering::Relaxed),
-        stats.late_events.load(Ordering::Relaxed),
-        stats.resets.load(Ordering::Relaxed),
-        stats.peak_voices.load(Ordering::Relaxed),
-        20.0 * f32::from_bits(stats.peak_before_clip.load(Ordering::Relaxed) as u32)
-            .max(1e-10)
-            .log10(),
-        stats.clipped.load(Ordering::Relaxed),
-        stats.two_core_runs.load(Ordering::Relaxed),
-        stats.helper_late.load(Ordering::Relaxed),
-        backlog.dropped_note_ons,
-        backlog.delayed,
-    );
+    let summary = Summary {
+        device: &output.device,
+        wall_s: wall,
+        rate_hz: settings.rate_hz,
+        filter_delay_frames,
+        cores,
+        xruns,
+        reopened,
+        backlog,
+    };
+    eprint!("{}", summary.describe(&output.stats, &stats));
     Ok(())
+}
+
+/// What `play` says when it stops: whether the engine kept up, its headroom, the latency from
+/// key to sound, what sounded, and anything lost on the way.
+struct Summary<'a> {
+    device: &'a str,
+    wall_s: f64,
+    rate_hz: f64,
+    filter_delay_frames: f64,
+    cores: usize,
+    xruns: u64,
+    reopened: u32,
+    backlog: unacorda::audio::backlog::Backlog,
+}
+
+impl Summary<'_> {
+    fn describe(&self, callback: &CallbackStats, synth: &unacorda::audio::synth::Stats) -> String {
+        let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        let callbacks = load(&callback.callbacks);
+        let frames = load(&callback.max_frames);
+        let deadline_ms = frames as f64 / self.rate_hz * 1e3;
+        let mean_ms = load(&callback.busy_ns) as f64 / callbacks.max(1) as f64 * 1e-6;
+        let max_ms = load(&callback.max_ns) as f64 * 1e-6;
+        let over = load(&callback.overruns);
+        let percent = |ms: f64| 100.0 * ms / deadline_ms.max(1e-9);
+        let mut out = format!(
+            "played {:.1} s on {}, {} core{}: {callbacks} callbacks ({} frames) of up to {frames} frames ({deadline_ms:.2} ms each at {} Hz)\n",
+            self.wall_s,
+            self.device,
+            self.cores,
+            if self.cores == 2 { "s" } else { "" },
+            load(&synth.frames),
+            self.rate_hz,
+        );
+        out += &match (over, self.xruns) {
+            (0, 0) => "  kept up: yes, no callback over its deadline\n".to_owned(),
+            _ => format!(
+                "  kept up: no, {over} of {callbacks} callbacks over their deadline (each a click); the device reported {} xruns. Fewer --voices, a larger --buffer, or `unacorda bench` to see what this machine holds\n",
+                self.xruns
+            ),
+        };
+        out += &format!(
+            "  headroom: a callback took {mean_ms:.2} ms on average ({:.0} % of its deadline), the slowest {max_ms:.2} ms ({:.0} %)\n",
+            percent(mean_ms),
+            percent(max_ms)
+        );
+        // An event waits for the next callback, which is played after the one in the device.
+        let latency_ms = 2.0 * deadline_ms + self.filter_delay_frames / self.rate_hz * 1e3;
+        out += &format!(
+            "  latency: about {latency_ms:.1} ms from key to sound at {frames} frames (a callback to be rendered, one in the device's buffer{}), plus the device's own\n",
+            if self.filter_delay_frames > 0.0 {
+                ", the anti-alias filter's delay"
+            } else {
+                ""
+            }
+        );
+        let peak = f32::from_bits(load(&synth.peak_before_clip) as u32);
+        let voices = load(&synth.peak_voices);
+        out += &if voices == 0 || peak <= 0.0 {
+            "  sound: silent, no note was played\n".to_owned()
+        } else {
+            format!(
+                "  sound: at most {voices} voices at once, peak {:.1} dBFS, {} samples soft-clipped, {} voices reset\n",
+                20.0 * peak.log10(),
+                load(&synth.clipped),
+                load(&synth.resets)
+            )
+        };
+        let late = load(&synth.late_events);
+        let (dropped, delayed) = (self.backlog.dropped_note_ons, self.backlog.delayed);
+        if late + dropped + delayed > 0 {
+            out += &format!(
+                "  events: {late} came late; a full event queue dropped {dropped} strikes and queued {delayed} releases late (none lost)\n"
+            );
+        }
+        if self.cores == 2 {
+            out += &format!(
+                "  cores: {} engine blocks on two, {} on one because the helper thread was late\n",
+                load(&synth.two_core_runs),
+                load(&synth.helper_late)
+            );
+        }
+        if self.reopened > 0 {
+            out += &format!("  device: lost, and reopened {} times\n", self.reopened);
+        }
+        out
+    }
 }
 
 /// Open the MIDI input `port` (a number or part of a name; `None`: the first) and move the event
@@ -341,6 +439,7 @@ fn play_on<E: VoicePool>(args: PlayArgs) -> Result<()> {
 fn connect_midi<E: VoicePool>(
     port: Option<&str>,
     handle: &Arc<Mutex<SynthHandle<E>>>,
+    velocity_curve: f64,
 ) -> Result<(midir::MidiInputConnection<()>, String), MidiError> {
     let (input, ports, names) = midi_input()?;
     let index = match port {
@@ -380,7 +479,10 @@ fn connect_midi<E: VoicePool>(
                     if let Some(event) = parser.push(b) {
                         let frame = clock.frame_at(now);
                         // A full queue keeps the releases for later and drops a strike.
-                        handle.schedule_live(Scheduled { frame, event });
+                        handle.schedule_live(Scheduled {
+                            frame,
+                            event: event.with_velocity_curve(velocity_curve),
+                        });
                     }
                 }
             },
@@ -402,7 +504,11 @@ enum MidiLink {
 
 impl MidiLink {
     /// Check the port list (about once a second); say when the input goes or comes back.
-    fn watch<E: VoicePool>(self, handle: &Arc<Mutex<SynthHandle<E>>>) -> MidiLink {
+    fn watch<E: VoicePool>(
+        self,
+        handle: &Arc<Mutex<SynthHandle<E>>>,
+        velocity_curve: f64,
+    ) -> MidiLink {
         let present =
             |name: &str| midi_input().is_ok_and(|(_, _, names)| names.iter().any(|n| n == name));
         match self {
@@ -412,7 +518,7 @@ impl MidiLink {
                 MidiLink::Unplugged(name)
             }
             MidiLink::Unplugged(name) if present(&name) => {
-                match connect_midi(Some(&name), handle) {
+                match connect_midi(Some(&name), handle, velocity_curve) {
                     Ok((c, name)) => {
                         eprintln!("MIDI input {name} is back");
                         MidiLink::Connected(c, name)

@@ -14,13 +14,27 @@ use unacorda::config::preset::Preset;
 use unacorda::config::preset::GRAND_BOARD_TOML;
 use unacorda::config::scaling::Scaling;
 use unacorda::engine::Strike;
-use unacorda::render::{simulate, simulate_with, Recording};
+use unacorda::render::{simulate, simulate_with, Length, Recording};
+
+/// A strike rendered without `--seconds` rings until it is this far under its loudest (dB)…
+const RING_OUT_FLOOR_DB: f64 = 60.0;
+/// …or this long (s): the lowest keys of a grand ring for half a minute.
+const RING_OUT_MAX_S: f64 = 30.0;
+/// A preset's strike without `--seconds` (s): the span of the paper's spectrograms.
+const PRESET_SECONDS: f64 = 4.0;
 
 #[derive(Parser)]
 #[command(
     name = "unacorda",
     version,
-    about = "Physical-modelling piano: the una-corda effect"
+    about = "Physical-modelling piano: the una-corda effect",
+    after_help = "Examples:
+  unacorda render --key C4 --out c4.wav                 one note of the concert grand, to a WAV
+  unacorda render --midi assets/midi/demo.mid --out demo.wav
+  unacorda play                                         play from the first MIDI keyboard
+  unacorda play --midi assets/midi/chorale.mid          play a file through the sound card
+
+`unacorda COMMAND --help` says every flag, its range and its default."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -29,13 +43,21 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render one strike of a preset, or a MIDI file, to a WAV file (32-bit float), without any
-    /// audio device.
+    /// Render one strike of a preset or a key, or a MIDI file, to a WAV file (32-bit float), as
+    /// fast as the machine allows, without any audio device (`play` is live). With no other flag
+    /// it strikes the paper's c2 preset, mono, for 4 s on its RK4 reference (the paper's case).
+    #[command(after_help = "Examples:
+  unacorda render --key C4 --out c4.wav                      one key of the concert grand, rung out
+  unacorda render --key A0 --una-corda --midi-velocity 100 --out a0.wav
+  unacorda render --midi assets/midi/chorale.mid --out chorale.wav
+  unacorda render --preset c2 --seconds 4 --out c2.wav       the paper's case on RK4")]
     Render {
-        /// Render offline (required: this command never opens an audio device; `play` is live).
+        /// Accepted and not needed: render always works offline (scripts written when it was
+        /// required still run).
         #[arg(long)]
         offline: bool,
-        /// Built-in preset name (c2) or path to a preset .toml file.
+        /// Built-in preset name (c2, the paper's bichord C2 on Table 1's board: the default,
+        /// as the paper's reference case) or path to a preset .toml file.
         #[arg(long, default_value = "c2")]
         preset: String,
         /// Render this key of the keyboard scaling instead of the preset: a name (C4, Bb0, F#6)
@@ -77,10 +99,10 @@ enum Command {
         /// Soft pedal: the hammer strikes one string of two (two of three).
         #[arg(long)]
         una_corda: bool,
-        /// `rk4`, the paper's RK4 at 10 × f_max (the reference; the default of --preset and
-        /// --key); or `exact`, each key's coupled modes advanced exactly at the output rate, the
-        /// keys coupled through the board (within 0.2 cents and 1 % of RK4 on c2, C4, A0; the
-        /// default of --midi).
+        /// `rk4`, the paper's RK4 at 10 × f_max (the reference; the default of --preset); or
+        /// `exact`, each key's coupled modes advanced exactly at the output rate, the keys
+        /// coupled through the board (within 0.2 cents and 1 % of RK4 on c2, C4, A0; the
+        /// default of --key and --midi, several times faster).
         #[arg(long, value_enum)]
         integrator: Option<IntegratorArg>,
         /// Hammer speed at the strings (m/s), 0.01–10; default: the preset's.
@@ -94,14 +116,11 @@ enum Command {
         /// Hammer speed from a MIDI velocity 1–127 (0.31–6 m/s: 30 → 0.70, 80 → 2.37, 127 → 6).
         #[arg(long, value_name = "1-127")]
         midi_velocity: Option<u8>,
-        /// Length of the render (s), 0.001–600.
-        #[arg(
-            long,
-            default_value_t = 4.0,
-            value_name = "S",
-            allow_negative_numbers = true
-        )]
-        seconds: f64,
+        /// Length of the strike's render (s), 0.001–600; default: for --key, until the note has
+        /// rung out, 60 dB under its loudest, at most 30 s; for a preset, 4 s (the paper's
+        /// spectrograms' span).
+        #[arg(long, value_name = "S", allow_negative_numbers = true)]
+        seconds: Option<f64>,
         /// Release the key after this many seconds: the damper falls on the strings.
         #[arg(long, value_name = "S", allow_negative_numbers = true)]
         release_at: Option<f64>,
@@ -113,6 +132,8 @@ enum Command {
         /// Output WAV file (32-bit float; two channels for a stereo keyboard).
         #[arg(long)]
         out: PathBuf,
+        #[command(flatten)]
+        levels: levels::Levels,
     },
     /// The modes of one key's linearised system (hammer out of play): frequency, decay rate, T60,
     /// and which string and direction, or the board, holds each.
@@ -145,10 +166,15 @@ enum Command {
     },
     /// Generate a reduced soundboard asset from a board description (TOML): clamped, ribbed
     /// orthotropic plate with bridges, all modes below f_max, reduced by the paper's rule.
+    #[command(after_help = "Example:
+  unacorda soundboard --input assets/soundboard_modes/grand.toml --out my_board.txt")]
     Soundboard {
+        /// Board description (TOML): plate, ribs, bridges, listeners and the reduction's rule.
         #[arg(long, default_value = "assets/soundboard_modes/grand.toml")]
         input: PathBuf,
-        #[arg(long, default_value = "assets/soundboard_modes/grand.txt")]
+        /// Output asset (text). The default, in the current directory, never overwrites a board
+        /// the keyboards ship with; pass a path under assets/soundboard_modes/ to replace one.
+        #[arg(long, default_value = "soundboard_modes.txt")]
         out: PathBuf,
         /// Keys whose dominant modes are kept, instead of the description's `reduction.points`
         /// (comma-separated names: C2,C8).
@@ -160,6 +186,7 @@ enum Command {
 mod analyze;
 mod bench;
 mod keys_bar;
+mod levels;
 mod live;
 mod modes;
 
@@ -365,21 +392,24 @@ fn run(cli: Cli) -> Result<()> {
             release_at,
             mono,
             out,
+            levels,
         } => {
-            if !offline {
-                bail!(
-                    "render works offline only: add --offline (for live sound use `unacorda play`)"
-                );
-            }
+            levels.check()?;
+            // Render always works offline; the flag is accepted for scripts that pass it.
+            let _ = offline;
             if let Some(path) = midi {
                 if !(0.0..=60.0).contains(&tail) {
                     bail!("--tail {tail}: expected a duration in [0, 60] s");
                 }
-                let events = unacorda::midi::file::read_file(&path)?;
+                let mut events = unacorda::midi::file::read_file(&path)?;
+                for e in &mut events {
+                    e.event = e.event.with_velocity_curve(levels.velocity_curve);
+                }
                 let mut scaling = Scaling::resolve(&keyboard)?;
                 if mono {
                     scaling.make_mono();
                 }
+                scaling.set_gain_db(levels.gain_db);
                 if !(1.0..=86_400.0).contains(&max_seconds) {
                     bail!("--max-seconds {max_seconds}: expected a duration in [1, 86400] s");
                 }
@@ -407,9 +437,23 @@ fn run(cli: Cli) -> Result<()> {
                     ),
                 };
             }
-            if !(0.001..=600.0).contains(&seconds) {
-                bail!("--seconds {seconds}: expected a duration in [0.001, 600] s");
+            if let Some(seconds) = seconds {
+                if !(0.001..=600.0).contains(&seconds) {
+                    bail!("--seconds {seconds}: expected a duration in [0.001, 600] s");
+                }
             }
+            let length = match (seconds, &key) {
+                (Some(s), _) => Length::Seconds(s),
+                (None, None) => Length::Seconds(PRESET_SECONDS),
+                (None, Some(_)) => Length::RingOut {
+                    floor_db: RING_OUT_FLOOR_DB,
+                    max_s: RING_OUT_MAX_S,
+                },
+            };
+            let (longest_s, rings_out) = match length {
+                Length::Seconds(s) => (s, false),
+                Length::RingOut { max_s, .. } => (max_s, true),
+            };
             let mut loaded = match &key {
                 Some(name) => {
                     let k = unacorda::config::scaling::parse_key(name).with_context(|| {
@@ -422,9 +466,13 @@ fn run(cli: Cli) -> Result<()> {
             if mono {
                 loaded.make_mono();
             }
+            loaded.set_gain_db(levels.gain_db);
             let velocity_m_s = match (velocity, midi_velocity) {
-                (_, Some(v)) => unacorda::midi::hammer_speed_m_s(v)
-                    .with_context(|| format!("--midi-velocity {v}: expected 1–127"))?,
+                (_, Some(v)) => unacorda::midi::hammer_speed_m_s(unacorda::midi::curved_velocity(
+                    v,
+                    levels.velocity_curve,
+                ))
+                .with_context(|| format!("--midi-velocity {v}: expected 1–127"))?,
                 (Some(v), None) => v,
                 (None, None) => loaded.preset.hammer.velocity_m_s,
             };
@@ -432,36 +480,61 @@ fn run(cli: Cli) -> Result<()> {
                 bail!("--velocity {velocity_m_s}: expected a hammer speed in [0.01, 10] m/s");
             }
             if let Some(r) = release_at {
-                if !(0.0..=seconds).contains(&r) {
+                if !(0.0..=longest_s).contains(&r) {
                     bail!(
-                        "--release-at {r}: expected a time in [0, {seconds}] s (within --seconds)"
+                        "--release-at {r}: expected a time in [0, {longest_s}] s (within {})",
+                        if rings_out {
+                            "the longest ring-out"
+                        } else {
+                            "the render's length"
+                        }
                     );
                 }
             }
-            let pb = progress_bar(seconds, "rendering");
+            // The fast engine for a key of the keyboard; the paper's reference for its preset.
+            let integrator = integrator.unwrap_or(match key {
+                Some(_) => IntegratorArg::Exact,
+                None => IntegratorArg::Rk4,
+            });
+            let started = std::time::Instant::now();
+            let pb = progress_bar(longest_s, "rendering");
             let rec = simulate_with(
                 &loaded,
-                integrator.map_or(unacorda::engine::Integrator::Rk4, Into::into),
+                integrator.into(),
                 Strike {
                     velocity_m_s,
                     una_corda,
                 },
                 release_at,
-                seconds,
+                length,
                 |f| pb.set_position((f * 1000.0) as u64),
             )?;
             pb.finish_and_clear();
             let channels = loaded.output_settings().channels;
             let peak_dbfs = write_wav(&out, &rec, loaded.preset.radiation.full_scale_pa, channels)?;
+            let written_s = rec.frames.len() as f64 / rec.rate_hz;
+            let ending = match rings_out {
+                false => String::new(),
+                true if written_s < RING_OUT_MAX_S => {
+                    format!(", rung out to {RING_OUT_FLOOR_DB:.0} dB under its loudest")
+                }
+                true => format!(
+                    ", stopped at {RING_OUT_MAX_S:.0} s before it rang out (--seconds renders longer)"
+                ),
+            };
             eprintln!(
-                "wrote {} ({}, {:.2} s at {} Hz {}, peak {:.1} dBFS, {})",
+                "wrote {} ({}, {written_s:.2} s at {} Hz {}, peak {:.1} dBFS, {}, {} engine{ending}; {:.1} s to render)",
                 out.display(),
                 loaded.preset.name,
-                seconds,
                 rec.rate_hz,
                 channel_layout(channels),
                 peak_dbfs,
-                if una_corda { "una corda" } else { "normal" }
+                if una_corda { "una corda" } else { "normal" },
+                match integrator {
+                    IntegratorArg::Rk4 => "RK4",
+                    IntegratorArg::Exact => "exact",
+                },
+                started.elapsed().as_secs_f64()
             );
         }
         Command::Figures {
@@ -477,6 +550,10 @@ fn run(cli: Cli) -> Result<()> {
             std::fs::create_dir_all(&out_dir)
                 .with_context(|| format!("creating {}", out_dir.display()))?;
             let v = loaded.preset.hammer.velocity_m_s;
+            eprintln!(
+                "simulating {} struck una corda and normally, {seconds} s each on RK4 (Figures 3–6)…",
+                loaded.preset.name
+            );
             // The two cases are independent: simulate them on two threads.
             let bars = MultiProgress::new();
             let [una_corda, normal] = std::thread::scope(|scope| {
@@ -510,7 +587,9 @@ fn run(cli: Cli) -> Result<()> {
                     Path::new("assets/soundboard_modes/grand.toml"),
                 )?,
             };
+            eprintln!("solving the full soundboard and reducing it (Figure 2)…");
             let (solved, reduced, _) = generate_asset(&spec, "")?;
+            eprintln!("drawing…");
             let mut written = unacorda::analysis::figures::figure2(
                 &out_dir,
                 &solved.modes,
