@@ -57,8 +57,8 @@ pub struct PlayArgs {
     #[arg(long, value_name = "N")]
     pub callbacks: Option<u64>,
     /// `exact` (default): each key's coupled modes advanced exactly at 48 kHz, the keys coupled
-    /// through the board (the first run prepares the 88 keys, ~8 s, and keeps them in the cache of
-    /// prepared keys; later runs read them back in under a second); `rk4`: the paper's RK4 at
+    /// through the board (the first run prepares the 88 keys, with a bar of their progress, and
+    /// keeps them in the cache of prepared keys; later runs read them back); `rk4`: the paper's RK4 at
     /// 96 kHz, the reference (a few voices at most: see `unacorda bench`).
     #[arg(long, value_enum, default_value_t = IntegratorArg::Exact)]
     pub integrator: IntegratorArg,

@@ -383,7 +383,7 @@ impl ExactPool {
                 continue;
             };
             let key = &self.keys[key];
-            let n = v.live_modes(key).min(key.n_modes());
+            let n = v.live_unpadded(key);
             state.push(Some(k), &v.w.re[..n], &key.modes.energy[..n]);
             state.push(Some(k), &v.w.im[..n], &key.modes.energy[..n]);
             let mut rest = v.d.to_vec();
@@ -407,7 +407,7 @@ impl ExactPool {
                 continue;
             };
             let key = &self.keys[key];
-            let n = v.live_modes(key).min(key.n_modes());
+            let n = v.live_unpadded(key);
             v.energies = None;
             v.w.re[..n].copy_from_slice(take(n));
             v.w.im[..n].copy_from_slice(take(n));
@@ -603,7 +603,7 @@ impl Policy for ExactPool {
         let part = &mut self.steps.part;
         let now = self.board.at(part, point, self.simd);
         v.energies = None;
-        let live = v.live_modes(key).min(key.n_modes());
+        let live = v.live_unpadded(key);
         for d in 0..3 {
             let change = now[d] - v.d[d];
             key.follow[d].add_range_to(&mut v.w, change, 0..live);

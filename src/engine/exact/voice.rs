@@ -119,7 +119,7 @@ impl Voice {
             return;
         }
         let (from, to) = (key.face_for(self.modal_felt), key.face_for(want));
-        let live = self.live_modes(from).min(from.n_modes());
+        let live = self.live_unpadded(from);
         for d in 0..DIRECTIONS {
             from.settle[d].add_range_to(&mut self.w, self.d[d], 0..live);
             to.settle[d].add_range_to(&mut self.w, -self.d[d], 0..live);
@@ -147,6 +147,12 @@ impl Voice {
     /// one padded.
     pub(crate) fn live_modes(&self, key: &ExactKey) -> usize {
         key.prefixes[self.live].modes
+    }
+
+    /// The key's own modes among those stepped: [`Voice::live_modes`] without the last chunk's
+    /// padding.
+    pub(crate) fn live_unpadded(&self, key: &ExactKey) -> usize {
+        self.live_modes(key).min(key.n_modes())
     }
 
     /// Step `chunks` chunks of `key`'s modes from now on: a chunk taken up starts as the
