@@ -311,7 +311,8 @@ fn record<E: Engine>(
     };
     let n = (seconds * rate_hz).round() as usize;
     let release_frame = release_s.map(|s| (s * rate_hz).round() as usize);
-    let mut frames = Vec::with_capacity(n);
+    // A ring-out's cap is rarely reached: its frames grow as it goes, not to the cap up front.
+    let mut frames = Vec::with_capacity(if ring.is_some() { 0 } else { n });
     let every = (rate_hz as usize / 20).max(1);
     // How far the note has fallen towards the floor, for the progress of a ring-out.
     let mut fallen = 0.0f64;
