@@ -119,7 +119,7 @@ fn latency(c: &mut Criterion) {
                 let frame = handle.clock.frame_at(t);
                 let event = Event::NoteOn {
                     note: 60,
-                    velocity: 80,
+                    velocity: 80.0,
                 };
                 handle
                     .schedule(Scheduled { frame, event })

@@ -40,7 +40,7 @@ pub fn loaded_synth<E: VoicePool>(
             v as u64 * 48,
             Event::NoteOn {
                 note,
-                velocity: VELOCITY,
+                velocity: f64::from(VELOCITY),
             },
         ));
     }
@@ -92,7 +92,7 @@ pub fn struck_chord_synth<E: VoicePool>(
     };
     let strikes = notes.iter().map(|&note| Event::NoteOn {
         note,
-        velocity: VELOCITY,
+        velocity: f64::from(VELOCITY),
     });
     for event in std::iter::once(sustain).chain(strikes) {
         // The queue holds 4096 events; a chord pushes a few.

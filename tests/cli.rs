@@ -134,15 +134,16 @@ fn gain_and_velocity_curve_flags_do_what_they_say() {
     let change_db = 20.0 * (peak(&quieter) / peak(&plain)).log10();
     println!("--gain-db -6: the peak moves {change_db:.4} dB");
     assert!((change_db + 6.0).abs() < 0.01, "{change_db} dB");
-    // 127 (64/127)^2 = 32.3: velocity 64 through the curve 2 strikes as 32 does.
+    // 127 (63.5/127)^2 = 31.75 exactly: velocity 63.5 through the curve 2 strikes as 31.75 does
+    // (a fraction of a MIDI step, as a CC88 prefix gives it, unrounded).
     let curved = render(
         "curved.wav",
-        &["--midi-velocity", "64", "--velocity-curve", "2"],
+        &["--midi-velocity", "63.5", "--velocity-curve", "2"],
     );
-    let direct = render("direct.wav", &["--midi-velocity", "32"]);
-    let plain64 = render("plain64.wav", &["--midi-velocity", "64"]);
+    let direct = render("direct.wav", &["--midi-velocity", "31.75"]);
+    let plain64 = render("plain64.wav", &["--midi-velocity", "63.5"]);
     println!(
-        "velocity 64 curved by 2: peak {:.5}; velocity 32: {:.5}; 64: {:.5}",
+        "velocity 63.5 curved by 2: peak {:.5}; velocity 31.75: {:.5}; 63.5: {:.5}",
         peak(&curved),
         peak(&direct),
         peak(&plain64)

@@ -65,7 +65,10 @@ fn chord() -> Case {
     let pedal = |pedal, down| Event::Pedal { pedal, down };
     let mut script = vec![(0, pedal(Pedal::Sustain, true))];
     for (i, &key) in keys.iter().enumerate() {
-        script.push((24 * i as u64, on(20 + key as u8, 30 + (i as u8 % 5) * 10)));
+        script.push((
+            24 * i as u64,
+            on(20 + key as u8, f64::from(30 + (i as u8 % 5) * 10)),
+        ));
         script.push((
             2_000 + i as u64,
             Event::NoteOff {
@@ -75,8 +78,8 @@ fn chord() -> Case {
     }
     script.push((6_000, pedal(Pedal::Soft, true)));
     script.push((7_000, pedal(Pedal::Sustain, false)));
-    script.push((7_500, on(60, 100)));
-    script.push((7_600, on(64, 90)));
+    script.push((7_500, on(60, 100.0)));
+    script.push((7_600, on(64, 90.0)));
     script.sort_by_key(|&(frame, _)| frame);
     Case {
         name: "exact pool, 40-key chord",
@@ -92,21 +95,21 @@ fn script() -> Vec<(u64, Event)> {
     let on = |note, velocity| Event::NoteOn { note, velocity };
     let pedal = |pedal, down| Event::Pedal { pedal, down };
     vec![
-        (0, on(21, 90)),
-        (10, on(36, 80)),
+        (0, on(21, 90.0)),
+        (10, on(36, 80.0)),
         (100, pedal(Pedal::Sustain, true)),
-        (700, on(40, 100)),
-        (701, on(48, 70)),
+        (700, on(40, 100.0)),
+        (701, on(48, 70.0)),
         (1500, pedal(Pedal::Soft, true)),
-        (2000, on(55, 90)),
-        (2600, on(60, 110)),
-        (3000, on(76, 60)),
-        (3100, on(96, 100)),
+        (2000, on(55, 90.0)),
+        (2600, on(60, 110.0)),
+        (3000, on(76, 60.0)),
+        (3100, on(96, 100.0)),
         (4000, Event::NoteOff { note: 36 }),
         (5000, pedal(Pedal::Sustain, false)),
-        (6000, on(36, 127)),
+        (6000, on(36, 127.0)),
         (9000, Event::AllNotesOff),
-        (11000, on(48, 90)),
+        (11000, on(48, 90.0)),
     ]
 }
 

@@ -77,7 +77,10 @@ fn pedalled<E: VoicePool>(
         });
     }
     for &(note, velocity) in notes {
-        piano.apply(Event::NoteOn { note, velocity });
+        piano.apply(Event::NoteOn {
+            note,
+            velocity: f64::from(velocity),
+        });
     }
     piano
 }
@@ -185,7 +188,7 @@ fn held_chord(piano: &Piano<ExactPool>, scaling: &LoadedScaling, modes: VoiceMod
     for name in ["C2", "G2", "E3", "C4", "E4", "G4", "C5"] {
         events.push(Event::NoteOn {
             note: note(name),
-            velocity: 80,
+            velocity: 80.0,
         });
     }
     for event in events {
@@ -255,7 +258,7 @@ fn struck_while_ringing(
     let energy_before = piano.instrument.voice_energy_j(ringing);
     piano.apply(Event::NoteOn {
         note: note("G4"),
-        velocity: 60,
+        velocity: 60.0,
     });
     assert_eq!(
         piano.instrument.voice_of_key(g4),

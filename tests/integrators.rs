@@ -626,7 +626,7 @@ fn the_boards_dropped_modes_sound_alike_on_both_engines() {
     use unacorda::render::simulate_with;
     let concert = Scaling::resolve("concert").unwrap();
     let strike = Strike {
-        velocity_m_s: unacorda::midi::hammer_speed_m_s(80).unwrap(),
+        velocity_m_s: unacorda::midi::hammer_speed_m_s(80.0).unwrap(),
         una_corda: false,
     };
     for key in [49, 64, 76, 87] {

@@ -24,11 +24,11 @@ fn live_parser_follows_the_midi_byte_grammar() {
         [
             Event::NoteOn {
                 note: 60,
-                velocity: 100
+                velocity: 100.0
             },
             Event::NoteOn {
                 note: 64,
-                velocity: 90
+                velocity: 90.0
             },
             Event::NoteOff { note: 60 }
         ]
@@ -38,7 +38,7 @@ fn live_parser_follows_the_midi_byte_grammar() {
         live(&[0x91, 0xF8, 48, 0xFE, 70]),
         [Event::NoteOn {
             note: 48,
-            velocity: 70
+            velocity: 70.0
         }]
     );
     // SysEx is skipped, and clears running status: the stray data after it is dropped.
@@ -46,7 +46,7 @@ fn live_parser_follows_the_midi_byte_grammar() {
         live(&[0x90, 60, 1, 0xF0, 0x7E, 60, 100, 0xF7, 61, 100]),
         [Event::NoteOn {
             note: 60,
-            velocity: 1
+            velocity: 1.0
         }]
     );
     // System common (song position, 2 data bytes) is skipped with its data.
@@ -82,7 +82,7 @@ fn live_parser_follows_the_midi_byte_grammar() {
         live(&[0x90, 60, 100, 0xF7, 61, 100]),
         [Event::NoteOn {
             note: 60,
-            velocity: 100
+            velocity: 100.0
         }]
     );
     println!(
@@ -102,8 +102,11 @@ fn reference_decoder(bytes: &[u8]) -> Vec<Event> {
         SysEx,
         Common(usize),
     }
-    let decode = |status: u8, d: &[u8]| -> Option<Event> {
+    // The CC88 prefix of each channel: the low 7 bits of its next note's 14-bit velocity.
+    let mut lsb = [0u8; 16];
+    let mut decode = |status: u8, d: &[u8]| -> Option<Event> {
         let (kind, a, b) = (status >> 4, d[0], d.get(1).copied().unwrap_or(0));
+        let prefix = &mut lsb[usize::from(status & 0xF)];
         let pedal = |pedal| {
             Some(Event::Pedal {
                 pedal,
@@ -111,17 +114,33 @@ fn reference_decoder(bytes: &[u8]) -> Vec<Event> {
             })
         };
         match (kind, a) {
-            (0x8, _) => Some(Event::NoteOff { note: a }),
-            (0x9, _) if b == 0 => Some(Event::NoteOff { note: a }),
-            (0x9, _) => Some(Event::NoteOn {
-                note: a,
-                velocity: b,
-            }),
+            (0x8, _) => {
+                *prefix = 0;
+                Some(Event::NoteOff { note: a })
+            }
+            (0x9, _) if b == 0 => {
+                *prefix = 0;
+                Some(Event::NoteOff { note: a })
+            }
+            (0x9, _) => {
+                let fourteen = u16::from(b) << 7 | u16::from(std::mem::take(prefix));
+                Some(Event::NoteOn {
+                    note: a,
+                    velocity: (f64::from(fourteen) / 128.0).min(127.0),
+                })
+            }
+            (0xB, 88) => {
+                *prefix = b;
+                None
+            }
             (0xB, 64) => pedal(Pedal::Sustain),
             (0xB, 66) => pedal(Pedal::Sostenuto),
             (0xB, 67) => pedal(Pedal::Soft),
             (0xB, 120) => Some(Event::AllSoundOff),
-            (0xB, 121) => Some(Event::ResetControllers),
+            (0xB, 121) => {
+                *prefix = 0;
+                Some(Event::ResetControllers)
+            }
             // All notes off, and the mode messages (omni off/on, mono, poly), which imply it.
             (0xB, 123..=127) => Some(Event::AllNotesOff),
             _ => None,
@@ -185,15 +204,20 @@ fn live_parser_agrees_with_a_reference_decoder_on_random_bytes() {
     let first_difference = ours.iter().zip(&theirs).position(|(a, b)| a != b);
     let count = |f: fn(&Event) -> bool| ours.iter().filter(|e| f(e)).count();
     println!(
-        "1 000 000 random bytes: {} events from the live parser, {} from the reference decoder ({} note-ons, {} note-offs, {} pedals, {} all-notes/sound-off or resets); first difference at {first_difference:?}",
+        "1 000 000 random bytes: {} events from the live parser, {} from the reference decoder ({} note-ons, {} of them refined by a CC88 prefix, {} note-offs, {} pedals, {} all-notes/sound-off or resets); first difference at {first_difference:?}",
         ours.len(),
         theirs.len(),
         count(|e| matches!(e, Event::NoteOn { .. })),
+        count(|e| matches!(e, Event::NoteOn { velocity, .. } if velocity.fract() != 0.0)),
         count(|e| matches!(e, Event::NoteOff { .. })),
         count(|e| matches!(e, Event::Pedal { .. })),
         count(|e| matches!(e, Event::AllNotesOff | Event::AllSoundOff | Event::ResetControllers))
     );
     assert!(ours.len() > 10_000, "too few events to say much");
+    assert!(
+        count(|e| matches!(e, Event::NoteOn { velocity, .. } if velocity.fract() != 0.0)) > 100,
+        "too few prefixed notes to say much"
+    );
     assert_eq!(first_difference, None);
     assert_eq!(ours.len(), theirs.len());
 }
@@ -305,6 +329,52 @@ fn midi_file_with_smpte_timing() {
     assert!((events[0].time_s - 0.5).abs() < 1e-12);
 }
 
+/// A file's CC88 prefix refines the next note of its channel in its track: not another channel's,
+/// not another track's.
+#[test]
+fn a_files_cc88_prefix_refines_the_next_note_of_its_channel_and_track() {
+    let mut smf = Smf::new(Header::new(
+        Format::Parallel,
+        Timing::Metrical(u15::new(96)),
+    ));
+    let on = |channel: u8, key: u8, vel: u8| TrackEventKind::Midi {
+        channel: u4::new(channel),
+        message: MidiMessage::NoteOn {
+            key: u7::new(key),
+            vel: u7::new(vel),
+        },
+    };
+    let prefix = TrackEventKind::Midi {
+        channel: u4::new(0),
+        message: MidiMessage::Controller {
+            controller: u7::new(88),
+            value: u7::new(96),
+        },
+    };
+    let end = TrackEventKind::Meta(MetaMessage::EndOfTrack);
+    smf.tracks.push(vec![
+        ev(0, prefix),
+        ev(10, on(1, 60, 100)),
+        ev(10, on(0, 62, 100)),
+        ev(10, on(0, 64, 100)),
+        ev(0, end),
+    ]);
+    smf.tracks.push(vec![ev(5, prefix), ev(0, end)]);
+    smf.tracks.push(vec![ev(40, on(0, 65, 100)), ev(0, end)]);
+    let velocities: Vec<f64> = parse(&smf_bytes(&smf), Path::new("cc88.mid"))
+        .unwrap()
+        .iter()
+        .filter_map(|e| match e.event {
+            Event::NoteOn { velocity, .. } => Some(velocity),
+            _ => None,
+        })
+        .collect();
+    println!(
+        "velocity 100 after CC88 96 on channel 1: channel 2's note, channel 1's, its next, another track's: {velocities:?}"
+    );
+    assert_eq!(velocities, [100.0, 100.75, 100.0, 100.0]);
+}
+
 #[test]
 fn bad_midi_files_are_errors_that_name_the_file() {
     let mut smf = Smf::new(Header::new(
@@ -375,7 +445,7 @@ fn a_flooded_queue_keeps_every_release() {
             frame: 0,
             event: Event::NoteOn {
                 note: note(k),
-                velocity: 90,
+                velocity: 90.0,
             },
         });
     }
@@ -391,7 +461,7 @@ fn a_flooded_queue_keeps_every_release() {
             frame,
             event: Event::NoteOn {
                 note: note(keys[0]),
-                velocity: 40,
+                velocity: 40.0,
             },
         });
         offered += 1;
@@ -408,7 +478,7 @@ fn a_flooded_queue_keeps_every_release() {
     }
     late.push(Event::NoteOn {
         note: note(keys[1]),
-        velocity: 100,
+        velocity: 100.0,
     });
     for event in late {
         handle.schedule_live(Scheduled { frame, event });
@@ -472,7 +542,7 @@ fn a_hosts_flood_inside_one_cell_keeps_every_release() {
     for &k in &keys {
         host.schedule(Event::NoteOn {
             note: note(k),
-            velocity: 90,
+            velocity: 90.0,
         });
     }
     host.process(&mut out);
@@ -480,7 +550,7 @@ fn a_hosts_flood_inside_one_cell_keeps_every_release() {
     for _ in 0..EVENT_QUEUE {
         refused += usize::from(!host.schedule(Event::NoteOn {
             note: note(keys[0]),
-            velocity: 40,
+            velocity: 40.0,
         }));
     }
     for &k in &keys {
@@ -488,7 +558,7 @@ fn a_hosts_flood_inside_one_cell_keeps_every_release() {
     }
     refused += usize::from(!host.schedule(Event::NoteOn {
         note: note(keys[1]),
-        velocity: 100,
+        velocity: 100.0,
     }));
     let late = stats.late_events.load(Ordering::Relaxed);
     let mut sounding = usize::MAX;

@@ -155,7 +155,7 @@ fn soft_pedal_marks_only_the_notes_played_under_it() {
             0.0,
             Event::NoteOn {
                 note: 36,
-                velocity: 90,
+                velocity: 90.0,
             },
         ),
         (
@@ -169,7 +169,7 @@ fn soft_pedal_marks_only_the_notes_played_under_it() {
             0.05,
             Event::NoteOn {
                 note: 48,
-                velocity: 90,
+                velocity: 90.0,
             },
         ),
     ];
@@ -204,7 +204,7 @@ fn sustain_keeps_a_released_key_ringing() {
                 0.0,
                 Event::NoteOn {
                     note: 36,
-                    velocity: 90,
+                    velocity: 90.0,
                 },
             ),
             (0.1, Event::NoteOff { note: 36 }),

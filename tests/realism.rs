@@ -288,7 +288,7 @@ fn the_concert_keyboards_first_partials_fall_early_as_the_recorded_grands() {
     // rather than the paper's 0.03 give 1.62.
     use unacorda::analysis::recorded::{early_t60_re_recorded, recorded_key, EARLY_T60_FROM_KEY};
     use unacorda::analysis::struck::{struck_key, LATE_S};
-    let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
+    let speed = unacorda::midi::hammer_speed_m_s(80.0).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();
     let keys: Vec<usize> = (EARLY_T60_FROM_KEY..=88)
         .filter(|&k| recorded_key(k).is_some_and(|r| r.p1_t60_s.0.is_some()))
@@ -367,7 +367,7 @@ fn the_concert_keyboard_fades_and_rings_out_like_the_recorded_grand() {
     use unacorda::analysis::listening::late_t60_s;
     use unacorda::analysis::recorded::recorded_key;
     use unacorda::analysis::struck::{pressure, StruckKey, LATE_S};
-    let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
+    let speed = unacorda::midi::hammer_speed_m_s(80.0).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();
     let c4 = keyboard.key_preset(40).unwrap();
     let (fs, x) = pressure(&c4, speed, LATE_S.1, None).unwrap();
@@ -406,7 +406,7 @@ fn struck_at_listener(
 /// listener above the board): each one's A-weighted level re the mean of the recorded keys of
 /// A3–A4 (A3, C4, D#4, F#4, A4), as the recording's balance is taken.
 fn concert_levels_re_middle_db(keys: &[usize]) -> Vec<f64> {
-    let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
+    let speed = unacorda::midi::hammer_speed_m_s(80.0).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();
     let middle_keys = [37, 40, 43, 46, 49];
     let all: Vec<usize> = middle_keys.iter().chain(keys).copied().collect();
@@ -525,7 +525,7 @@ fn the_concert_hammers_leave_the_strings_when_measured_hammers_do() {
     // and 0.88 ms, 23 and 20 % early (C2 after 3.52 ms, 17 % late), and this fails; with every
     // felt's exponent 4.5, C7 after 0.85 ms, 42 % late, and this fails.
     use unacorda::analysis::struck::contact_s;
-    let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
+    let speed = unacorda::midi::hammer_speed_m_s(80.0).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();
     for (key, measured_ms, within) in [
         (16, 3.0, 0.15),
@@ -561,7 +561,7 @@ fn the_middle_registers_fundamental_is_as_strong_as_the_recorded_grands() {
     // this fails; with the paper keyboard's hammers there (Chaigne & Askenfelt's masses, 2.97 g
     // at C4: contacts 20-30 % shorter than measured), 9.0 dB.
     use unacorda::analysis::recorded::recorded_key;
-    let speed = unacorda::midi::hammer_speed_m_s(80).unwrap();
+    let speed = unacorda::midi::hammer_speed_m_s(80.0).unwrap();
     let keyboard = Scaling::resolve("concert").unwrap();
     let keys: Vec<usize> = (19..=64).step_by(3).collect();
     let ours = unacorda::cores::map_on_cores(&keys, |&key| {

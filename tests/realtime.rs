@@ -28,7 +28,10 @@ fn piano(
 }
 
 fn on(note: u8, velocity: u8) -> Event {
-    Event::NoteOn { note, velocity }
+    Event::NoteOn {
+        note,
+        velocity: f64::from(velocity),
+    }
 }
 
 fn pedal(pedal: Pedal, down: bool) -> Event {

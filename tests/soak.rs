@@ -53,7 +53,10 @@ fn random_events(rng: &mut Rng, held: &mut Vec<u8>, out: &mut [Option<Event>; 4]
         if held.len() < held.capacity() {
             held.push(note);
         }
-        out[0] = Some(Event::NoteOn { note, velocity });
+        out[0] = Some(Event::NoteOn {
+            note,
+            velocity: f64::from(velocity),
+        });
     }
     if !held.is_empty() && rng.one_in(70) {
         let note = held.swap_remove(rng.below(held.len() as u64) as usize);

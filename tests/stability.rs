@@ -344,7 +344,7 @@ fn energy_stress<E: VoicePool>(seconds: f64, tolerance: f64) -> (u64, u64, f64) 
         let event = match rng.below(6) {
             0 | 1 => Event::NoteOn {
                 note,
-                velocity: 20 + rng.below(100) as u8,
+                velocity: f64::from(20 + rng.below(100) as u8),
             },
             2 | 3 => Event::NoteOff { note },
             d => Event::Pedal {
@@ -422,7 +422,7 @@ fn growth_guard<E: VoicePool>(zeta: f64) -> (Option<f64>, f64) {
     let (mut synth, mut handle) = Synth::new(piano, settings, EVENT_QUEUE).unwrap();
     let strike = Event::NoteOn {
         note: 36,
-        velocity: 64,
+        velocity: 64.0,
     };
     handle
         .schedule(Scheduled {

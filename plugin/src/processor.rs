@@ -17,7 +17,7 @@ use unacorda::audio::synth::EVENT_QUEUE;
 use unacorda::audio::{Aligned, Synth};
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Pair, Rk4Pool, VoicePool};
-use unacorda::midi::{curved_velocity, map_channel_message, Event, Pedal};
+use unacorda::midi::{curved_velocity, Decoder, Event, Pedal};
 
 /// The ring-out the tail reports: how long the slowest mode takes to fall this far (dB), from a
 /// fortissimo's level to below the 24-bit floor.
@@ -51,6 +51,8 @@ pub struct Processor<'a> {
     rebuild: Rebuilding,
     /// The host's thread pool, if it has one: the engine's second core, before the helper thread.
     thread_pool: Option<HostThreadPool>,
+    /// The host's MIDI messages to piano events (its CC88 prefixes kept between them).
+    midi: Decoder,
 }
 
 /// The synth on either engine, realigned to the host's blocks.
@@ -178,6 +180,7 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             built,
             rebuild: Rebuilding::No,
             thread_pool,
+            midi: Decoder::default(),
         })
     }
 
@@ -298,13 +301,11 @@ impl Processor<'_> {
             Match::All => None,
         };
         let event = match event.as_core_event() {
-            // CLAP's velocity 0–1; 0 is the softest strike, not a release.
+            // CLAP's velocity 0–1 onto MIDI's 1–127, unrounded; 0 is the softest strike, not a
+            // release.
             Some(CoreEventSpace::NoteOn(e)) => note(e.pckn().key).map(|note| Event::NoteOn {
                 note,
-                velocity: curved_velocity(
-                    (e.velocity() * 127.0).round().clamp(1.0, 127.0) as u8,
-                    curve,
-                ),
+                velocity: curved_velocity((e.velocity() * 127.0).clamp(1.0, 127.0), curve),
             }),
             Some(CoreEventSpace::NoteOff(e)) => Some(match note(e.pckn().key) {
                 Some(note) => Event::NoteOff { note },
@@ -317,7 +318,9 @@ impl Processor<'_> {
             }),
             Some(CoreEventSpace::Midi(e)) => {
                 let [status, data1, data2] = e.data();
-                map_channel_message(status, data1, data2).map(|e| e.with_velocity_curve(curve))
+                self.midi
+                    .decode(status, data1, data2)
+                    .map(|e| e.with_velocity_curve(curve))
             }
             Some(CoreEventSpace::ParamValue(e)) => {
                 let index = e

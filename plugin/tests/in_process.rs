@@ -11,7 +11,7 @@ use host::{Instance, Play, Threads};
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::{Rk4Pool, VoicePool};
 use unacorda::midi::file::TimedEvent;
-use unacorda::midi::{Event, Pedal};
+use unacorda::midi::{Decoder, Event, Pedal};
 
 #[global_allocator]
 static ALLOCATOR: AllocDisabler = AllocDisabler;
@@ -44,8 +44,9 @@ fn checked(f: &mut dyn FnMut()) -> u32 {
     violation_count() - before
 }
 
-/// A performance in the host's events: CLAP notes (one at velocity 0, the softest strike), MIDI
-/// notes and the sustain pedal as MIDI CC64, the soft pedal as a parameter, releases with the
+/// A performance in the host's events: CLAP notes (one at velocity 0, the softest strike, one
+/// between MIDI's velocity steps), MIDI notes (one refined by a CC88 prefix) and the sustain pedal
+/// as MIDI CC64, the soft pedal as a parameter, releases with the
 /// pedal down and up, a wildcard note-off.
 fn script() -> Vec<(u64, Play)> {
     let ms = |t: f64| (t * RATE_HZ / 1000.0).round() as u64;
@@ -58,10 +59,11 @@ fn script() -> Vec<(u64, Play)> {
         (ms(90.0), Play::Midi([0x80, 64, 0])),
         (ms(110.0), Play::Param(SOFT, 1.0)),
         (ms(120.0), Play::On(48, 90.0 / 127.0)),
+        (ms(129.0), Play::Midi([0xB1, 88, 64])),
         (ms(130.0), Play::Midi([0x91, 36, 110])),
         (ms(160.0), Play::Midi([0xB0, 64, 0])),
         (ms(170.0), Play::Param(SOFT, 0.0)),
-        (ms(175.0), Play::On(72, 60.0 / 127.0)),
+        (ms(175.0), Play::On(72, 0.4321)),
         (ms(200.0), Play::Off(None)),
         (ms(210.0), Play::Midi([0x90, 84, 127])),
         (ms(230.0), Play::Midi([0x90, 84, 0])),
@@ -72,18 +74,19 @@ fn script() -> Vec<(u64, Play)> {
 
 /// The script as the piano's events, timed as a MIDI file's (what `render --midi` plays).
 fn as_piano_events(script: &[(u64, Play)]) -> Vec<TimedEvent> {
+    let mut midi = Decoder::default();
     script
         .iter()
         .filter_map(|&(frame, play)| {
             let event = match play {
                 Play::On(note, v) => Event::NoteOn {
                     note: note as u8,
-                    velocity: ((v * 127.0).round() as u8).max(1),
+                    velocity: (v * 127.0).clamp(1.0, 127.0),
                 },
                 Play::Off(Some(note)) => Event::NoteOff { note: note as u8 },
                 Play::Off(None) => Event::AllNotesOff,
                 Play::Choke(_) => return None,
-                Play::Midi([s, d1, d2]) => unacorda::midi::map_channel_message(s, d1, d2)?,
+                Play::Midi([s, d1, d2]) => midi.decode(s, d1, d2)?,
                 Play::Param(SOFT, v) => Event::Pedal {
                     pedal: Pedal::Soft,
                     down: v >= 0.5,

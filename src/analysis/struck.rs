@@ -302,7 +302,7 @@ impl Touch {
     /// curve's hammer speeds), each heard as `hearing` says and measured.
     pub fn pp_and_ff(preset: &LoadedPreset, hearing: Hearing) -> Result<[Touch; 2], BuildError> {
         let at = |velocity: u8| -> Result<Touch, BuildError> {
-            let speed = hammer_speed_m_s(velocity).expect("a MIDI velocity 1–127");
+            let speed = hammer_speed_m_s(f64::from(velocity)).expect("a MIDI velocity 1–127");
             let (fs, x) = pressure_heard(preset, speed, ONSET_S.1, None, hearing)?;
             Ok(Touch::measure(&x, fs))
         };

@@ -105,7 +105,7 @@ mod tests {
         for event in [
             Event::NoteOn {
                 note: 60,
-                velocity: 90,
+                velocity: 90.0,
             },
             Event::NoteOff { note: 60 },
             Event::NoteOff { note: 60 },

@@ -1,7 +1,7 @@
 //! Standard MIDI files (midly): every track merged into one list of piano events in seconds,
 //! through the file's tempo map (metrical timing) or its SMPTE rate (timecode timing).
 
-use super::{map_channel_message, Event};
+use super::{Decoder, Event};
 use midly::num::{u15, u24, u28, u4};
 use midly::{Format, Header, MetaMessage, MidiMessage, Smf, Timing, TrackEvent, TrackEventKind};
 use std::path::{Path, PathBuf};
@@ -98,6 +98,8 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<TimedEvent>, MidiFileError
     let mut track_start = 0u64;
     for (t, track) in smf.tracks.iter().enumerate() {
         let mut tick = track_start;
+        // A CC88 prefix refines the next note of its channel in its own track.
+        let mut decoder = Decoder::default();
         for (k, ev) in track.iter().enumerate() {
             tick += ev.delta.as_int() as u64;
             match ev.kind {
@@ -109,8 +111,8 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<TimedEvent>, MidiFileError
                     }
                     items.push((tick, t, k, What::Tempo(us.as_int() as f64)));
                 }
-                TrackEventKind::Midi { message, .. } => {
-                    let (status, d1, d2) = match message {
+                TrackEventKind::Midi { channel, message } => {
+                    let (kind, d1, d2) = match message {
                         MidiMessage::NoteOff { key, vel } => (0x80, key.as_int(), vel.as_int()),
                         MidiMessage::NoteOn { key, vel } => (0x90, key.as_int(), vel.as_int()),
                         MidiMessage::Controller { controller, value } => {
@@ -118,7 +120,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<TimedEvent>, MidiFileError
                         }
                         _ => continue,
                     };
-                    if let Some(e) = map_channel_message(status, d1, d2) {
+                    if let Some(e) = decoder.decode(kind | channel.as_int(), d1, d2) {
                         items.push((tick, t, k, What::Piano(e)));
                     }
                 }

@@ -5,7 +5,7 @@
 //! skipped with their data and clearing running status, and data bytes without a status dropped. It never allocates, so it can run on
 //! the audio thread.
 
-use super::{map_channel_message, Event};
+use super::{Decoder, Event};
 
 /// Streaming parser state.
 #[derive(Debug, Clone, Default)]
@@ -16,6 +16,7 @@ pub struct LiveParser {
     in_sysex: bool,
     /// Data bytes still to skip of a system common message.
     skip: usize,
+    decoder: Decoder,
 }
 
 /// Data bytes that follow a channel status.
@@ -72,7 +73,7 @@ impl LiveParser {
                     return None;
                 }
                 self.filled = 0;
-                map_channel_message(status, self.data[0], self.data[1])
+                self.decoder.decode(status, self.data[0], self.data[1])
             }
         }
     }

@@ -1,8 +1,9 @@
 //! MIDI input: the byte-stream parser that live input (midir) feeds, the standard-MIDI-file reader,
-//! and their common mapping to piano events (DESIGN.md §3): note on → hammer strike with a speed
-//! from the velocity curve, note off (or velocity 0) → damper, CC64 sustain, CC66 sostenuto, CC67
-//! soft pedal (≥ 64: una corda), CC120 all sound off, CC121 reset controllers, CC123–127 all notes
-//! off; pitch bend and other messages are ignored.
+//! and their common mapping to piano events (DESIGN.md §3, [`Decoder`]): note on → hammer strike
+//! with a speed from the velocity curve, refined by a CC88 high-resolution velocity prefix; note
+//! off (or velocity 0) → damper; CC64 sustain, CC66 sostenuto, CC67 soft pedal (≥ 64: una corda),
+//! CC120 all sound off, CC121 reset controllers, CC123–127 all notes off; pitch bend and other
+//! messages are ignored.
 
 pub mod file;
 pub mod live;
@@ -18,13 +19,14 @@ pub const VELOCITY_ANCHORS_M_S: [(u8, f64); 3] = [(30, 0.70), (80, 2.37), (127, 
 
 /// MIDI velocity 1–127 → hammer speed (m/s): the logarithm of the speed is the parabola through
 /// [`VELOCITY_ANCHORS_M_S`] (0.31 m/s at velocity 1, rising at every step), so that equal velocity
-/// steps are nearly equal ratios of speed, a little larger at the soft end; `None` for 0, which MIDI
-/// defines as a note-off, or for values above 127.
-pub fn hammer_speed_m_s(velocity: u8) -> Option<f64> {
-    if !(1..=127).contains(&velocity) {
+/// steps are nearly equal ratios of speed, a little larger at the soft end. A velocity between two
+/// of MIDI's steps (a CC88 prefix's, a plugin host's) lies on the same parabola. `None` under 1
+/// (MIDI's 0 is a note-off), above 127 or not a number.
+pub fn hammer_speed_m_s(velocity: f64) -> Option<f64> {
+    if !(1.0..=127.0).contains(&velocity) {
         return None;
     }
-    let v = velocity as f64;
+    let v = velocity;
     let ln_speed: f64 = VELOCITY_ANCHORS_M_S
         .iter()
         .map(|&(vi, si)| {
@@ -44,14 +46,22 @@ pub fn hammer_speed_m_s(velocity: u8) -> Option<f64> {
 /// `127 (v/127)^exponent` before the hammer's speed is found from it ([`curved_velocity`]).
 pub const VELOCITY_CURVE: std::ops::RangeInclusive<f64> = 0.25..=4.0;
 
-/// MIDI velocity `v` (1–127) through the velocity curve `exponent` ([`VELOCITY_CURVE`]): above 1 a
-/// harder touch is needed for the same loudness, below 1 a lighter one; 1 leaves it as it is.
-pub fn curved_velocity(v: u8, exponent: f64) -> u8 {
+/// MIDI velocity `v` (1–127, with any fraction) through the velocity curve `exponent`
+/// ([`VELOCITY_CURVE`]): above 1 a harder touch is needed for the same loudness, below 1 a lighter
+/// one; 1 leaves it as it is. The result is not rounded to MIDI's steps.
+pub fn curved_velocity(v: f64, exponent: f64) -> f64 {
     if exponent == 1.0 {
         return v;
     }
-    let x = f64::from(v.clamp(1, 127)) / 127.0;
-    (127.0 * x.powf(exponent)).round().clamp(1.0, 127.0) as u8
+    let x = v.clamp(1.0, 127.0) / 127.0;
+    (127.0 * x.powf(exponent)).clamp(1.0, 127.0)
+}
+
+/// The velocity of a note-on or note-off from its MIDI byte and the low 7 bits of a CC88 prefix
+/// (0 without one): the 14-bit velocity `msb << 7 | lsb` on MIDI's 1–127 scale, `msb + lsb/128`,
+/// at most 127 (the fastest blow a key is built for).
+pub fn fine_velocity(msb: u8, lsb: u8) -> f64 {
+    (f64::from(msb) + f64::from(lsb & 0x7F) / 128.0).min(127.0)
 }
 
 /// Piano key 1 (A0) to 88 (C8) of a MIDI note number, `None` off the keyboard.
@@ -71,11 +81,21 @@ pub enum Pedal {
 }
 
 /// A piano event, whatever channel it came on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Event {
-    NoteOn { note: u8, velocity: u8 },
-    NoteOff { note: u8 },
-    Pedal { pedal: Pedal, down: bool },
+    /// A key struck: `velocity` on MIDI's scale, 1–127 with a fraction where the source has one
+    /// (a CC88 prefix, a plugin host's floating-point velocity).
+    NoteOn {
+        note: u8,
+        velocity: f64,
+    },
+    NoteOff {
+        note: u8,
+    },
+    Pedal {
+        pedal: Pedal,
+        down: bool,
+    },
     AllNotesOff,
     AllSoundOff,
     ResetControllers,
@@ -95,38 +115,68 @@ impl Event {
     }
 }
 
-/// The piano event of a channel message (`status` with its channel nibble), if it has one.
-pub fn map_channel_message(status: u8, data1: u8, data2: u8) -> Option<Event> {
-    match status & 0xF0 {
-        0x80 => Some(Event::NoteOff { note: data1 }),
-        0x90 if data2 == 0 => Some(Event::NoteOff { note: data1 }),
-        0x90 => Some(Event::NoteOn {
-            note: data1,
-            velocity: data2,
-        }),
-        0xB0 => {
-            let down = data2 >= 64;
-            match data1 {
-                64 => Some(Event::Pedal {
-                    pedal: Pedal::Sustain,
-                    down,
-                }),
-                66 => Some(Event::Pedal {
-                    pedal: Pedal::Sostenuto,
-                    down,
-                }),
-                67 => Some(Event::Pedal {
-                    pedal: Pedal::Soft,
-                    down,
-                }),
-                120 => Some(Event::AllSoundOff),
-                121 => Some(Event::ResetControllers),
-                // 123 all notes off; 124–127 (omni/mono/poly mode changes) imply it.
-                123..=127 => Some(Event::AllNotesOff),
-                _ => None,
+/// MIDI's high-resolution velocity prefix (CA-031): the low 7 bits of the velocity of the
+/// channel's next note-on or note-off.
+pub const VELOCITY_PREFIX_CC: u8 = 88;
+
+/// Channel messages to piano events, with what must be remembered between them: each channel's
+/// CC88 prefix, kept until that channel's next note-on or note-off takes it (MIDI CA-031; a
+/// controller reset clears it). One per stream of messages (a device, a file's track, a plugin
+/// instance); touched by the thread that reads that stream. Never allocates.
+#[derive(Debug, Clone, Default)]
+pub struct Decoder {
+    velocity_lsb: [u8; 16],
+}
+
+impl Decoder {
+    /// The piano event of a channel message (`status` with its channel nibble), if it has one.
+    pub fn decode(&mut self, status: u8, data1: u8, data2: u8) -> Option<Event> {
+        let channel = usize::from(status & 0x0F);
+        let lsb = &mut self.velocity_lsb[channel];
+        match status & 0xF0 {
+            0x80 => {
+                *lsb = 0;
+                Some(Event::NoteOff { note: data1 })
             }
+            0x90 if data2 == 0 => {
+                *lsb = 0;
+                Some(Event::NoteOff { note: data1 })
+            }
+            0x90 => Some(Event::NoteOn {
+                note: data1,
+                velocity: fine_velocity(data2, std::mem::take(lsb)),
+            }),
+            0xB0 => {
+                let down = data2 >= 64;
+                match data1 {
+                    VELOCITY_PREFIX_CC => {
+                        *lsb = data2 & 0x7F;
+                        None
+                    }
+                    64 => Some(Event::Pedal {
+                        pedal: Pedal::Sustain,
+                        down,
+                    }),
+                    66 => Some(Event::Pedal {
+                        pedal: Pedal::Sostenuto,
+                        down,
+                    }),
+                    67 => Some(Event::Pedal {
+                        pedal: Pedal::Soft,
+                        down,
+                    }),
+                    120 => Some(Event::AllSoundOff),
+                    121 => {
+                        *lsb = 0;
+                        Some(Event::ResetControllers)
+                    }
+                    // 123 all notes off; 124–127 (omni/mono/poly mode changes) imply it.
+                    123..=127 => Some(Event::AllNotesOff),
+                    _ => None,
+                }
+            }
+            _ => None,
         }
-        _ => None,
     }
 }
 
@@ -137,25 +187,60 @@ mod tests {
     #[test]
     fn the_velocity_curve_is_monotonic_and_identity_at_one() {
         for e in [0.25, 0.5, 1.0, 2.0, 4.0] {
-            let v: Vec<u8> = (1..=127).map(|v| curved_velocity(v, e)).collect();
-            assert!(v.windows(2).all(|w| w[1] >= w[0]), "exponent {e}");
-            assert_eq!((v[0].max(1), v[126]), (v[0], 127));
+            let v: Vec<f64> = (128..=127 * 128)
+                .map(|v| curved_velocity(f64::from(v) / 128.0, e))
+                .collect();
+            // Rising at every 1/128 of a step, but where the curve holds the softest at 1.
+            let rising = |w: &[f64]| w[1] > w[0] || (w[0] == 1.0 && w[1] == 1.0);
+            assert!(v.windows(2).all(rising), "exponent {e}");
+            assert!(v[0] >= 1.0 && v[v.len() - 1] == 127.0, "exponent {e}");
         }
-        assert!((1..=127).all(|v| curved_velocity(v, 1.0) == v));
-        assert!(curved_velocity(64, 2.0) < 64 && curved_velocity(64, 0.5) > 64);
+        assert!((1..=127).all(|v| curved_velocity(f64::from(v), 1.0) == f64::from(v)));
+        assert!(curved_velocity(64.0, 2.0) < 64.0 && curved_velocity(64.0, 0.5) > 64.0);
     }
 
     #[test]
     fn curve_passes_its_anchors_and_rises_at_every_step() {
-        assert_eq!(hammer_speed_m_s(0), None);
-        assert_eq!(hammer_speed_m_s(128), None);
+        assert_eq!(hammer_speed_m_s(0.0), None);
+        assert_eq!(hammer_speed_m_s(127.5), None);
+        assert_eq!(hammer_speed_m_s(f64::NAN), None);
         for (velocity, speed_m_s) in VELOCITY_ANCHORS_M_S {
-            assert!((hammer_speed_m_s(velocity).unwrap() / speed_m_s - 1.0).abs() < 1e-12);
+            let speed = hammer_speed_m_s(f64::from(velocity)).unwrap();
+            assert!((speed / speed_m_s - 1.0).abs() < 1e-12);
         }
-        let v: Vec<f64> = (1..=127).map(|k| hammer_speed_m_s(k).unwrap()).collect();
+        let v: Vec<f64> = (1..=127)
+            .map(|k| hammer_speed_m_s(f64::from(k)).unwrap())
+            .collect();
         println!("velocity 1 -> {:.3} m/s, 127 -> {:.3} m/s", v[0], v[126]);
         assert!((0.3..0.32).contains(&v[0]), "velocity 1: {} m/s", v[0]);
         assert!(v.windows(2).all(|w| w[1] > w[0]));
+    }
+
+    /// CC88 refines its channel's next note-on to 1/128 of a velocity step (MIDI CA-031), and only
+    /// that one: another channel's note-on leaves it, a note-off or a controller reset takes it.
+    #[test]
+    fn a_cc88_prefix_refines_the_next_note_on_of_its_channel() {
+        let mut d = Decoder::default();
+        let on = |velocity: f64| Some(Event::NoteOn { note: 60, velocity });
+        assert_eq!(d.decode(0xB0, VELOCITY_PREFIX_CC, 64), None);
+        assert_eq!(d.decode(0x91, 60, 100), on(100.0));
+        assert_eq!(d.decode(0x90, 60, 100), on(100.5));
+        assert_eq!(d.decode(0x90, 60, 100), on(100.0));
+        d.decode(0xB0, VELOCITY_PREFIX_CC, 127);
+        assert_eq!(d.decode(0x90, 60, 127), on(127.0));
+        for reset in [(0x80, 60, 0), (0x90, 60, 0), (0xB0, 121, 0)] {
+            d.decode(0xB0, VELOCITY_PREFIX_CC, 32);
+            d.decode(reset.0, reset.1, reset.2);
+            assert_eq!(d.decode(0x90, 60, 90), on(90.0), "after {reset:?}");
+        }
+        let speed = |v: f64| hammer_speed_m_s(v).unwrap();
+        println!(
+            "velocity 100 -> {:.4} m/s, 100 + 64/128 -> {:.4}, 101 -> {:.4}",
+            speed(100.0),
+            speed(100.5),
+            speed(101.0)
+        );
+        assert!(speed(100.0) < speed(100.5) && speed(100.5) < speed(101.0));
     }
 
     #[test]

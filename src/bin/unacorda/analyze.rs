@@ -331,7 +331,8 @@ fn strike(
     seconds: f64,
     release_s: Option<f64>,
 ) -> Result<(f64, Vec<f64>)> {
-    let speed = unacorda::midi::hammer_speed_m_s(velocity).context("a MIDI velocity 1–127")?;
+    let speed =
+        unacorda::midi::hammer_speed_m_s(f64::from(velocity)).context("a MIDI velocity 1–127")?;
     Ok(struck::pressure(
         &scaling.key_preset(key)?,
         speed,
@@ -342,7 +343,8 @@ fn strike(
 
 /// `key` struck at [`VELOCITY`] and measured ([`struck::Struck`]).
 fn struck_key(scaling: &LoadedScaling, key: usize) -> Result<struck::Struck> {
-    let speed = unacorda::midi::hammer_speed_m_s(VELOCITY).context("a MIDI velocity 1–127")?;
+    let speed =
+        unacorda::midi::hammer_speed_m_s(f64::from(VELOCITY)).context("a MIDI velocity 1–127")?;
     Ok(struck::struck_key(
         &scaling.key_preset(key)?,
         scaling.target_hz(key),

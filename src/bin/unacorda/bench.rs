@@ -479,7 +479,7 @@ fn damped(keyboard: &str, model: FeltModel, seconds: f64, voices: usize) -> Resu
                 frame,
                 event: Event::NoteOn {
                     note,
-                    velocity: VELOCITY,
+                    velocity: f64::from(VELOCITY),
                 },
             });
             if released == 1 {

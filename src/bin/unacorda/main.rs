@@ -113,9 +113,10 @@ enum Command {
             conflicts_with = "midi_velocity"
         )]
         velocity: Option<f64>,
-        /// Hammer speed from a MIDI velocity 1–127 (0.31–6 m/s: 30 → 0.70, 80 → 2.37, 127 → 6).
-        #[arg(long, value_name = "1-127")]
-        midi_velocity: Option<u8>,
+        /// Hammer speed from a MIDI velocity 1–127, fractions allowed as a CC88 prefix gives them
+        /// (0.31–6 m/s: 30 → 0.70, 80 → 2.37, 127 → 6).
+        #[arg(long, value_name = "1-127", allow_negative_numbers = true)]
+        midi_velocity: Option<f64>,
         /// Length of the strike's render (s), 0.001–600; default: for --key, until the note has
         /// rung out, 60 dB under its loudest, at most 30 s; for a preset, 4 s (the paper's
         /// spectrograms' span).
@@ -468,11 +469,14 @@ fn run(cli: Cli) -> Result<()> {
             }
             loaded.set_gain_db(levels.gain_db);
             let velocity_m_s = match (velocity, midi_velocity) {
-                (_, Some(v)) => unacorda::midi::hammer_speed_m_s(unacorda::midi::curved_velocity(
-                    v,
-                    levels.velocity_curve,
-                ))
-                .with_context(|| format!("--midi-velocity {v}: expected 1–127"))?,
+                (_, Some(v)) => {
+                    if !(1.0..=127.0).contains(&v) {
+                        bail!("--midi-velocity {v}: expected 1–127");
+                    }
+                    let curved = unacorda::midi::curved_velocity(v, levels.velocity_curve);
+                    unacorda::midi::hammer_speed_m_s(curved)
+                        .context("the velocity curve keeps a velocity within 1–127")?
+                }
                 (Some(v), None) => v,
                 (None, None) => loaded.preset.hammer.velocity_m_s,
             };
