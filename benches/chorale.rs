@@ -78,8 +78,8 @@ fn main() {
                 e.event,
                 unacorda::midi::Event::Pedal {
                     pedal: unacorda::midi::Pedal::Sustain,
-                    down: false
-                }
+                    depth,
+                } if depth < unacorda::midi::PEDAL_DOWN_AT
             )
         })
         .map(|e| format!("{:.2}", e.time_s))

@@ -29,10 +29,7 @@ pub fn loaded_synth<E: VoicePool>(
 ) -> (Synth<E>, SynthHandle<E>) {
     let (mut synth, mut handle) =
         Synth::new(piano.clone(), settings, EVENT_QUEUE).expect("the keyboard's rates match");
-    let sustain = Event::Pedal {
-        pedal: Pedal::Sustain,
-        down: true,
-    };
+    let sustain = Event::pedal(Pedal::Sustain, true);
     let mut events = vec![(0, sustain)];
     for v in 0..voices {
         let note = (21 + v * 88 / voices.max(1)) as u8;
@@ -86,10 +83,7 @@ pub fn struck_chord_synth<E: VoicePool>(
 ) -> (Synth<E>, SynthHandle<E>) {
     let (synth, mut handle) =
         Synth::new(piano.clone(), settings, EVENT_QUEUE).expect("the keyboard's rates match");
-    let sustain = Event::Pedal {
-        pedal: Pedal::Sustain,
-        down: true,
-    };
+    let sustain = Event::pedal(Pedal::Sustain, true);
     let strikes = notes.iter().map(|&note| Event::NoteOn {
         note,
         velocity: f64::from(VELOCITY),

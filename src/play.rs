@@ -3,7 +3,7 @@
 //! struck in its current motion; a key without a voice takes a free one, or steals the quietest.
 
 use crate::engine::{Strike, UnisonSpec, VoicePool};
-use crate::midi::{hammer_speed_m_s, piano_key, Event, Pedal};
+use crate::midi::{hammer_speed_m_s, piano_key, Event, Pedal, PEDAL_DOWN_AT};
 
 /// The performer's state: which keys are down and what the pedals do.
 #[derive(Debug, Clone)]
@@ -95,23 +95,24 @@ impl Player {
             }
             Event::Pedal {
                 pedal: Pedal::Sustain,
-                down,
+                depth,
             } => {
-                self.sustain = down;
+                self.sustain = depth >= PEDAL_DOWN_AT;
                 self.settle_all(instrument);
             }
             Event::Pedal {
                 pedal: Pedal::Sostenuto,
-                down,
+                depth,
             } => {
+                let down = depth >= PEDAL_DOWN_AT;
                 self.sostenuto = down;
                 self.sostenuto_held = if down { self.key_down } else { [false; 89] };
                 self.settle_all(instrument);
             }
             Event::Pedal {
                 pedal: Pedal::Soft,
-                down,
-            } => self.soft = down,
+                depth,
+            } => self.soft = depth >= PEDAL_DOWN_AT,
             Event::AllNotesOff => {
                 self.key_down = [false; 89];
                 self.settle_all(instrument);

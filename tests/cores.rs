@@ -62,7 +62,7 @@ fn chord() -> Case {
     let scaling = Scaling::resolve("paper").unwrap();
     let keys: Vec<usize> = (0..40).map(|k| 1 + 2 * k).collect();
     let on = |note, velocity| Event::NoteOn { note, velocity };
-    let pedal = |pedal, down| Event::Pedal { pedal, down };
+    let pedal = |pedal, down| Event::pedal(pedal, down);
     let mut script = vec![(0, pedal(Pedal::Sustain, true))];
     for (i, &key) in keys.iter().enumerate() {
         script.push((
@@ -93,7 +93,7 @@ fn chord() -> Case {
 /// Notes, pedals, releases and (the pool holds 5 voices for 8 keys) steals with their fades.
 fn script() -> Vec<(u64, Event)> {
     let on = |note, velocity| Event::NoteOn { note, velocity };
-    let pedal = |pedal, down| Event::Pedal { pedal, down };
+    let pedal = |pedal, down| Event::pedal(pedal, down);
     vec![
         (0, on(21, 90.0)),
         (10, on(36, 80.0)),

@@ -71,10 +71,7 @@ fn pedalled<E: VoicePool>(
     piano.instrument.set_voice_modes(modes);
     piano.player.set_halo(true);
     if pedal {
-        piano.apply(Event::Pedal {
-            pedal: Pedal::Sustain,
-            down: true,
-        });
+        piano.apply(Event::pedal(Pedal::Sustain, true));
     }
     for &(note, velocity) in notes {
         piano.apply(Event::NoteOn {
@@ -181,10 +178,7 @@ fn held_chord(piano: &Piano<ExactPool>, scaling: &LoadedScaling, modes: VoiceMod
     piano.instrument.set_voice_modes(modes);
     let (mut synth, mut handle) =
         Synth::new(piano, scaling.output_settings(), EVENT_QUEUE).unwrap();
-    let mut events = vec![Event::Pedal {
-        pedal: Pedal::Sustain,
-        down: true,
-    }];
+    let mut events = vec![Event::pedal(Pedal::Sustain, true)];
     for name in ["C2", "G2", "E3", "C4", "E4", "G4", "C5"] {
         events.push(Event::NoteOn {
             note: note(name),

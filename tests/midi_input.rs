@@ -52,10 +52,7 @@ fn live_parser_follows_the_midi_byte_grammar() {
     // System common (song position, 2 data bytes) is skipped with its data.
     assert_eq!(
         live(&[0xF2, 60, 100, 0xB0, 67, 127]),
-        [Event::Pedal {
-            pedal: Pedal::Soft,
-            down: true
-        }]
+        [Event::pedal(Pedal::Soft, true)]
     );
     // Pedals and channel-mode messages on any channel; pitch bend and program change ignored.
     assert_eq!(
@@ -63,11 +60,11 @@ fn live_parser_follows_the_midi_byte_grammar() {
         [
             Event::Pedal {
                 pedal: Pedal::Sustain,
-                down: false
+                depth: 63.0 / 127.0
             },
             Event::Pedal {
                 pedal: Pedal::Sostenuto,
-                down: true
+                depth: 64.0 / 127.0
             },
             Event::AllSoundOff,
             Event::ResetControllers,
@@ -110,7 +107,7 @@ fn reference_decoder(bytes: &[u8]) -> Vec<Event> {
         let pedal = |pedal| {
             Some(Event::Pedal {
                 pedal,
-                down: b > 63,
+                depth: f64::from(b) / 127.0,
             })
         };
         match (kind, a) {
@@ -298,13 +295,7 @@ fn midi_file_follows_the_tempo_map_across_tracks() {
     for (t, want) in times.iter().zip([0.5, 1.0, 1.25, 1.5]) {
         assert!((t - want).abs() < 1e-12);
     }
-    assert_eq!(
-        events[1].event,
-        Event::Pedal {
-            pedal: Pedal::Soft,
-            down: true
-        }
-    );
+    assert_eq!(events[1].event, Event::pedal(Pedal::Soft, true));
     assert_eq!(events[3].event, Event::NoteOff { note: 60 });
 }
 
@@ -471,10 +462,7 @@ fn a_flooded_queue_keeps_every_release() {
         late.push(Event::NoteOff { note: note(k) });
     }
     for down in [true, false] {
-        late.push(Event::Pedal {
-            pedal: Pedal::Sustain,
-            down,
-        });
+        late.push(Event::pedal(Pedal::Sustain, down));
     }
     late.push(Event::NoteOn {
         note: note(keys[1]),

@@ -144,13 +144,7 @@ fn perform(
 #[test]
 fn soft_pedal_marks_only_the_notes_played_under_it() {
     let events = [
-        (
-            0.0,
-            Event::Pedal {
-                pedal: Pedal::Soft,
-                down: true,
-            },
-        ),
+        (0.0, Event::pedal(Pedal::Soft, true)),
         (
             0.0,
             Event::NoteOn {
@@ -158,13 +152,7 @@ fn soft_pedal_marks_only_the_notes_played_under_it() {
                 velocity: 90.0,
             },
         ),
-        (
-            0.05,
-            Event::Pedal {
-                pedal: Pedal::Soft,
-                down: false,
-            },
-        ),
+        (0.05, Event::pedal(Pedal::Soft, false)),
         (
             0.05,
             Event::NoteOn {
@@ -210,16 +198,7 @@ fn sustain_keeps_a_released_key_ringing() {
             (0.1, Event::NoteOff { note: 36 }),
         ];
         if sustain {
-            events.insert(
-                1,
-                (
-                    0.05,
-                    Event::Pedal {
-                        pedal: Pedal::Sustain,
-                        down: true,
-                    },
-                ),
-            );
+            events.insert(1, (0.05, Event::pedal(Pedal::Sustain, true)));
         }
         let (obs, _) = perform(&["C2"], &events, 0.5);
         let tail: Vec<f64> = obs[0][obs[0].len() * 5 / 6..]

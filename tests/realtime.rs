@@ -35,7 +35,7 @@ fn on(note: u8, velocity: u8) -> Event {
 }
 
 fn pedal(pedal: Pedal, down: bool) -> Event {
-    Event::Pedal { pedal, down }
+    Event::pedal(pedal, down)
 }
 
 #[test]

@@ -64,10 +64,7 @@ fn random_events(rng: &mut Rng, held: &mut Vec<u8>, out: &mut [Option<Event>; 4]
     }
     if rng.one_in(2000) {
         let pedal = [Pedal::Sustain, Pedal::Sostenuto, Pedal::Soft][rng.below(3) as usize];
-        out[2] = Some(Event::Pedal {
-            pedal,
-            down: rng.one_in(2),
-        });
+        out[2] = Some(Event::pedal(pedal, rng.one_in(2)));
     }
     if rng.one_in(20_000) {
         held.clear();

@@ -344,13 +344,13 @@ fn energy_stress<E: VoicePool>(seconds: f64, tolerance: f64) -> (u64, u64, f64) 
         let event = match rng.below(6) {
             0 | 1 => Event::NoteOn {
                 note,
-                velocity: f64::from(20 + rng.below(100) as u8),
+                velocity: (20 + rng.below(100)) as f64,
             },
             2 | 3 => Event::NoteOff { note },
-            d => Event::Pedal {
-                pedal: [Pedal::Sustain, Pedal::Sostenuto, Pedal::Soft][rng.below(3) as usize],
-                down: d == 4,
-            },
+            d => Event::pedal(
+                [Pedal::Sustain, Pedal::Sostenuto, Pedal::Soft][rng.below(3) as usize],
+                d == 4,
+            ),
         };
         handle.schedule(Scheduled { frame: t, event }).unwrap();
     }

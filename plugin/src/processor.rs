@@ -282,7 +282,7 @@ impl Processor<'_> {
             let down = self.shared.values.on(index);
             if down != self.pedals[i] {
                 self.pedals[i] = down;
-                self.play(Event::Pedal { pedal, down });
+                self.play(Event::pedal(pedal, down));
             }
         }
     }

@@ -87,14 +87,8 @@ fn as_piano_events(script: &[(u64, Play)]) -> Vec<TimedEvent> {
                 Play::Off(None) => Event::AllNotesOff,
                 Play::Choke(_) => return None,
                 Play::Midi([s, d1, d2]) => midi.decode(s, d1, d2)?,
-                Play::Param(SOFT, v) => Event::Pedal {
-                    pedal: Pedal::Soft,
-                    down: v >= 0.5,
-                },
-                Play::Param(SUSTAIN, v) => Event::Pedal {
-                    pedal: Pedal::Sustain,
-                    down: v >= 0.5,
-                },
+                Play::Param(SOFT, v) => Event::pedal(Pedal::Soft, v >= 0.5),
+                Play::Param(SUSTAIN, v) => Event::pedal(Pedal::Sustain, v >= 0.5),
                 Play::Param(..) => return None,
             };
             Some(TimedEvent {

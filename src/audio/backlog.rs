@@ -21,7 +21,7 @@ pub struct Backlog {
     /// Notes whose note-off waits, one bit per MIDI note.
     note_offs: u128,
     /// Each pedal's latest position not yet queued ([`PEDALS`] order).
-    pedals: [Option<bool>; 3],
+    pedals: [Option<f64>; 3],
     all_sound_off: bool,
     all_notes_off: bool,
     reset_controllers: bool,
@@ -46,9 +46,9 @@ impl Backlog {
             Event::NoteOn { .. } => self.dropped_note_ons += 1,
             // A MIDI note is a data byte, 0–127: one bit each.
             Event::NoteOff { note } => self.note_offs |= 1u128 << (note & 0x7F),
-            Event::Pedal { pedal, down } => {
+            Event::Pedal { pedal, depth } => {
                 let i = PEDALS.iter().position(|&p| p == pedal).unwrap_or(0);
-                self.pedals[i] = Some(down);
+                self.pedals[i] = Some(depth);
             }
             Event::AllSoundOff => self.all_sound_off = true,
             Event::AllNotesOff => self.all_notes_off = true,
@@ -75,7 +75,7 @@ impl Backlog {
         PEDALS
             .iter()
             .zip(&self.pedals)
-            .find_map(|(&pedal, down)| down.map(|down| Event::Pedal { pedal, down }))
+            .find_map(|(&pedal, depth)| depth.map(|depth| Event::Pedal { pedal, depth }))
     }
 
     /// `event` (the one [`Backlog::next`] gave) is queued: no longer waiting.
@@ -111,18 +111,9 @@ mod tests {
             Event::NoteOff { note: 60 },
             Event::NoteOff { note: 127 },
             Event::NoteOff { note: 0 },
-            Event::Pedal {
-                pedal: Pedal::Sustain,
-                down: true,
-            },
-            Event::Pedal {
-                pedal: Pedal::Sustain,
-                down: false,
-            },
-            Event::Pedal {
-                pedal: Pedal::Soft,
-                down: true,
-            },
+            Event::pedal(Pedal::Sustain, true),
+            Event::pedal(Pedal::Sustain, false),
+            Event::pedal(Pedal::Soft, true),
             Event::AllNotesOff,
         ] {
             b.keep(event);
@@ -139,14 +130,8 @@ mod tests {
                 Event::NoteOff { note: 0 },
                 Event::NoteOff { note: 60 },
                 Event::NoteOff { note: 127 },
-                Event::Pedal {
-                    pedal: Pedal::Sustain,
-                    down: false
-                },
-                Event::Pedal {
-                    pedal: Pedal::Soft,
-                    down: true
-                },
+                Event::pedal(Pedal::Sustain, false),
+                Event::pedal(Pedal::Soft, true),
             ]
         );
         assert!(b.is_empty());

@@ -80,6 +80,10 @@ pub enum Pedal {
     Soft,
 }
 
+/// A pedal's depth from which it counts as down, of 0 (up) to 1 (fully down): MIDI's convention,
+/// a controller value of 64 or more (64/127 = 0.504, 63/127 = 0.496).
+pub const PEDAL_DOWN_AT: f64 = 0.5;
+
 /// A piano event, whatever channel it came on.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Event {
@@ -92,9 +96,11 @@ pub enum Event {
     NoteOff {
         note: u8,
     },
+    /// A pedal moved to `depth`, 0 (up) to 1 (fully down): a controller's value / 127, or a plugin
+    /// parameter's value.
     Pedal {
         pedal: Pedal,
-        down: bool,
+        depth: f64,
     },
     AllNotesOff,
     AllSoundOff,
@@ -102,6 +108,14 @@ pub enum Event {
 }
 
 impl Event {
+    /// A pedal fully down (`down`) or up.
+    pub fn pedal(pedal: Pedal, down: bool) -> Event {
+        Event::Pedal {
+            pedal,
+            depth: if down { 1.0 } else { 0.0 },
+        }
+    }
+
     /// The event with a note-on's velocity through the velocity curve `exponent`
     /// ([`curved_velocity`]); any other event as it is.
     pub fn with_velocity_curve(self, exponent: f64) -> Event {
@@ -147,7 +161,7 @@ impl Decoder {
                 velocity: fine_velocity(data2, std::mem::take(lsb)),
             }),
             0xB0 => {
-                let down = data2 >= 64;
+                let depth = f64::from(data2.min(127)) / 127.0;
                 match data1 {
                     VELOCITY_PREFIX_CC => {
                         *lsb = data2 & 0x7F;
@@ -155,15 +169,15 @@ impl Decoder {
                     }
                     64 => Some(Event::Pedal {
                         pedal: Pedal::Sustain,
-                        down,
+                        depth,
                     }),
                     66 => Some(Event::Pedal {
                         pedal: Pedal::Sostenuto,
-                        down,
+                        depth,
                     }),
                     67 => Some(Event::Pedal {
                         pedal: Pedal::Soft,
-                        down,
+                        depth,
                     }),
                     120 => Some(Event::AllSoundOff),
                     121 => {
@@ -241,6 +255,26 @@ mod tests {
             speed(101.0)
         );
         assert!(speed(100.0) < speed(100.5) && speed(100.5) < speed(101.0));
+    }
+
+    /// A pedal controller's value is its depth, value / 127, and it is down from 64 up, as MIDI
+    /// has it, at every value of every pedal.
+    #[test]
+    fn a_pedals_depth_is_its_value_and_down_from_64() {
+        let mut d = Decoder::default();
+        for (cc, pedal) in [
+            (64, Pedal::Sustain),
+            (66, Pedal::Sostenuto),
+            (67, Pedal::Soft),
+        ] {
+            for value in 0..=127u8 {
+                let Some(Event::Pedal { pedal: p, depth }) = d.decode(0xB3, cc, value) else {
+                    panic!("CC{cc} {value}: no pedal event");
+                };
+                assert_eq!((p, depth), (pedal, f64::from(value) / 127.0));
+                assert_eq!(depth >= PEDAL_DOWN_AT, value >= 64, "CC{cc} {value}");
+            }
+        }
     }
 
     #[test]
