@@ -34,10 +34,6 @@ fn on(note: u8, velocity: u8) -> Event {
     }
 }
 
-fn pedal(pedal: Pedal, down: bool) -> Event {
-    Event::pedal(pedal, down)
-}
-
 #[test]
 fn the_callback_never_allocates() {
     // Five keys on a pool of three voices: stealing, re-striking, all three pedals, all notes off.
@@ -48,17 +44,17 @@ fn the_callback_never_allocates() {
     let (mut synth, mut handle) = Synth::new(piano.clone(), settings, EVENT_QUEUE).unwrap();
     let script = [
         (0, on(36, 90)),
-        (40, pedal(Pedal::Sustain, true)),
+        (40, Event::pedal(Pedal::Sustain, true)),
         (300, on(48, 80)),
-        (900, pedal(Pedal::Soft, true)),
+        (900, Event::pedal(Pedal::Soft, true)),
         (1000, on(52, 70)),
         (1500, on(55, 100)), // the pool is full: steals the quietest
         (2000, on(60, 60)),  // and again
         (2600, on(36, 110)), // C2 again, in its current motion or a stolen voice
-        (3000, pedal(Pedal::Soft, false)),
-        (3200, pedal(Pedal::Sostenuto, true)),
+        (3000, Event::pedal(Pedal::Soft, false)),
+        (3200, Event::pedal(Pedal::Sostenuto, true)),
         (4000, Event::NoteOff { note: 60 }),
-        (5000, pedal(Pedal::Sustain, false)),
+        (5000, Event::pedal(Pedal::Sustain, false)),
         (6000, Event::AllNotesOff),
         (7000, Event::ResetControllers),
         (8000, on(48, 127)),
@@ -427,23 +423,17 @@ fn play_runs_the_callback_on_the_alsa_null_device() {
             || stderr.contains("real-time priority not granted: "),
         "no word on real-time priority"
     );
+    // The number that follows `marker` in a line of the summary.
+    fn after<T: std::str::FromStr>(line: &str, marker: &str) -> Option<T> {
+        line.split(marker).nth(1)?.split(' ').next()?.parse().ok()
+    }
     let played = ours.iter().find(|l| l.starts_with("played")).unwrap();
-    let n: u64 = played
-        .split(": ")
-        .nth(1)
-        .and_then(|r| r.split(' ').next())
-        .and_then(|v| v.parse().ok())
-        .expect("the summary gives the callbacks");
+    let n: u64 = after(played, ": ").expect("the summary gives the callbacks");
     assert!(n >= 300, "{played}");
     let summary = ours.iter().find(|l| l.contains("sound: ")).unwrap();
     assert!(summary.contains("at most 1 voices at once"), "{summary}");
     // And sound came out of it: the output's peak (C4 at velocity 90 reaches about −15 dBFS).
-    let peak_db: f64 = summary
-        .split("peak ")
-        .nth(1)
-        .and_then(|r| r.split(' ').next())
-        .and_then(|v| v.parse().ok())
-        .expect("the summary gives the output's peak");
+    let peak_db: f64 = after(summary, "peak ").expect("the summary gives the output's peak");
     assert!(peak_db > -40.0 && peak_db < 0.0, "{summary}");
 }
 

@@ -1,5 +1,5 @@
 //! MIDI input: the byte-stream parser that live input (midir) feeds, the standard-MIDI-file reader,
-//! and their common mapping to piano events (DESIGN.md §3, [`Decoder`]): note on → hammer strike
+//! and their common mapping to piano events ([`Decoder`]): note on → hammer strike
 //! with a speed from the velocity curve, refined by a CC88 high-resolution velocity prefix; note
 //! off (or velocity 0) → damper; CC64 sustain, CC66 sostenuto, CC67 soft pedal (≥ 64: una corda),
 //! CC120 all sound off, CC121 reset controllers, CC123–127 all notes off; pitch bend and other
@@ -22,11 +22,10 @@ pub const VELOCITY_ANCHORS_M_S: [(u8, f64); 3] = [(30, 0.70), (80, 2.37), (127, 
 /// steps are nearly equal ratios of speed, a little larger at the soft end. A velocity between two
 /// of MIDI's steps (a CC88 prefix's, a plugin host's) lies on the same parabola. `None` under 1
 /// (MIDI's 0 is a note-off), above 127 or not a number.
-pub fn hammer_speed_m_s(velocity: f64) -> Option<f64> {
-    if !(1.0..=127.0).contains(&velocity) {
+pub fn hammer_speed_m_s(v: f64) -> Option<f64> {
+    if !(1.0..=127.0).contains(&v) {
         return None;
     }
-    let v = velocity;
     let ln_speed: f64 = VELOCITY_ANCHORS_M_S
         .iter()
         .map(|&(vi, si)| {
