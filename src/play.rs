@@ -15,7 +15,8 @@ pub struct Player {
     key_down: [bool; 89],
     /// Keys whose dampers the sostenuto pedal holds up.
     sostenuto_held: [bool; 89],
-    sustain: bool,
+    /// How far the sustain pedal lifts the dampers of released keys (0-1: [`sustain_lift`]).
+    sustain_lift: f64,
     sostenuto: bool,
     soft: bool,
     /// Whether every key whose damper a pedal lifts rings in sympathy, struck or not (the
@@ -37,7 +38,7 @@ impl Player {
             key_of_bank: keys.to_vec(),
             key_down: [false; 89],
             sostenuto_held: [false; 89],
-            sustain: false,
+            sustain_lift: 0.0,
             sostenuto: false,
             soft: false,
             halo: false,
@@ -87,17 +88,18 @@ impl Player {
                     }
                 }
             }
-            Event::NoteOff { note } => {
+            Event::NoteOff { note, velocity } => {
                 if let Some(key) = piano_key(note) {
                     self.key_down[key] = false;
-                    self.settle_damper(key, instrument);
+                    let steps = damper_landing_s(velocity) / instrument.step_s();
+                    self.move_damper(key, steps, instrument);
                 }
             }
             Event::Pedal {
                 pedal: Pedal::Sustain,
                 depth,
             } => {
-                self.sustain = depth >= PEDAL_DOWN_AT;
+                self.sustain_lift = sustain_lift(depth);
                 self.settle_all(instrument);
             }
             Event::Pedal {
@@ -124,7 +126,7 @@ impl Player {
                 }
             }
             Event::ResetControllers => {
-                self.sustain = false;
+                self.sustain_lift = 0.0;
                 self.sostenuto = false;
                 self.sostenuto_held = [false; 89];
                 self.soft = false;
@@ -133,9 +135,19 @@ impl Player {
         }
     }
 
-    /// Whether the damper of piano key `key` is lifted by the key or a pedal.
+    /// How far the damper of piano key `key` is lifted by the key or a pedal (0 resting, 1 clear
+    /// of the strings).
+    fn lift(&self, key: usize) -> f64 {
+        if self.key_down[key] || self.sostenuto_held[key] {
+            1.0
+        } else {
+            self.sustain_lift
+        }
+    }
+
+    /// Whether the damper of piano key `key` is lifted at all by the key or a pedal.
     fn lifted(&self, key: usize) -> bool {
-        self.key_down[key] || self.sustain || self.sostenuto_held[key]
+        self.lift(key) > 0.0
     }
 
     /// The voice a newly sounding key takes: a silent one if there is any (one that never played
@@ -161,15 +173,21 @@ impl Player {
             .unwrap_or(0)
     }
 
-    /// Lift or drop one key's damper from the key and the pedals. A key whose damper is lifted
-    /// rings in sympathy with the rest through the board; with the halo ([`Player::set_halo`])
-    /// one that holds no voice takes a free one at rest, where there is one (never a sounding
-    /// voice).
+    /// Lift or drop one key's damper at once from the key and the pedals
+    /// ([`Player::move_damper`]).
     fn settle_damper(&self, key: usize, instrument: &mut impl VoicePool) {
+        self.move_damper(key, 0.0, instrument);
+    }
+
+    /// Lift or drop one key's damper from the key and the pedals, over `steps` of the
+    /// instrument's steps (a key let go) or at once. A key whose damper is lifted rings in
+    /// sympathy with the rest through the board; with the halo ([`Player::set_halo`]) one that
+    /// holds no voice takes a free one at rest, where there is one (never a sounding voice).
+    fn move_damper(&self, key: usize, steps: f64, instrument: &mut impl VoicePool) {
         let Some(bank) = self.bank_of_key[key] else {
             return;
         };
-        let lifted = self.lifted(key);
+        let (lift, lifted) = (self.lift(key), self.lifted(key));
         let v = match instrument.voice_of_key(bank) {
             Some(v) => v,
             None if lifted && self.halo => match free_voice(instrument) {
@@ -181,7 +199,7 @@ impl Player {
             },
             None => return,
         };
-        instrument.set_damper_voice(v, !lifted);
+        instrument.move_damper(v, lift, steps);
         // Strings whose damper is up ring in sympathy with the rest through the board.
         if lifted {
             instrument.set_active(v, true);
@@ -193,6 +211,41 @@ impl Player {
             self.settle_damper(key, instrument);
         }
     }
+}
+
+/// Where the sustain pedal's travel lifts the dampers: from its free travel's end
+/// ([`SUSTAIN_LIFT_FROM`]) to their full lift ([`SUSTAIN_LIFT_TO`]).
+pub const SUSTAIN_LIFT_FROM: f64 = 0.2;
+pub const SUSTAIN_LIFT_TO: f64 = 0.8;
+
+/// How far a sustain pedal at `depth` (0 up, 1 fully down) lifts the dampers (0 resting on the
+/// strings, 1 clear of them): not at all through the pedal's free travel, then as the square of
+/// the pedal's travel beyond it. Part pedalling happens within a millimetre of the strings
+/// (the felts at a gap that loud strings still reach, [`crate::engine::physics::damper`]), a
+/// fraction of the dampers' full lift: the square spreads that millimetre over a third of the
+/// controller's range, as a pianist's foot finds it on a grand's pedal.
+pub fn sustain_lift(depth: f64) -> f64 {
+    let travel = (depth - SUSTAIN_LIFT_FROM) / (SUSTAIN_LIFT_TO - SUSTAIN_LIFT_FROM);
+    travel.clamp(0.0, 1.0).powi(2)
+}
+
+/// How long a key's damper takes to land on its strings from its lift when the key is let go
+/// at MIDI's default release velocity (s): the damper falls with the key as it rises.
+pub const DAMPER_LANDING_S: f64 = 0.03;
+
+/// How long a key let go at the release velocity `velocity` (MIDI's scale, 1–127; 0 for none,
+/// taken as [`crate::midi::DEFAULT_RELEASE_VELOCITY`]) takes to land its damper (s): the key
+/// rises at a speed in proportion to the release velocity, and the damper with it —
+/// [`DAMPER_LANDING_S`] at the default, half of it at 127, 6.4 times it at 10. A slow release
+/// lets the felt reach the strings late and touch them gradually (a part-lifted felt on its
+/// way: [`crate::engine::physics::damper::contact_share`]), the note dying more gradually.
+pub fn damper_landing_s(velocity: f64) -> f64 {
+    let v = if velocity > 0.0 {
+        velocity.clamp(1.0, 127.0)
+    } else {
+        crate::midi::DEFAULT_RELEASE_VELOCITY
+    };
+    DAMPER_LANDING_S * crate::midi::DEFAULT_RELEASE_VELOCITY / v
 }
 
 /// A voice neither sounding nor fading: one that never played first, else any.

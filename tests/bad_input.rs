@@ -102,6 +102,12 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
     assert!(e.contains("bad_keyboard_losses.toml") && e.contains("`losses.key` = [2, 88]"));
     let e = keyboard_error("bad_keyboard_dampers.toml");
     assert!(e.contains("`dampers.width_m` = 0.2 (key 1)") && e.contains("[0.001, 0.1]"));
+    let e = keyboard_error("bad_keyboard_damper_travel.toml");
+    assert!(
+        e.contains("bad_keyboard_damper_travel.toml")
+            && e.contains("`damper_travel.full_lift_m` = 0.0003")
+            && e.contains("more than damper_travel.rest_compression_m (0.0005) up to 0.02")
+    );
     let e = keyboard_error("bad_keyboard_voicing.toml");
     assert!(
         e.contains("`voicing.felt_stiffness_factor` = 1000000 (key 88)")

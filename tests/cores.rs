@@ -73,6 +73,7 @@ fn chord() -> Case {
             2_000 + i as u64,
             Event::NoteOff {
                 note: 20 + key as u8,
+                velocity: 64.0,
             },
         ));
     }
@@ -105,7 +106,13 @@ fn script() -> Vec<(u64, Event)> {
         (2600, on(60, 110.0)),
         (3000, on(76, 60.0)),
         (3100, on(96, 100.0)),
-        (4000, Event::NoteOff { note: 36 }),
+        (
+            4000,
+            Event::NoteOff {
+                note: 36,
+                velocity: 64.0,
+            },
+        ),
         (5000, pedal(Pedal::Sustain, false)),
         (6000, on(36, 127.0)),
         (9000, Event::AllNotesOff),

@@ -30,7 +30,10 @@ fn live_parser_follows_the_midi_byte_grammar() {
                 note: 64,
                 velocity: 90.0
             },
-            Event::NoteOff { note: 60 }
+            Event::NoteOff {
+                note: 60,
+                velocity: 64.0
+            }
         ]
     );
     // Real-time bytes (clock, active sensing) inside a message change nothing.
@@ -72,7 +75,13 @@ fn live_parser_follows_the_midi_byte_grammar() {
         ]
     );
     // Data bytes with no status at all are dropped.
-    assert_eq!(live(&[60, 100, 0x80, 60, 0]), [Event::NoteOff { note: 60 }]);
+    assert_eq!(
+        live(&[60, 100, 0x80, 60, 0]),
+        [Event::NoteOff {
+            note: 60,
+            velocity: 64.0
+        }]
+    );
     // A stray end-of-SysEx is a system common message too: it cancels running status (found by
     // the reference decoder below; the parser used to keep it).
     assert_eq!(
@@ -111,13 +120,20 @@ fn reference_decoder(bytes: &[u8]) -> Vec<Event> {
             })
         };
         match (kind, a) {
-            (0x8, _) => {
-                *prefix = 0;
-                Some(Event::NoteOff { note: a })
+            // A release velocity: the prefix's 14 bits, or MIDI's default for none (0).
+            (0x8, _) if b > 0 => {
+                let fourteen = u16::from(b) << 7 | u16::from(std::mem::take(prefix));
+                Some(Event::NoteOff {
+                    note: a,
+                    velocity: (f64::from(fourteen) / 128.0).min(127.0),
+                })
             }
-            (0x9, _) if b == 0 => {
+            (0x8 | 0x9, _) if b == 0 => {
                 *prefix = 0;
-                Some(Event::NoteOff { note: a })
+                Some(Event::NoteOff {
+                    note: a,
+                    velocity: 64.0,
+                })
             }
             (0x9, _) => {
                 let fourteen = u16::from(b) << 7 | u16::from(std::mem::take(prefix));
@@ -296,7 +312,13 @@ fn midi_file_follows_the_tempo_map_across_tracks() {
         assert!((t - want).abs() < 1e-12);
     }
     assert_eq!(events[1].event, Event::pedal(Pedal::Soft, true));
-    assert_eq!(events[3].event, Event::NoteOff { note: 60 });
+    assert_eq!(
+        events[3].event,
+        Event::NoteOff {
+            note: 60,
+            velocity: 64.0
+        }
+    );
 }
 
 #[test]
@@ -459,7 +481,10 @@ fn a_flooded_queue_keeps_every_release() {
     }
     let mut late = vec![];
     for &k in &keys {
-        late.push(Event::NoteOff { note: note(k) });
+        late.push(Event::NoteOff {
+            note: note(k),
+            velocity: 64.0,
+        });
     }
     for down in [true, false] {
         late.push(Event::pedal(Pedal::Sustain, down));
@@ -542,7 +567,10 @@ fn a_hosts_flood_inside_one_cell_keeps_every_release() {
         }));
     }
     for &k in &keys {
-        refused += usize::from(!host.schedule(Event::NoteOff { note: note(k) }));
+        refused += usize::from(!host.schedule(Event::NoteOff {
+            note: note(k),
+            velocity: 64.0,
+        }));
     }
     refused += usize::from(!host.schedule(Event::NoteOn {
         note: note(keys[1]),

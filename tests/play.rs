@@ -195,7 +195,13 @@ fn sustain_keeps_a_released_key_ringing() {
                     velocity: 90.0,
                 },
             ),
-            (0.1, Event::NoteOff { note: 36 }),
+            (
+                0.1,
+                Event::NoteOff {
+                    note: 36,
+                    velocity: 64.0,
+                },
+            ),
         ];
         if sustain {
             events.insert(1, (0.05, Event::pedal(Pedal::Sustain, true)));

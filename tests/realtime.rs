@@ -53,7 +53,13 @@ fn the_callback_never_allocates() {
         (2600, on(36, 110)), // C2 again, in its current motion or a stolen voice
         (3000, Event::pedal(Pedal::Soft, false)),
         (3200, Event::pedal(Pedal::Sostenuto, true)),
-        (4000, Event::NoteOff { note: 60 }),
+        (
+            4000,
+            Event::NoteOff {
+                note: 60,
+                velocity: 64.0,
+            },
+        ),
         (5000, Event::pedal(Pedal::Sustain, false)),
         (6000, Event::AllNotesOff),
         (7000, Event::ResetControllers),

@@ -60,7 +60,10 @@ fn random_events(rng: &mut Rng, held: &mut Vec<u8>, out: &mut [Option<Event>; 4]
     }
     if !held.is_empty() && rng.one_in(70) {
         let note = held.swap_remove(rng.below(held.len() as u64) as usize);
-        out[1] = Some(Event::NoteOff { note });
+        out[1] = Some(Event::NoteOff {
+            note,
+            velocity: 64.0,
+        });
     }
     if rng.one_in(2000) {
         let pedal = [Pedal::Sustain, Pedal::Sostenuto, Pedal::Soft][rng.below(3) as usize];

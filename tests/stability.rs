@@ -346,7 +346,10 @@ fn energy_stress<E: VoicePool>(seconds: f64, tolerance: f64) -> (u64, u64, f64) 
                 note,
                 velocity: (20 + rng.below(100)) as f64,
             },
-            2 | 3 => Event::NoteOff { note },
+            2 | 3 => Event::NoteOff {
+                note,
+                velocity: 64.0,
+            },
             d => Event::pedal(
                 [Pedal::Sustain, Pedal::Sostenuto, Pedal::Soft][rng.below(3) as usize],
                 d == 4,

@@ -319,6 +319,9 @@ impl PluginMainThreadParams for MainThread<'_> {
         match i {
             params::GAIN_DB => write!(writer, "{value:.1} dB"),
             params::VELOCITY_CURVE => write!(writer, "{value:.2}"),
+            params::SUSTAIN if value <= 0.0 => write!(writer, "up"),
+            params::SUSTAIN if value >= 1.0 => write!(writer, "down"),
+            params::SUSTAIN => write!(writer, "{:.0} %", 100.0 * value),
             _ if p.max == 1.0 && p.stepped => {
                 write!(writer, "{}", if value >= 0.5 { "down" } else { "up" })
             }
@@ -335,6 +338,14 @@ impl PluginMainThreadParams for MainThread<'_> {
                 "down" | "on" | "1" => 1.0,
                 "up" | "off" | "0" => 0.0,
                 _ => return None,
+            },
+            None if i == params::SUSTAIN => match text {
+                "down" | "on" => 1.0,
+                "up" | "off" => 0.0,
+                _ => match text.strip_suffix('%') {
+                    Some(percent) => percent.trim().parse::<f64>().ok()? / 100.0,
+                    None => text.parse().ok()?,
+                },
             },
             _ => text.trim_end_matches("dB").trim().parse().ok()?,
         };

@@ -1,4 +1,4 @@
-//! The plugin's parameters: the three pedals, the output gain and the velocity curve
+//! The plugin's parameters: the three pedals (the sustain pedal's depth continuous), the output gain and the velocity curve
 //! (automatable, applied within the block at their event's frame), the keyboard, the voice pool's
 //! size, the integrator and the pedal's halo (not automatable: a change rebuilds the piano in the
 //! background, [`crate::rebuild`]). Values are shared between the main thread and the audio thread as atomics.
@@ -59,7 +59,12 @@ const fn switch(id: u32, name: &'static str, key: &'static str) -> Spec {
 
 /// Every parameter, in the order hosts list them.
 pub const PARAMS: [Spec; 9] = [
-    switch(1, "Sustain pedal", "sustain"),
+    // Continuous: how far the dampers are lifted (`unacorda::play::sustain_lift`; half
+    // pedalling between the ends).
+    Spec {
+        stepped: false,
+        ..switch(1, "Sustain pedal", "sustain")
+    },
     switch(2, "Sostenuto pedal", "sostenuto"),
     switch(3, "Soft pedal (una corda)", "soft"),
     Spec {

@@ -40,7 +40,7 @@ pub struct Processor<'a> {
     channels: usize,
     scratch: Vec<f32>,
     /// The pedal parameters as last played (a state load changes them behind the processor).
-    pedals: [bool; 3],
+    pedals: [f64; 3],
     /// The gain applied to the last frame (linear).
     gain: f32,
     /// The ring-out reported as the tail (host frames; infinite on RK4).
@@ -174,7 +174,7 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             engine,
             channels,
             scratch: vec![0.0; SCRATCH_FRAMES * channels],
-            pedals: [false; 3],
+            pedals: [0.0; 3],
             gain: db_to_gain(values.get(GAIN_DB)),
             tail,
             built,
@@ -231,7 +231,7 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         if let Some(engine) = &mut self.engine {
             engine.silence();
         }
-        self.pedals = [false; 3];
+        self.pedals = [0.0; 3];
     }
 }
 
@@ -279,10 +279,10 @@ impl Processor<'_> {
     /// or a state load on the main thread).
     fn settle_pedals(&mut self) {
         for (i, &(index, pedal)) in PEDALS.iter().enumerate() {
-            let down = self.shared.values.on(index);
-            if down != self.pedals[i] {
-                self.pedals[i] = down;
-                self.play(Event::pedal(pedal, down));
+            let depth = self.shared.values.get(index);
+            if depth != self.pedals[i] {
+                self.pedals[i] = depth;
+                self.play(Event::Pedal { pedal, depth });
             }
         }
     }
@@ -307,13 +307,22 @@ impl Processor<'_> {
                 note,
                 velocity: curved_velocity((e.velocity() * 127.0).clamp(1.0, 127.0), curve),
             }),
+            // CLAP's release velocity, 0-1, on MIDI's scale (0, a host that has none, is MIDI's
+            // default).
             Some(CoreEventSpace::NoteOff(e)) => Some(match note(e.pckn().key) {
-                Some(note) => Event::NoteOff { note },
+                Some(note) => Event::NoteOff {
+                    note,
+                    velocity: (e.velocity() * 127.0).min(127.0),
+                },
                 None => Event::AllNotesOff,
             }),
-            // A choke stops the note at once: its damper falls (every damper for a wildcard).
+            // A choke stops the note at once: its damper falls as fast as a key lets it (every
+            // damper for a wildcard).
             Some(CoreEventSpace::NoteChoke(e)) => Some(match note(e.pckn().key) {
-                Some(note) => Event::NoteOff { note },
+                Some(note) => Event::NoteOff {
+                    note,
+                    velocity: 127.0,
+                },
                 None => Event::AllSoundOff,
             }),
             Some(CoreEventSpace::Midi(e)) => {

@@ -45,9 +45,10 @@ fn checked(f: &mut dyn FnMut()) -> u32 {
 }
 
 /// A performance in the host's events: CLAP notes (one at velocity 0, the softest strike, one
-/// between MIDI's velocity steps), MIDI notes (one refined by a CC88 prefix) and the sustain pedal
-/// as MIDI CC64, the soft pedal as a parameter, releases with the
-/// pedal down and up, a wildcard note-off.
+/// between MIDI's velocity steps), MIDI notes (one refined by a CC88 prefix), a CLAP release
+/// velocity and a host's release without one, the sustain pedal
+/// as MIDI CC64 and part way down as a parameter and as CC64 (a release under it), the soft pedal
+/// as a parameter, releases with the pedal down and up, a wildcard note-off.
 fn script() -> Vec<(u64, Play)> {
     let ms = |t: f64| (t * RATE_HZ / 1000.0).round() as u64;
     let mut s = vec![
@@ -55,16 +56,19 @@ fn script() -> Vec<(u64, Play)> {
         (ms(20.0), Play::Midi([0x90, 64, 80])),
         (ms(35.0), Play::On(67, 0.0)),
         (ms(60.0), Play::Midi([0xB0, 64, 127])),
-        (ms(80.0), Play::Off(Some(60))),
-        (ms(90.0), Play::Midi([0x80, 64, 0])),
+        (ms(80.0), Play::Off(Some(60), 0.0)),
+        (ms(90.0), Play::Midi([0x80, 64, 30])),
         (ms(110.0), Play::Param(SOFT, 1.0)),
         (ms(120.0), Play::On(48, 90.0 / 127.0)),
         (ms(129.0), Play::Midi([0xB1, 88, 64])),
         (ms(130.0), Play::Midi([0x91, 36, 110])),
+        (ms(140.0), Play::Param(SUSTAIN, 0.45)),
+        (ms(145.0), Play::Off(Some(48), 0.2)),
+        (ms(150.0), Play::Midi([0xB0, 64, 50])),
         (ms(160.0), Play::Midi([0xB0, 64, 0])),
         (ms(170.0), Play::Param(SOFT, 0.0)),
         (ms(175.0), Play::On(72, 0.4321)),
-        (ms(200.0), Play::Off(None)),
+        (ms(200.0), Play::Off(None, 0.0)),
         (ms(210.0), Play::Midi([0x90, 84, 127])),
         (ms(230.0), Play::Midi([0x90, 84, 0])),
     ];
@@ -83,12 +87,18 @@ fn as_piano_events(script: &[(u64, Play)]) -> Vec<TimedEvent> {
                     note: note as u8,
                     velocity: (v * 127.0).clamp(1.0, 127.0),
                 },
-                Play::Off(Some(note)) => Event::NoteOff { note: note as u8 },
-                Play::Off(None) => Event::AllNotesOff,
+                Play::Off(Some(note), v) => Event::NoteOff {
+                    note: note as u8,
+                    velocity: 127.0 * v,
+                },
+                Play::Off(None, _) => Event::AllNotesOff,
                 Play::Choke(_) => return None,
                 Play::Midi([s, d1, d2]) => midi.decode(s, d1, d2)?,
                 Play::Param(SOFT, v) => Event::pedal(Pedal::Soft, v >= 0.5),
-                Play::Param(SUSTAIN, v) => Event::pedal(Pedal::Sustain, v >= 0.5),
+                Play::Param(SUSTAIN, depth) => Event::Pedal {
+                    pedal: Pedal::Sustain,
+                    depth,
+                },
                 Play::Param(..) => return None,
             };
             Some(TimedEvent {
@@ -434,7 +444,7 @@ fn pedals_reset_and_sleep() {
             (t0, Play::Param(SUSTAIN, sustain)),
             (t0, Play::Param(SOFT, soft)),
             (t0 + 1, Play::On(60, 0.7)),
-            (t0 + second as u64 / 10, Play::Off(Some(60))),
+            (t0 + second as u64 / 10, Play::Off(Some(60), 0.0)),
         ];
         let heard = active.run(second / 2, &[480], &script, host::unchecked);
         active.processor.reset();

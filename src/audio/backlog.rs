@@ -16,10 +16,11 @@ const PEDALS: [Pedal; 3] = [Pedal::Sustain, Pedal::Sostenuto, Pedal::Soft];
 
 /// Releases waiting for room in the queue, and what the queue has cost (written by the thread
 /// that schedules live events; read by it for the summary).
-#[derive(Debug, Default, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Backlog {
-    /// Notes whose note-off waits, one bit per MIDI note.
+    /// Notes whose note-off waits, one bit per MIDI note, and each one's release velocity.
     note_offs: u128,
+    release_velocity: [f64; 128],
     /// Each pedal's latest position not yet queued ([`PEDALS`] order).
     pedals: [Option<f64>; 3],
     all_sound_off: bool,
@@ -29,6 +30,21 @@ pub struct Backlog {
     pub dropped_note_ons: u64,
     /// Releases and pedal moves queued late, once the queue had room.
     pub delayed: u64,
+}
+
+impl Default for Backlog {
+    fn default() -> Backlog {
+        Backlog {
+            note_offs: 0,
+            release_velocity: [0.0; 128],
+            pedals: [None; 3],
+            all_sound_off: false,
+            all_notes_off: false,
+            reset_controllers: false,
+            dropped_note_ons: 0,
+            delayed: 0,
+        }
+    }
 }
 
 impl Backlog {
@@ -45,7 +61,10 @@ impl Backlog {
         match event {
             Event::NoteOn { .. } => self.dropped_note_ons += 1,
             // A MIDI note is a data byte, 0–127: one bit each.
-            Event::NoteOff { note } => self.note_offs |= 1u128 << (note & 0x7F),
+            Event::NoteOff { note, velocity } => {
+                self.note_offs |= 1u128 << (note & 0x7F);
+                self.release_velocity[usize::from(note & 0x7F)] = velocity;
+            }
             Event::Pedal { pedal, depth } => {
                 let i = PEDALS.iter().position(|&p| p == pedal).unwrap_or(0);
                 self.pedals[i] = Some(depth);
@@ -70,7 +89,8 @@ impl Backlog {
         }
         if self.note_offs != 0 {
             let note = self.note_offs.trailing_zeros() as u8;
-            return Some(Event::NoteOff { note });
+            let velocity = self.release_velocity[usize::from(note)];
+            return Some(Event::NoteOff { note, velocity });
         }
         PEDALS
             .iter()
@@ -84,7 +104,7 @@ impl Backlog {
             Event::AllSoundOff => self.all_sound_off = false,
             Event::AllNotesOff => self.all_notes_off = false,
             Event::ResetControllers => self.reset_controllers = false,
-            Event::NoteOff { note } => self.note_offs &= !(1u128 << (note & 0x7F)),
+            Event::NoteOff { note, .. } => self.note_offs &= !(1u128 << (note & 0x7F)),
             Event::Pedal { pedal, .. } => {
                 let i = PEDALS.iter().position(|&p| p == pedal).unwrap_or(0);
                 self.pedals[i] = None;
@@ -99,6 +119,11 @@ impl Backlog {
 mod tests {
     use super::*;
 
+    fn off(note: u8, velocity: f64) -> Event {
+        Event::NoteOff { note, velocity }
+    }
+
+    /// A key's note-off kept once, with its latest release velocity.
     #[test]
     fn every_release_is_kept_once_and_strikes_are_counted() {
         let mut b = Backlog::default();
@@ -107,10 +132,10 @@ mod tests {
                 note: 60,
                 velocity: 90.0,
             },
-            Event::NoteOff { note: 60 },
-            Event::NoteOff { note: 60 },
-            Event::NoteOff { note: 127 },
-            Event::NoteOff { note: 0 },
+            off(60, 30.0),
+            off(60, 100.5),
+            off(127, 64.0),
+            off(0, 1.0),
             Event::pedal(Pedal::Sustain, true),
             Event::pedal(Pedal::Sustain, false),
             Event::pedal(Pedal::Soft, true),
@@ -127,9 +152,9 @@ mod tests {
             out,
             [
                 Event::AllNotesOff,
-                Event::NoteOff { note: 0 },
-                Event::NoteOff { note: 60 },
-                Event::NoteOff { note: 127 },
+                off(0, 1.0),
+                off(60, 100.5),
+                off(127, 64.0),
                 Event::pedal(Pedal::Sustain, false),
                 Event::pedal(Pedal::Soft, true),
             ]

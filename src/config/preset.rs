@@ -7,7 +7,7 @@
 use crate::board::BoardSpec;
 use crate::config::asset::{self, AssetError};
 use crate::engine::physics::contact::{hertz_stiffness_n_m, Contact};
-use crate::engine::physics::damper::{DamperParams, FeltModel};
+use crate::engine::physics::damper::{self, DamperParams, FeltModel};
 use crate::engine::physics::hammer::HammerParams;
 use crate::engine::physics::soundboard::SoundboardModes;
 use crate::engine::physics::string::{ModeSet, StringParams};
@@ -175,7 +175,28 @@ pub struct DamperSection {
     /// ([`FeltModel`]).
     #[serde(default, with = "FeltModelName")]
     pub model: FeltModel,
+    /// How far the felt rises clear of the strings at the full lift (m), and how far it sits
+    /// pressed into them at rest (m): a part-lifted damper's share of the felt
+    /// ([`DamperParams::contact_share`]).
+    #[serde(default = "default_full_lift_m")]
+    pub full_lift_m: f64,
+    #[serde(default = "default_rest_compression_m")]
+    pub rest_compression_m: f64,
 }
+
+fn default_full_lift_m() -> f64 {
+    damper::FULL_LIFT_M
+}
+
+fn default_rest_compression_m() -> f64 {
+    damper::REST_COMPRESSION_M
+}
+
+/// The ranges of a damper's travel: its compression at rest (m), and its full lift (m), which
+/// must clear the compression (a felt still pressing at the full lift would jump off the strings
+/// there).
+pub const REST_COMPRESSION_M: std::ops::RangeInclusive<f64> = 1e-5..=5e-3;
+pub const MAX_FULL_LIFT_M: f64 = 0.02;
 
 /// [`FeltModel`] as a preset or keyboard names it.
 #[derive(Deserialize)]
@@ -405,6 +426,23 @@ impl Preset {
             1.0,
         )?;
         range("damper.damping_n_s_m", self.damper.damping_n_s_m, 0.0, 1e3)?;
+        let rest = self.damper.rest_compression_m;
+        range(
+            "damper.rest_compression_m",
+            rest,
+            *REST_COMPRESSION_M.start(),
+            *REST_COMPRESSION_M.end(),
+        )?;
+        if !(self.damper.full_lift_m > rest && self.damper.full_lift_m <= MAX_FULL_LIFT_M) {
+            return Err(PresetError::Range {
+                path: path.to_owned(),
+                field: "damper.full_lift_m",
+                value: self.damper.full_lift_m.to_string(),
+                allowed: format!(
+                    "more than damper.rest_compression_m ({rest}) up to {MAX_FULL_LIFT_M}"
+                ),
+            });
+        }
         // The felt lies on the speaking length.
         let d = &self.damper;
         let (x_m, half_m) = (d.position_ratio * s.speaking_length_m, d.width_m / 2.0);
@@ -648,6 +686,8 @@ impl LoadedPreset {
                 damping_n_s_m: self.preset.damper.damping_n_s_m,
                 width_m: self.preset.damper.width_m,
                 model: self.preset.damper.model,
+                full_lift_m: self.preset.damper.full_lift_m,
+                rest_compression_m: self.preset.damper.rest_compression_m,
             }),
             contact: self.contact(),
             // The residual stays with the preset's board: the key takes its own point's share.
@@ -717,6 +757,27 @@ mod tests {
         println!("{e}");
         assert!(e.contains("`damper.width_m` = 0.05") && e.contains("less than 0.0"));
         p.damper.width_m = 0.0;
+        assert!(p.validate(Path::new("c2.toml")).is_ok());
+    }
+
+    /// A damper's travel: a compression out of its range, and a full lift that would leave the
+    /// felt pressed on the strings, are refused with the field and the range.
+    #[test]
+    fn a_damper_travel_out_of_range_is_refused() {
+        let mut p = Preset::resolve("c2").unwrap().preset;
+        p.damper.rest_compression_m = 0.0;
+        let e = p.validate(Path::new("c2.toml")).unwrap_err().to_string();
+        println!("{e}");
+        assert!(e.contains("`damper.rest_compression_m` = 0") && e.contains("[1e-5, 5e-3]"));
+        p.damper.rest_compression_m = 1e-3;
+        p.damper.full_lift_m = 1e-3;
+        let e = p.validate(Path::new("c2.toml")).unwrap_err().to_string();
+        println!("{e}");
+        assert!(
+            e.contains("`damper.full_lift_m` = 0.001")
+                && e.contains("more than damper.rest_compression_m (0.001) up to 0.02")
+        );
+        p.damper.full_lift_m = 4e-3;
         assert!(p.validate(Path::new("c2.toml")).is_ok());
     }
 }

@@ -9,8 +9,9 @@
 
 use crate::config::preset::{
     bridge_point_index, heard, read_text, FeltModelName, LoadedPreset, Preset, PresetError,
-    RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA, MAX_HAMMER_MASS_KG,
-    MAX_HYSTERESIS_S, MIN_EXPONENT, MIN_FULL_SCALE_PA, MIN_HAMMER_MASS_KG,
+    RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_LIFT_M, MAX_FULL_SCALE_PA,
+    MAX_HAMMER_MASS_KG, MAX_HYSTERESIS_S, MIN_EXPONENT, MIN_FULL_SCALE_PA, MIN_HAMMER_MASS_KG,
+    REST_COMPRESSION_M,
 };
 use crate::engine::physics::damper::{DamperParams, FeltModel};
 use crate::engine::physics::string::StringParams;
@@ -55,6 +56,8 @@ pub struct Scaling {
     /// How the exact engine carries every key's damper felt (`damper_model`); `None`: the base
     /// preset's.
     pub damper_model: Option<FeltModel>,
+    /// Every key's damper travel (`[damper_travel]`); `None`: the base preset's.
+    pub damper_travel: Option<DamperTravel>,
     pub voicing: Vec<VoicingAnchor>,
     /// Registers whose string modes reach another frequency than `layout.max_mode_freq_hz`
     /// (`mode_limits`), in increasing keys.
@@ -161,6 +164,8 @@ struct ScalingFile {
     dampers: Vec<DamperAnchor>,
     /// `coupled` or `modal` ([`FeltModel`]); inherited from the base keyboard when absent.
     damper_model: Option<FeltModelField>,
+    /// Inherited from the base keyboard when absent.
+    damper_travel: Option<DamperTravel>,
     #[serde(default)]
     voicing: Vec<VoicingAnchor>,
     #[serde(default)]
@@ -196,6 +201,16 @@ pub struct LossAnchor {
     pub key: usize,
     pub b1_per_s: f64,
     pub b3_s: f64,
+}
+
+/// Every damper's travel: how far its felt rises clear of the strings at the full lift and how
+/// far it sits pressed into them at rest (m), what a part-lifted damper's share of its felt
+/// follows ([`DamperParams::contact_share`]).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DamperTravel {
+    pub full_lift_m: f64,
+    pub rest_compression_m: f64,
 }
 
 /// The damper at one key: where its felt lies, how far apart its two contact points are, and how
@@ -477,6 +492,9 @@ impl Scaling {
                 .damper_model
                 .map(|m| m.0)
                 .or_else(|| base.as_ref().and_then(|b| b.damper_model)),
+            damper_travel: file
+                .damper_travel
+                .or_else(|| base.as_ref().and_then(|b| b.damper_travel)),
             voicing: inherit_points(file.voicing, base.as_ref().map(|b| &b.voicing)),
             mode_limits: inherit_points(file.mode_limits, base.as_ref().map(|b| &b.mode_limits)),
             base_preset: file
@@ -637,6 +655,26 @@ impl Scaling {
                         &format!("a number in (0, {hi:e}]"),
                     ));
                 }
+            }
+        }
+        if let Some(t) = &self.damper_travel {
+            let rest = t.rest_compression_m;
+            let (lo, hi) = (*REST_COMPRESSION_M.start(), *REST_COMPRESSION_M.end());
+            if !(lo..=hi).contains(&rest) {
+                return Err(bad(
+                    "damper_travel.rest_compression_m",
+                    rest.to_string(),
+                    &format!("a number in [{lo:e}, {hi:e}]"),
+                ));
+            }
+            if !(t.full_lift_m > rest && t.full_lift_m <= MAX_FULL_LIFT_M) {
+                return Err(bad(
+                    "damper_travel.full_lift_m",
+                    t.full_lift_m.to_string(),
+                    &format!(
+                        "more than damper_travel.rest_compression_m ({rest}) up to {MAX_FULL_LIFT_M}"
+                    ),
+                ));
             }
         }
         for a in &self.dampers {
@@ -1007,6 +1045,8 @@ impl LoadedScaling {
                 damping_n_s_m: 0.0,
                 width_m: at(|a| a.width_m),
                 model: preset.damper.model,
+                full_lift_m: preset.damper.full_lift_m,
+                rest_compression_m: preset.damper.rest_compression_m,
             };
             felt.damping_n_s_m = felt.coefficient_for_t60(
                 at(|a| a.t60_s),
@@ -1019,6 +1059,10 @@ impl LoadedScaling {
         }
         if let Some(model) = self.scaling.damper_model {
             preset.damper.model = model;
+        }
+        if let Some(t) = self.scaling.damper_travel {
+            let d = &mut preset.damper;
+            (d.full_lift_m, d.rest_compression_m) = (t.full_lift_m, t.rest_compression_m);
         }
         let h = &mut preset.hammer;
         h.mass_kg = self.interpolate(key, |a| a.hammer_mass_kg);

@@ -22,12 +22,36 @@ pub struct VoiceState {
     pub hammer_on: bool,
     /// The strings the hammer strikes (the first ones; una corda leaves the last out).
     pub struck: [bool; MAX_STRINGS],
+    /// How far the key or a pedal lifts the damper: 0 resting on the strings, 1 clear of them,
+    /// in between part-lifted ([`Policy::touch_felt`]).
+    pub damper_lift: f64,
+    /// The felt rests fully on the strings: the damped key (a resting damper, or a part-lifted
+    /// one that every string still touches all the time).
     pub damper_down: bool,
+    /// The share of the felt's damping a part-lifted damper gives while it is not down (0 for
+    /// one resting or clear): written between steps by [`Policy::touch_felt`].
+    pub damper_share: f64,
+    /// Where a moving damper is going (a lift), and how far it moves each step (0: still):
+    /// [`Policy::move_damper`].
+    pub damper_target: f64,
+    pub damper_speed: f64,
     /// Scale of the contact forces: 1, or falling to 0 along the fade of a stolen voice.
     pub coupling: f64,
     /// Steps left in the fade of a stolen voice, and the key and strike that follow it.
     pub fade_left: u32,
     pub pending: Option<(usize, Strike)>,
+}
+
+impl VoiceState {
+    /// The share of the damper felt's damping on the strings now: all of it while the damper is
+    /// down, a part-lifted felt's share, or none.
+    pub fn felt_share(&self) -> f64 {
+        if self.damper_down {
+            1.0
+        } else {
+            self.damper_share
+        }
+    }
 }
 
 impl Default for VoiceState {
@@ -37,7 +61,11 @@ impl Default for VoiceState {
             active: false,
             hammer_on: false,
             struck: [false; MAX_STRINGS],
+            damper_lift: 1.0,
             damper_down: false,
+            damper_share: 0.0,
+            damper_target: 1.0,
+            damper_speed: 0.0,
             coupling: 1.0,
             fade_left: 0,
             pending: None,
@@ -156,6 +184,8 @@ pub trait Policy {
         let s = self.state_mut(k);
         s.key = Some(key);
         (s.active, s.hammer_on, s.damper_down) = (false, false, false);
+        (s.damper_lift, s.damper_share) = (1.0, 0.0);
+        (s.damper_target, s.damper_speed) = (1.0, 0.0);
         (s.coupling, s.fade_left, s.pending) = (1.0, 0, None);
         self.damper_moved(k);
     }
@@ -187,7 +217,8 @@ pub trait Policy {
             s.fade_left = fade_steps;
         }
         s.pending = Some((key, strike));
-        s.damper_down = false;
+        (s.damper_lift, s.damper_down, s.damper_share) = (1.0, false, 0.0);
+        (s.damper_target, s.damper_speed) = (1.0, 0.0);
         self.damper_moved(k);
     }
 
@@ -198,10 +229,10 @@ pub trait Policy {
             return;
         }
         if let Some((key, strike)) = s.pending {
-            let damper_down = s.damper_down;
+            let lift = s.damper_target;
             self.assign(k, key);
             self.strike_voice(k, strike);
-            self.set_damper_voice(k, damper_down);
+            self.set_damper_lift(k, lift);
         }
     }
 
@@ -244,11 +275,104 @@ pub trait Policy {
     /// Lower (key released) or lift (key down, or a pedal holding it) voice `k`'s damper. Keys
     /// without a damper ignore it. For a fading voice it applies to the key that follows.
     fn set_damper_voice(&mut self, k: usize, down: bool) {
+        self.set_damper_lift(k, if down { 0.0 } else { 1.0 });
+    }
+
+    /// Set voice `k`'s damper at the lift `lift` (0 resting on the strings, 1 clear of them, in
+    /// between part-lifted: [`Policy::touch_felt`]). Keys without a damper ignore it. For a
+    /// fading voice it applies to the key that follows.
+    fn set_damper_lift(&mut self, k: usize, lift: f64) {
+        let lift = self.damper_lift_for(k, lift);
+        let s = self.state_mut(k);
+        (s.damper_target, s.damper_speed) = (lift, 0.0);
+        self.place_damper(k, lift);
+    }
+
+    /// Move voice `k`'s damper to the lift `lift` at a constant speed over `steps` steps (a key
+    /// let go: its damper falls with it), at once within a step. Keys without a damper ignore it.
+    fn move_damper(&mut self, k: usize, lift: f64, steps: f64) {
+        let lift = self.damper_lift_for(k, lift);
+        let distance = (lift - self.state(k).damper_lift).abs();
+        if steps < 1.0 || distance == 0.0 {
+            self.set_damper_lift(k, lift);
+            return;
+        }
+        let s = self.state_mut(k);
+        (s.damper_target, s.damper_speed) = (lift, distance / steps);
+    }
+
+    /// Each moving damper ([`Policy::move_damper`]) moves on by `steps` steps: the engines call
+    /// it before each step or block, before [`Policy::touch_felts`].
+    fn move_dampers(&mut self, steps: usize) {
+        for k in 0..self.n_voices() {
+            let s = *self.state(k);
+            if s.damper_speed == 0.0 {
+                continue;
+            }
+            let (to, by) = (s.damper_target, s.damper_speed * steps as f64);
+            let lift = if (to - s.damper_lift).abs() <= by {
+                self.state_mut(k).damper_speed = 0.0;
+                to
+            } else {
+                s.damper_lift + by.copysign(to - s.damper_lift)
+            };
+            self.place_damper(k, lift);
+        }
+    }
+
+    /// `lift` for voice `k`'s damper within 0-1, or clear for a key without one (that of the key
+    /// that follows a fading voice).
+    fn damper_lift_for(&self, k: usize, lift: f64) -> f64 {
         let s = self.state(k);
         let key = s.pending.map(|(key, _)| key).or(s.key);
         let has = key.is_some_and(|key| self.key_has_damper(key));
-        self.state_mut(k).damper_down = down && has;
+        if has {
+            lift.clamp(0.0, 1.0)
+        } else {
+            1.0
+        }
+    }
+
+    /// Voice `k`'s damper at the lift `lift` now, where it moves or not.
+    fn place_damper(&mut self, k: usize, lift: f64) {
+        let s = self.state_mut(k);
+        (s.damper_lift, s.damper_down, s.damper_share) = (lift, lift == 0.0, 0.0);
         self.damper_moved(k);
+        self.touch_felt(k);
+    }
+
+    /// The share of its felt's damping voice `k`'s damper gives at the lift `lift`
+    /// ([`crate::engine::physics::damper::DamperParams::contact_share`]) with its loudest
+    /// string's vertical excursion under the felt now (the amplitude of a sinusoid of the same
+    /// mean square, from its modes' amplitudes). By default none.
+    fn felt_share(&self, _k: usize, _lift: f64) -> f64 {
+        0.0
+    }
+
+    /// How much of its felt a part-lifted damper gives voice `k` from its strings' excursion now
+    /// ([`Policy::felt_share`]): all of it (the damper down, as if
+    /// resting), a share ([`VoiceState::damper_share`]) or none. A damper resting or clear, or a
+    /// voice not simulated, is left as it is. Between steps.
+    fn touch_felt(&mut self, k: usize) {
+        let s = *self.state(k);
+        if s.damper_lift <= 0.0 || s.damper_lift >= 1.0 || !s.active {
+            return;
+        }
+        let share = self.felt_share(k, s.damper_lift);
+        let down = share >= 1.0;
+        let s = self.state_mut(k);
+        s.damper_share = if down { 0.0 } else { share };
+        if s.damper_down != down {
+            s.damper_down = down;
+            self.damper_moved(k);
+        }
+    }
+
+    /// [`Policy::touch_felt`] for every voice: the engines call it before each step or block.
+    fn touch_felts(&mut self) {
+        for k in 0..self.n_voices() {
+            self.touch_felt(k);
+        }
     }
 
     /// What an engine does once voice `k`'s damper has been lowered or lifted (between steps):

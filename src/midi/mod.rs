@@ -79,6 +79,10 @@ pub enum Pedal {
     Soft,
 }
 
+/// The release velocity of a note-off that has none (a note-on of velocity 0, a MIDI note-off
+/// of velocity 0, a plugin host's note-off without one): MIDI's default.
+pub const DEFAULT_RELEASE_VELOCITY: f64 = 64.0;
+
 /// A pedal's depth from which it counts as down, of 0 (up) to 1 (fully down): MIDI's convention,
 /// a controller value of 64 or more (64/127 = 0.504, 63/127 = 0.496).
 pub const PEDAL_DOWN_AT: f64 = 0.5;
@@ -92,8 +96,11 @@ pub enum Event {
         note: u8,
         velocity: f64,
     },
+    /// A key let go: `velocity` its release velocity on MIDI's scale, 1–127 (how fast the key
+    /// rose), [`DEFAULT_RELEASE_VELOCITY`] where the source has none.
     NoteOff {
         note: u8,
+        velocity: f64,
     },
     /// A pedal moved to `depth`, 0 (up) to 1 (fully down): a controller's value / 127, or a plugin
     /// parameter's value.
@@ -147,13 +154,17 @@ impl Decoder {
         let channel = usize::from(status & 0x0F);
         let lsb = &mut self.velocity_lsb[channel];
         match status & 0xF0 {
-            0x80 => {
+            // A release velocity of 0 is a keyboard that sends none (MIDI asks for 64 then).
+            0x80 if data2 > 0 => Some(Event::NoteOff {
+                note: data1,
+                velocity: fine_velocity(data2, std::mem::take(lsb)),
+            }),
+            0x80 | 0x90 if data2 == 0 => {
                 *lsb = 0;
-                Some(Event::NoteOff { note: data1 })
-            }
-            0x90 if data2 == 0 => {
-                *lsb = 0;
-                Some(Event::NoteOff { note: data1 })
+                Some(Event::NoteOff {
+                    note: data1,
+                    velocity: DEFAULT_RELEASE_VELOCITY,
+                })
             }
             0x90 => Some(Event::NoteOn {
                 note: data1,
@@ -254,6 +265,21 @@ mod tests {
             speed(101.0)
         );
         assert!(speed(100.0) < speed(100.5) && speed(100.5) < speed(101.0));
+    }
+
+    /// A note-off's release velocity is its data byte, refined by a CC88 prefix as a note-on's;
+    /// a note-off of velocity 0 and a note-on of velocity 0 have none: MIDI's default, 64.
+    #[test]
+    fn a_note_off_carries_its_release_velocity() {
+        let mut d = Decoder::default();
+        let off = |velocity: f64| Some(Event::NoteOff { note: 60, velocity });
+        assert_eq!(d.decode(0x80, 60, 30), off(30.0));
+        d.decode(0xB2, VELOCITY_PREFIX_CC, 64);
+        assert_eq!(d.decode(0x82, 60, 30), off(30.5));
+        assert_eq!(d.decode(0x82, 60, 30), off(30.0));
+        assert_eq!(d.decode(0x80, 60, 0), off(DEFAULT_RELEASE_VELOCITY));
+        assert_eq!(d.decode(0x90, 60, 0), off(DEFAULT_RELEASE_VELOCITY));
+        assert_eq!(d.decode(0x80, 60, 127), off(127.0));
     }
 
     /// A pedal controller's value is its depth, value / 127, and it is down from 64 up, as MIDI

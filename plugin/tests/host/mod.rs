@@ -245,9 +245,10 @@ impl HostHandlers for Host {
 /// What the test plays at a frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Play {
-    /// CLAP note on (velocity 0–1) and off; `None`: the wildcard key (−1).
+    /// CLAP note on (velocity 0–1) and off (release velocity 0–1, 0 for none); `None`: the
+    /// wildcard key (−1).
     On(u16, f64),
-    Off(Option<u16>),
+    Off(Option<u16>, f64),
     Choke(Option<u16>),
     /// A MIDI 1.0 message.
     Midi([u8; 3]),
@@ -544,10 +545,10 @@ fn push(events: &mut EventBuffer, time: u32, play: Play) {
             Pckn::new(0u16, 0u16, k, Match::All),
             v,
         )),
-        Play::Off(k) => events.push(&NoteOffEvent::new(
+        Play::Off(k, velocity) => events.push(&NoteOffEvent::new(
             time,
             Pckn::new(0u16, Match::All, key(k), Match::All),
-            0.0,
+            velocity,
         )),
         Play::Choke(k) => events.push(&NoteChokeEvent::new(
             time,

@@ -485,7 +485,10 @@ fn damped(keyboard: &str, model: FeltModel, seconds: f64, voices: usize) -> Resu
             if released == 1 {
                 let _ = handle.schedule(Scheduled {
                     frame: frame + 480,
-                    event: Event::NoteOff { note },
+                    event: Event::NoteOff {
+                        note,
+                        velocity: 64.0,
+                    },
                 });
             }
         }

@@ -18,7 +18,7 @@ use super::kernels::{
     DIRECTIONS, FELT_ROWS, READS, SOUND_READS, WIDE,
 };
 use crate::engine::modal::{input_weights, Modal};
-use crate::engine::physics::damper::FeltModel;
+use crate::engine::physics::damper::{DamperParams, FeltModel};
 use crate::engine::physics::duplex::duplex_damping_matrix;
 use crate::engine::physics::hammer::HammerParams;
 use crate::engine::spec::{BuildError, Direction, UnisonSpec, CHANNELS, MAX_STRINGS};
@@ -335,24 +335,137 @@ impl KeyModes {
     /// module's tests). A felt can only take energy: a mode it would seem to feed keeps its own
     /// decay.
     pub(crate) fn with_felt(&self, damping_n_s_m: f64) -> KeyModes {
-        let scale = self.lambda.iter().map(|l| l.norm()).fold(1.0, f64::max);
-        let mut lambda = self.lambda.clone();
-        for (m, l) in lambda.iter_mut().enumerate() {
-            let weight = if l.im > 1e-12 * scale { 2.0 } else { 1.0 };
-            let mut delta = c64::new(0.0, 0.0);
-            for (r, g) in self.damper_row.iter().zip(&self.damper_input) {
-                delta -= c64::new(r.re[m], r.im[m]) * c64::new(g.re[m], g.im[m]);
-            }
-            delta *= damping_n_s_m / weight;
-            l.re += delta.re.min(0.0);
-            l.im += delta.im;
-        }
+        let lambda = self
+            .lambda
+            .iter()
+            .zip(self.felt_shift(damping_n_s_m))
+            .map(|(l, d)| l + d)
+            .collect();
         // The felt is in the eigenvalues now: its channels are not kept.
         KeyModes {
             lambda,
             damper_row: vec![],
             damper_input: vec![],
             ..self.clone()
+        }
+    }
+
+    /// How far the felt of `damping_n_s_m` moves each mode's eigenvalue, to first order
+    /// ([`KeyModes::with_felt`]; never towards growth).
+    pub(crate) fn felt_shift(&self, damping_n_s_m: f64) -> Vec<c64> {
+        let scale = self.lambda.iter().map(|l| l.norm()).fold(1.0, f64::max);
+        self.lambda
+            .iter()
+            .enumerate()
+            .map(|(m, l)| {
+                let weight = if l.im > 1e-12 * scale { 2.0 } else { 1.0 };
+                let mut delta = c64::new(0.0, 0.0);
+                for (r, g) in self.damper_row.iter().zip(&self.damper_input) {
+                    delta -= c64::new(r.re[m], r.im[m]) * c64::new(g.re[m], g.im[m]);
+                }
+                delta *= damping_n_s_m / weight;
+                c64::new(delta.re.min(0.0), delta.im)
+            })
+            .collect()
+    }
+}
+
+/// Below this size of its argument [`PartFelt::damp`] takes the exponential as its series to
+/// third order (within 3e-7 of itself), above it in full.
+const SERIES_BELOW: f64 = 0.05;
+
+/// What a part-lifted damper reads and does on a key whose damper is neither down nor clear
+/// ([`crate::engine::pool::Policy::touch_felt`]): its strings' excursion under the felt, and
+/// the felt's share of damping on each mode's decay, to first order as the modal felt's.
+#[derive(Debug, Clone)]
+pub(crate) struct PartFelt {
+    /// Per string, per mode, the square of its vertical displacement under the felt per `|w|`:
+    /// `sum_k |r_k|^2 / |lambda|^2` over the felt's points `k` of the T channel's velocity row
+    /// (each point's share `a_k^2` taken out: the points' mean square).
+    excursion: Vec<Vec<f64>>,
+    /// Per mode, the whole felt's `delta h` ([`KeyModes::felt_shift`] times the step).
+    rate: Vec<c64>,
+    felt: DamperParams,
+}
+
+impl PartFelt {
+    /// A key's, from its modes with the felt's channels, its felt at the step `h` (s).
+    fn new(modes: &KeyModes, felt: DamperParams, h: f64) -> PartFelt {
+        let ns = modes.force_row.len();
+        let points = modes.damper_row.len() / (2 * ns);
+        let excursion = (0..ns)
+            .map(|s| {
+                (0..modes.n_modes())
+                    .map(|m| {
+                        let l2 = modes.lambda[m].norm_sqr();
+                        (0..points)
+                            .map(|p| {
+                                let r = &modes.damper_row[2 * (p * ns + s)];
+                                (r.re[m] * r.re[m] + r.im[m] * r.im[m]) / l2
+                            })
+                            .sum()
+                    })
+                    .collect()
+            })
+            .collect();
+        let rate = modes
+            .felt_shift(felt.damping_n_s_m)
+            .iter()
+            .map(|d| d * h)
+            .collect();
+        PartFelt {
+            excursion,
+            rate,
+            felt,
+        }
+    }
+
+    /// The share of the felt at the lift `lift` ([`DamperParams::contact_share`]) with the
+    /// loudest string's excursion under it from the first `live` modes of `w`.
+    pub(crate) fn share(&self, lift: f64, w: &Split, live: usize) -> f64 {
+        let amplitude_m = self
+            .excursion
+            .iter()
+            .map(|e| {
+                e.iter()
+                    .zip(w.re.iter().zip(&w.im))
+                    .take(live)
+                    .map(|(e, (re, im))| e * (re * re + im * im))
+                    .sum::<f64>()
+            })
+            .fold(0.0, f64::max)
+            .sqrt();
+        self.felt.contact_share(lift, amplitude_m)
+    }
+
+    /// Give the first `live` modes of `z = w + sum_d settle_d D_d` the felt's `share` over
+    /// `steps` steps: each mode's decay moved by `share delta`, `z <- e^{share delta h steps} z`.
+    pub(crate) fn damp(
+        &self,
+        w: &mut Split,
+        settle: &[Split; DIRECTIONS],
+        d: &[f64; DIRECTIONS],
+        live: usize,
+        share: f64,
+        steps: usize,
+    ) {
+        let k = share * steps as f64;
+        for (m, rate) in self.rate.iter().enumerate().take(live) {
+            let x = rate * k;
+            // A light felt's decay over a block is a small fraction of one: the exponential to
+            // third order (error `|x|^4 / 24`); a heavy felt's, in full.
+            let one = c64::new(1.0, 0.0);
+            let g = if x.norm_sqr() < SERIES_BELOW * SERIES_BELOW {
+                one + x * (one + x * 0.5 * (one + x / 3.0))
+            } else {
+                x.exp()
+            };
+            let mut held = c64::new(0.0, 0.0);
+            for (a, dd) in settle.iter().zip(d) {
+                held += c64::new(a.re[m], a.im[m]) * dd;
+            }
+            let z = g * c64::new(w.re[m], w.im[m]) + (g - 1.0) * held;
+            (w.re[m], w.im[m]) = (z.re, z.im);
         }
     }
 }
@@ -811,6 +924,8 @@ pub struct ExactKey {
     /// for a key without a damper.
     pub(crate) damper: Option<DamperKey>,
     pub(crate) modal_felt: Option<Box<ExactKey>>,
+    /// A part-lifted damper's reads and decay (the key's own face, with a damper).
+    pub(crate) part_felt: Option<PartFelt>,
     pub(crate) hammer: HammerParams,
 }
 
@@ -824,7 +939,9 @@ impl ExactKey {
     /// Everything a voice steps with, from the key's modes (cheap: no decomposition), and its
     /// face with a modal felt down.
     pub(crate) fn from_modes(spec: &UnisonSpec, modes: KeyModes) -> ExactKey {
-        match spec.damper {
+        let h = 1.0 / spec.sample_rate_hz;
+        let part_felt = spec.damper.map(|felt| PartFelt::new(&modes, felt, h));
+        let key = match spec.damper {
             Some(felt) if felt.model == FeltModel::Modal => {
                 let face = ExactKey::face(spec, modes.with_felt(felt.damping_n_s_m), None);
                 ExactKey {
@@ -833,7 +950,8 @@ impl ExactKey {
                 }
             }
             felt => ExactKey::face(spec, modes, felt.map(|f| f.damping_n_s_m)),
-        }
+        };
+        ExactKey { part_felt, ..key }
     }
 
     /// The key as it steps with `modes`, with a coupled felt of `coupled_n_s_m` if given.
@@ -985,6 +1103,7 @@ impl ExactKey {
             block,
             damper,
             modal_felt: None,
+            part_felt: None,
             hammer: spec.hammer,
             modes,
         }

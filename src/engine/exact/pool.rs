@@ -138,6 +138,8 @@ impl ExactPool {
     /// One step of every active voice, each one sample at a time ([`Voice::pre_step`],
     /// [`Voice::post_step`]), the interface solved between.
     pub fn step(&mut self) {
+        self.move_dampers(1);
+        self.touch_felts();
         for k in 0..self.voices.len() {
             self.take_up(k);
         }
@@ -154,6 +156,7 @@ impl ExactPool {
             keep_energies: false,
         };
         run(&cx, [&mut self.voices, &mut []], &mut self.steps, 1);
+        self.damp_part_felts(1);
         self.radiated_m3_s = self
             .heard
             .next(self.steps.volume[0], self.steps.board_volume[0]);
@@ -217,6 +220,29 @@ impl ExactPool {
         }
     }
 
+    /// Each voice whose damper is part-lifted, not down, loses its felt's share of damping over
+    /// the `steps` just taken ([`super::key::PartFelt::damp`]): the felt's damping is diagonal in
+    /// the modes, as the free steps are, so the two taken one after the other are the steps with
+    /// both, at the block's ends.
+    fn damp_part_felts(&mut self, steps: usize) {
+        for v in self.voices.iter_mut() {
+            let (true, Some(key)) = (v.state.active, v.state.key) else {
+                continue;
+            };
+            let share = v.state.damper_share;
+            if v.state.damper_down || share <= 0.0 {
+                continue;
+            }
+            let key = &self.keys[key];
+            let face = v.face(key);
+            if let Some(felt) = &key.part_felt {
+                let live = v.live_unpadded(face);
+                felt.damp(&mut v.w, &face.settle, &v.d, live, share, steps);
+                v.energies = None;
+            }
+        }
+    }
+
     /// Every voice whose fade has ended takes its next key.
     fn finish_fades(&mut self) {
         for k in 0..self.voices.len() {
@@ -269,6 +295,8 @@ impl ExactPool {
     /// The last block of a run (`last`) keeps each voice's energies for the policy
     /// ([`Voice::energies`]).
     fn block(&mut self, out: &mut [[f64; CHANNELS]], pair: Option<&dyn Pair>, last: bool) {
+        self.move_dampers(out.len());
+        self.touch_felts();
         for k in 0..self.voices.len() {
             self.take_up(k);
         }
@@ -317,6 +345,7 @@ impl ExactPool {
         }
         let (v0, v1) = self.voices.split_at_mut(passes);
         both(split, &mut || end(&cx, v1, len), &mut || end(&cx, v0, len));
+        self.damp_part_felts(len);
         for (t, out) in out.iter_mut().enumerate() {
             *out = self
                 .heard
@@ -568,6 +597,17 @@ impl Policy for ExactPool {
 
     fn key_has_damper(&self, key: usize) -> bool {
         self.keys[key].has_damper()
+    }
+
+    fn felt_share(&self, k: usize, lift: f64) -> f64 {
+        let v = &self.voices[k];
+        let Some(key) = v.state.key else {
+            return 0.0;
+        };
+        let key = &self.keys[key];
+        key.part_felt.as_ref().map_or(0.0, |felt| {
+            felt.share(lift, &v.w, v.live_unpadded(v.face(key)))
+        })
     }
 
     /// The voice steps with its key's face with the modal felt down from now on, or no longer

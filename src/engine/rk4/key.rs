@@ -4,6 +4,7 @@
 
 use crate::engine::kernels::Real;
 use crate::engine::physics::contact::Contact;
+use crate::engine::physics::damper::DamperParams;
 use crate::engine::physics::duplex::{duplex_damping_matrix, low_rank_factor};
 use crate::engine::physics::hammer::HammerParams;
 use crate::engine::physics::string::ModeSet;
@@ -38,6 +39,8 @@ pub struct Rk4Key<T> {
     /// ([`crate::engine::physics::damper::DamperParams::felt_points`]), and the felt's coefficient (N s/m); empty without damper.
     pub(super) damper_shapes: Vec<Vec<T>>,
     pub(super) damper_n_s_m: f64,
+    /// The felt's parameters (its travel: [`DamperParams::contact_share`]); none without damper.
+    pub(super) damper: Option<DamperParams>,
     /// The duplex matrix (Eq. 13) as `C_d = Wᵀ W`: `W` is `duplex_rank × duplex_n`, row-major.
     pub(super) duplex_w: Vec<T>,
     pub(super) duplex_n: usize,
@@ -152,6 +155,7 @@ pub(super) fn build_key<T: Real>(spec: &UnisonSpec) -> Result<Rk4Key<T>, BuildEr
             .collect(),
         damper_shapes,
         damper_n_s_m,
+        damper: spec.damper,
         duplex_w: cast(&duplex_w),
         duplex_n,
         duplex_rank,

@@ -456,6 +456,8 @@ impl<T: Real> Rk4Pool<T> {
 
     /// Advance one RK4 step; never allocates.
     pub fn step(&mut self) {
+        self.move_dampers(1);
+        self.touch_felts();
         let mut n = 0;
         for (k, voice) in self.model.voices.iter().enumerate() {
             if self.states[k].active {

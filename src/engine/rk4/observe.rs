@@ -111,7 +111,7 @@ impl<T: Real> Rk4Pool<T> {
             let r = km.duplex_rank;
             // (and the dropped modes driven by its force, 3 × 2 per mode).
             eval += 3 * n + 6 * n + 18 * nb + 6 * nr + 4 * r * voice.n_strings * (nt + np);
-            if f[k].damper_down {
+            if f[k].felt_share() > 0.0 {
                 eval += 4 * km.damper_shapes.len() * voice.n_strings * (nt + np);
             }
             if f[k].hammer_on {

@@ -36,6 +36,35 @@ impl<T: Real> Policy for Rk4Pool<T> {
         !self.model.keys[key].damper_shapes.is_empty()
     }
 
+    /// The loudest string's excursion from `sum_k sum_n (a_k psi_n(x_k))^2 (q_n^2 + qdot_n^2 /
+    /// omega_n^2)` over the felt's points `k` (shares `a_k^2` summing to one) and the T modes
+    /// `n`: the mean square of each mode's amplitude under the felt.
+    fn felt_share(&self, k: usize, lift: f64) -> f64 {
+        let Some(key) = self.states[k].key else {
+            return 0.0;
+        };
+        let (km, voice) = (&self.model.keys[key], &self.model.voices[k]);
+        let Some(felt) = km.damper else {
+            return 0.0;
+        };
+        let amplitude_m = (0..voice.n_strings)
+            .map(|s| {
+                let r = voice.ranges[s][0].clone();
+                let mut sum = 0.0;
+                for shape in &km.damper_shapes {
+                    for (j, i) in r.clone().enumerate() {
+                        let (q, v) = (self.q[i].to_f64(), self.v[i].to_f64());
+                        let w2 = self.model.omega2[i].to_f64();
+                        sum += shape[j].to_f64().powi(2) * (q * q + v * v / w2);
+                    }
+                }
+                sum
+            })
+            .fold(0.0, f64::max)
+            .sqrt();
+        felt.contact_share(lift, amplitude_m)
+    }
+
     /// Copies the key's coefficients into the slot.
     fn load_key(&mut self, k: usize, key: usize) {
         let km = &self.model.keys[key];

@@ -99,16 +99,18 @@ pub(super) fn evaluate<T: Real, const SIMD: bool>(
         }
         // Duplex damping on both transverse polarisations of every string (Eq. 13).
         duplex_damping::<T, SIMD>(km, &voice.ranges, v, acc, duplex_z);
-        // The damper felt, while it is down: at each of its points, a point damper on T and P of
-        // every string. The flag may belong to the key that follows a fading voice, so the key's
-        // own damper decides.
-        if states[k].damper_down {
+        // The damper felt, while it touches (its share of the felt: all of it while down): at each
+        // of its points, a point damper on T and P of every string. The share may belong to the
+        // key that follows a fading voice, so the key's own damper decides.
+        let share = states[k].felt_share();
+        if share > 0.0 {
+            let c = share * km.damper_n_s_m;
             for shape in &km.damper_shapes {
                 for s in 0..voice.n_strings {
                     for d in [0, 2] {
                         let r = voice.ranges[s][d].clone();
                         let shape = &shape[..r.len()];
-                        let f = km.damper_n_s_m * T::dot::<SIMD>(shape, &v[r.clone()]).to_f64();
+                        let f = c * T::dot::<SIMD>(shape, &v[r.clone()]).to_f64();
                         T::axpy::<SIMD>(&mut acc[r], shape, T::from_f64(-f));
                     }
                 }
