@@ -238,7 +238,8 @@ pub const DAMPER_LANDING_S: f64 = 0.03;
 /// rises at a speed in proportion to the release velocity, and the damper with it —
 /// [`DAMPER_LANDING_S`] at the default, half of it at 127, 6.4 times it at 10. A slow release
 /// lets the felt reach the strings late and touch them gradually (a part-lifted felt on its
-/// way: [`crate::engine::physics::damper::contact_share`]), the note dying more gradually.
+/// way: [`crate::engine::physics::damper::DamperParams::contact_share`]), the note dying more
+/// gradually.
 pub fn damper_landing_s(velocity: f64) -> f64 {
     let v = if velocity > 0.0 {
         velocity.clamp(1.0, 127.0)

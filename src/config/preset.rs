@@ -198,6 +198,34 @@ fn default_rest_compression_m() -> f64 {
 pub const REST_COMPRESSION_M: std::ops::RangeInclusive<f64> = 1e-5..=5e-3;
 pub const MAX_FULL_LIFT_M: f64 = 0.02;
 
+/// A damper's travel within its ranges, or the one of `fields` (the compression's, the full
+/// lift's) that is not, with its value and what is allowed.
+pub(crate) fn check_damper_travel(
+    full_lift_m: f64,
+    rest_compression_m: f64,
+    fields: [&'static str; 2],
+) -> Result<(), (&'static str, String, String)> {
+    let (lo, hi) = (*REST_COMPRESSION_M.start(), *REST_COMPRESSION_M.end());
+    if !(lo..=hi).contains(&rest_compression_m) {
+        return Err((
+            fields[0],
+            rest_compression_m.to_string(),
+            format!("a number in [{lo:e}, {hi:e}]"),
+        ));
+    }
+    if !(full_lift_m > rest_compression_m && full_lift_m <= MAX_FULL_LIFT_M) {
+        return Err((
+            fields[1],
+            full_lift_m.to_string(),
+            format!(
+                "more than {} ({rest_compression_m}) up to {MAX_FULL_LIFT_M}",
+                fields[0]
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// [`FeltModel`] as a preset or keyboard names it.
 #[derive(Deserialize)]
 #[serde(remote = "FeltModel", rename_all = "lowercase")]
@@ -426,23 +454,17 @@ impl Preset {
             1.0,
         )?;
         range("damper.damping_n_s_m", self.damper.damping_n_s_m, 0.0, 1e3)?;
-        let rest = self.damper.rest_compression_m;
-        range(
-            "damper.rest_compression_m",
-            rest,
-            *REST_COMPRESSION_M.start(),
-            *REST_COMPRESSION_M.end(),
-        )?;
-        if !(self.damper.full_lift_m > rest && self.damper.full_lift_m <= MAX_FULL_LIFT_M) {
-            return Err(PresetError::Range {
-                path: path.to_owned(),
-                field: "damper.full_lift_m",
-                value: self.damper.full_lift_m.to_string(),
-                allowed: format!(
-                    "more than damper.rest_compression_m ({rest}) up to {MAX_FULL_LIFT_M}"
-                ),
-            });
-        }
+        check_damper_travel(
+            self.damper.full_lift_m,
+            self.damper.rest_compression_m,
+            ["damper.rest_compression_m", "damper.full_lift_m"],
+        )
+        .map_err(|(field, value, allowed)| PresetError::Range {
+            path: path.to_owned(),
+            field,
+            value,
+            allowed,
+        })?;
         // The felt lies on the speaking length.
         let d = &self.damper;
         let (x_m, half_m) = (d.position_ratio * s.speaking_length_m, d.width_m / 2.0);

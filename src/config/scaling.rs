@@ -8,10 +8,9 @@
 //! per-note [`Preset`] bridged at its own point of the soundboard.
 
 use crate::config::preset::{
-    bridge_point_index, heard, read_text, FeltModelName, LoadedPreset, Preset, PresetError,
-    RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_LIFT_M, MAX_FULL_SCALE_PA,
+    bridge_point_index, check_damper_travel, heard, read_text, FeltModelName, LoadedPreset, Preset,
+    PresetError, RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA,
     MAX_HAMMER_MASS_KG, MAX_HYSTERESIS_S, MIN_EXPONENT, MIN_FULL_SCALE_PA, MIN_HAMMER_MASS_KG,
-    REST_COMPRESSION_M,
 };
 use crate::engine::physics::damper::{DamperParams, FeltModel};
 use crate::engine::physics::string::StringParams;
@@ -658,24 +657,15 @@ impl Scaling {
             }
         }
         if let Some(t) = &self.damper_travel {
-            let rest = t.rest_compression_m;
-            let (lo, hi) = (*REST_COMPRESSION_M.start(), *REST_COMPRESSION_M.end());
-            if !(lo..=hi).contains(&rest) {
-                return Err(bad(
+            check_damper_travel(
+                t.full_lift_m,
+                t.rest_compression_m,
+                [
                     "damper_travel.rest_compression_m",
-                    rest.to_string(),
-                    &format!("a number in [{lo:e}, {hi:e}]"),
-                ));
-            }
-            if !(t.full_lift_m > rest && t.full_lift_m <= MAX_FULL_LIFT_M) {
-                return Err(bad(
                     "damper_travel.full_lift_m",
-                    t.full_lift_m.to_string(),
-                    &format!(
-                        "more than damper_travel.rest_compression_m ({rest}) up to {MAX_FULL_LIFT_M}"
-                    ),
-                ));
-            }
+                ],
+            )
+            .map_err(|(field, value, allowed)| bad(field, value, &allowed))?;
         }
         for a in &self.dampers {
             for (field, v, lo, hi) in [

@@ -310,13 +310,13 @@ pub trait Policy {
                 continue;
             }
             let (to, by) = (s.damper_target, s.damper_speed * steps as f64);
-            let lift = if (to - s.damper_lift).abs() <= by {
+            if (to - s.damper_lift).abs() <= by {
                 self.state_mut(k).damper_speed = 0.0;
-                to
+                self.place_damper(k, to);
             } else {
-                s.damper_lift + by.copysign(to - s.damper_lift)
-            };
-            self.place_damper(k, lift);
+                // On its way the felt is part-lifted: [`Policy::touch_felts`] takes it from here.
+                self.state_mut(k).damper_lift = s.damper_lift + by.copysign(to - s.damper_lift);
+            }
         }
     }
 
@@ -333,12 +333,33 @@ pub trait Policy {
         }
     }
 
-    /// Voice `k`'s damper at the lift `lift` now, where it moves or not.
+    /// Voice `k`'s damper at the lift `lift` now, where it moves or not, touching its strings as
+    /// far as it reaches them ([`Policy::felt_contact`]).
     fn place_damper(&mut self, k: usize, lift: f64) {
+        self.state_mut(k).damper_lift = lift;
+        let (down, share) = self.felt_contact(k);
         let s = self.state_mut(k);
-        (s.damper_lift, s.damper_down, s.damper_share) = (lift, lift == 0.0, 0.0);
+        (s.damper_down, s.damper_share) = (down, share);
         self.damper_moved(k);
-        self.touch_felt(k);
+    }
+
+    /// Whether voice `k`'s damper is down at its lift, and a part-lifted felt's share while it is
+    /// not ([`Policy::felt_share`]): down resting, clear at the full lift, and part-lifted on a
+    /// voice not simulated (its strings at rest reach no felt above them).
+    fn felt_contact(&self, k: usize) -> (bool, f64) {
+        let s = self.state(k);
+        if s.damper_lift <= 0.0 {
+            return (true, 0.0);
+        }
+        if s.damper_lift >= 1.0 || !s.active {
+            return (false, 0.0);
+        }
+        let share = self.felt_share(k, s.damper_lift);
+        if share >= 1.0 {
+            (true, 0.0)
+        } else {
+            (false, share)
+        }
     }
 
     /// The share of its felt's damping voice `k`'s damper gives at the lift `lift`
@@ -358,10 +379,9 @@ pub trait Policy {
         if s.damper_lift <= 0.0 || s.damper_lift >= 1.0 || !s.active {
             return;
         }
-        let share = self.felt_share(k, s.damper_lift);
-        let down = share >= 1.0;
+        let (down, share) = self.felt_contact(k);
         let s = self.state_mut(k);
-        s.damper_share = if down { 0.0 } else { share };
+        s.damper_share = share;
         if s.damper_down != down {
             s.damper_down = down;
             self.damper_moved(k);
