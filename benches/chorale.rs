@@ -111,7 +111,7 @@ fn chord_struck(scaling: &unacorda::config::scaling::LoadedScaling, deadline_s: 
         for k in 0..keys.len() {
             let strike = Strike {
                 velocity_m_s: 3.0,
-                una_corda: false,
+                shift: 0.0,
             };
             pool.strike_voice(k, strike);
         }

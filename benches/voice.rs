@@ -20,7 +20,7 @@ fn c2_voice(c: &mut Criterion) {
     let preset = Preset::resolve("c2").expect("built-in preset");
     let strike = Strike {
         velocity_m_s: 2.5,
-        una_corda: false,
+        shift: 0.0,
     };
     let mut group = c.benchmark_group("c2_voice");
     group.throughput(Throughput::Elements(FRAMES as u64));

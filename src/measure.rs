@@ -243,7 +243,7 @@ pub fn voice_speed<T: Real>(spec: &UnisonSpec, seconds: f64) -> VoiceSpeed {
     let mut inst = Rk4Pool::<T>::unison(spec).expect("the preset builds");
     inst.strike(Strike {
         velocity_m_s: 2.5,
-        una_corda: false,
+        shift: 0.0,
     });
     // Past the hammer's contact, so the FLOP count per step is steady.
     for _ in 0..(0.01 / inst.step_s()) as usize {
@@ -274,7 +274,7 @@ pub fn exact_speed(spec: &UnisonSpec, rate_hz: f64, seconds: f64) -> (VoiceSpeed
     let build_s = t.elapsed().as_secs_f64();
     voice.strike(Strike {
         velocity_m_s: 2.5,
-        una_corda: false,
+        shift: 0.0,
     });
     for _ in 0..(0.01 * rate_hz) as usize {
         voice.step();
@@ -305,7 +305,7 @@ pub fn denormal_tail_step_s(spec: &UnisonSpec, steps: usize) -> (f64, f64, f64) 
     sounding.set_damper(false);
     sounding.strike(Strike {
         velocity_m_s: 2.5,
-        una_corda: false,
+        shift: 0.0,
     });
     for _ in 0..(0.05 / sounding.step_s()) as usize {
         sounding.step();
@@ -333,7 +333,7 @@ pub fn dense_real_time_factor(spec: &UnisonSpec, steps: usize) -> f64 {
     let mut dense = DenseUnison::new(spec);
     dense.strike(Strike {
         velocity_m_s: 2.5,
-        una_corda: false,
+        shift: 0.0,
     });
     let t = Instant::now();
     for _ in 0..steps {

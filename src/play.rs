@@ -18,7 +18,8 @@ pub struct Player {
     /// How far the sustain pedal lifts the dampers of released keys (0-1: [`sustain_lift`]).
     sustain_lift: f64,
     sostenuto: bool,
-    soft: bool,
+    /// The soft pedal's shift of the action, a fraction of the full shift (its depth).
+    soft_shift: f64,
     /// Whether every key whose damper a pedal lifts rings in sympathy, struck or not (the
     /// pedal's halo: [`Player::set_halo`]); else only the keys that hold a voice.
     halo: bool,
@@ -40,7 +41,7 @@ impl Player {
             sostenuto_held: [false; 89],
             sustain_lift: 0.0,
             sostenuto: false,
-            soft: false,
+            soft_shift: 0.0,
             halo: false,
         }
     }
@@ -54,9 +55,9 @@ impl Player {
         self.halo = halo;
     }
 
-    /// Whether the soft pedal is down.
-    pub fn soft(&self) -> bool {
-        self.soft
+    /// The soft pedal's shift of the action, 0 (up) to 1 (the una corda).
+    pub fn soft_shift(&self) -> f64 {
+        self.soft_shift
     }
 
     /// Apply one event to the instrument. Events for keys the instrument lacks are ignored.
@@ -73,7 +74,7 @@ impl Player {
                 self.key_down[key] = true;
                 let strike = Strike {
                     velocity_m_s: speed,
-                    una_corda: self.soft,
+                    shift: self.soft_shift,
                 };
                 match instrument.voice_of_key(bank) {
                     // Sounding (or waiting for its stolen voice): struck in its current motion.
@@ -114,7 +115,7 @@ impl Player {
             Event::Pedal {
                 pedal: Pedal::Soft,
                 depth,
-            } => self.soft = depth >= PEDAL_DOWN_AT,
+            } => self.soft_shift = depth.clamp(0.0, 1.0),
             Event::AllNotesOff => {
                 self.key_down = [false; 89];
                 self.settle_all(instrument);
@@ -129,7 +130,7 @@ impl Player {
                 self.sustain_lift = 0.0;
                 self.sostenuto = false;
                 self.sostenuto_held = [false; 89];
-                self.soft = false;
+                self.soft_shift = 0.0;
                 self.settle_all(instrument);
             }
         }

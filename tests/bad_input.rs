@@ -108,6 +108,12 @@ fn malformed_keyboards_are_rejected_with_file_and_field() {
             && e.contains("`damper_travel.full_lift_m` = 0.0003")
             && e.contains("more than damper_travel.rest_compression_m (0.0005) up to 0.02")
     );
+    let e = keyboard_error("bad_keyboard_hammer_felt.toml");
+    assert!(
+        e.contains("bad_keyboard_hammer_felt.toml")
+            && e.contains("`hammer_felt.overhang_m` = 0.0015")
+            && e.contains("half a groove plus the shoulder")
+    );
     let e = keyboard_error("bad_keyboard_voicing.toml");
     assert!(
         e.contains("`voicing.felt_stiffness_factor` = 1000000 (key 88)")
@@ -214,7 +220,7 @@ fn cli_rejects_bad_input_without_writing() {
     let wav = dir.path().join("out.wav");
     let wav = wav.to_str().unwrap();
     let bad_preset = data("bad_preset_range.toml");
-    let cases: [(&[&str], &str); 11] = [
+    let cases: [(&[&str], &str); 12] = [
         (&["modes", "--max-hz", "0"], "--max-hz 0"),
         (&["modes", "--key", "H9"], "--key H9"),
         (
@@ -252,6 +258,10 @@ fn cli_rejects_bad_input_without_writing() {
         (
             &["figures", "--seconds", "0", "--out-dir", wav],
             "--seconds",
+        ),
+        (
+            &["render", "--key", "C4", "--soft", "1.5", "--out", wav],
+            "--soft 1.5",
         ),
     ];
     assert_refused(&cases, Some(wav));

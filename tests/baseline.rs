@@ -16,7 +16,7 @@ fn optimised_engine_matches_the_dense_state_space_form() {
         spec.hammer.hysteresis_s = hysteresis_s;
         let strike = Strike {
             velocity_m_s: 2.5,
-            una_corda,
+            shift: if una_corda { 1.0 } else { 0.0 },
         };
         let mut fast = Rk4Pool::new(&spec).unwrap();
         let mut dense = DenseUnison::new(&spec);

@@ -229,7 +229,7 @@ fn analyze_heads_its_columns_and_says_what_they_mean() {
         .any(|l| l.starts_with("note: the model's T60")));
 }
 
-/// `figures` draws Fig. 6 with its colour bar: at its right, a column of pixels running through
+/// `figures` draws Fig. 6 with its colour bar (and Fig. 7, the soft pedal's depths): at its right, a column of pixels running through
 /// the spectrograms' colour map from its top (loud) to its bottom (quiet) over most of the
 /// plot's height, which a spectrogram's own column (harmonics over a quiet floor) never does.
 #[test]
@@ -244,6 +244,19 @@ fn figure_6_has_a_colour_bar() {
         dir.path().to_str().unwrap(),
     ]);
     assert_eq!(code, Some(0));
+    // Figure 7 beside it: the felt force at each of the soft pedal's five depths, the normal
+    // strike's the strongest, the una corda's (one string of two) under 0.7 of it.
+    let csv = std::fs::read_to_string(dir.path().join("fig7_soft_pedal.csv")).unwrap();
+    let peak = |depth: &str| {
+        csv.lines()
+            .filter_map(|l| l.strip_prefix(&format!("force,{depth},")))
+            .filter_map(|l| l.split(',').nth(1)?.parse::<f64>().ok())
+            .fold(0.0, f64::max)
+    };
+    let peaks: Vec<f64> = ["0", "0.5", "0.8", "0.9", "1"].map(peak).to_vec();
+    println!("Fig. 7's peak forces at depths 0, 0.5, 0.8, 0.9, 1: {peaks:.2?} N");
+    assert!(peaks[1..].iter().all(|&p| p < peaks[0]) && (0.0..0.7 * peaks[0]).contains(&peaks[4]));
+    assert!(dir.path().join("fig7_soft_pedal.png").exists());
     let png = image::open(dir.path().join("fig6_spectrograms.png"))
         .unwrap()
         .to_rgb8();

@@ -23,7 +23,7 @@ fn released_key_is_damped_held_key_rings() {
     let c2 = Preset::resolve("c2").unwrap();
     let strike = Strike {
         velocity_m_s: 2.5,
-        una_corda: false,
+        shift: 0.0,
     };
     let held = simulate(&c2, strike, None, 1.0, |_| {}).unwrap();
     let released = simulate(&c2, strike, Some(0.3), 1.0, |_| {}).unwrap();

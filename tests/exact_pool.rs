@@ -36,7 +36,7 @@ fn forces<E: VoicePool>(keys: &[&str], seconds: f64) -> (Vec<Vec<f64>>, f64) {
         0,
         Strike {
             velocity_m_s: 3.0,
-            una_corda: false,
+            shift: 0.0,
         },
     );
     let per = (1.0 / (rate * pool.step_s())).round() as usize;
@@ -99,7 +99,7 @@ fn every_key(up_s: f64, down_s: f64) -> Vec<f64> {
             k,
             Strike {
                 velocity_m_s: 3.0,
-                una_corda: false,
+                shift: 0.0,
             },
         );
     }

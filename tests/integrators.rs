@@ -50,7 +50,7 @@ fn run(integrator: Integrator, spec: &UnisonSpec, una_corda: bool, seconds: f64)
     let mut spec = spec.clone();
     let strike = Strike {
         velocity_m_s: 2.5,
-        una_corda,
+        shift: if una_corda { 1.0 } else { 0.0 },
     };
     let mut step: Box<dyn FnMut() -> Observation> = match integrator {
         Integrator::Rk4 => {
@@ -383,7 +383,7 @@ fn agree_through_the_renderer(
     use unacorda::render::simulate_with;
     let strike = Strike {
         velocity_m_s: 2.5,
-        una_corda: false,
+        shift: 0.0,
     };
     let window = |integrator| {
         let rec = simulate_with(preset, integrator, strike, None, 1.0, |_| {}).unwrap();
@@ -467,7 +467,7 @@ fn both_engines_damp_a_released_key_alike() {
     let keyboard = Scaling::resolve("concert").unwrap();
     let strike = Strike {
         velocity_m_s: 2.5,
-        una_corda: false,
+        shift: 0.0,
     };
     for name in ["C2", "C4"] {
         let mut preset = keyboard.key_preset(parse_key(name).unwrap()).unwrap();
@@ -545,7 +545,7 @@ fn string_modes_to_20_khz_sound_without_aliasing() {
     let concert = Scaling::resolve("concert").unwrap();
     let strike = Strike {
         velocity_m_s: 6.0,
-        una_corda: false,
+        shift: 0.0,
     };
     let force: Channel = |f| f.obs.total_force_n[0];
     let pressure: Channel = |f| f.pressure_right_pa;
@@ -627,7 +627,7 @@ fn the_boards_dropped_modes_sound_alike_on_both_engines() {
     let concert = Scaling::resolve("concert").unwrap();
     let strike = Strike {
         velocity_m_s: unacorda::midi::hammer_speed_m_s(80.0).unwrap(),
-        una_corda: false,
+        shift: 0.0,
     };
     for key in [49, 64, 76, 87] {
         let name = unacorda::board::key_name(key);

@@ -298,7 +298,7 @@ fn strike_every_key<E: VoicePool>() -> (f64, usize) {
             0,
             Strike {
                 velocity_m_s: 6.0,
-                una_corda: false,
+                shift: 0.0,
             },
         );
         let mut out = [[0.0; 2]];
@@ -358,7 +358,7 @@ fn keys_sound_near_their_pitch() {
             &lp,
             Strike {
                 velocity_m_s: 2.5,
-                una_corda: false,
+                shift: 0.0,
             },
             None,
             0.6,
@@ -397,7 +397,7 @@ fn keys_prepared_on_several_threads_land_in_order() {
         .instrument;
     let strike = Strike {
         velocity_m_s: 2.0,
-        una_corda: false,
+        shift: 0.0,
     };
     for (bank, key) in keys.iter().enumerate() {
         for pool in [&mut sequential, &mut threaded] {

@@ -22,7 +22,7 @@ fn render(piano: &Piano<ExactPool>) -> Vec<f64> {
             k,
             Strike {
                 velocity_m_s: 3.0,
-                una_corda: k == 1,
+                shift: if k == 1 { 1.0 } else { 0.0 },
             },
         );
     }

@@ -28,7 +28,7 @@ fn runs() -> &'static Runs {
                 &preset,
                 Strike {
                     velocity_m_s: v,
-                    una_corda,
+                    shift: if una_corda { 1.0 } else { 0.0 },
                 },
                 None,
                 SECONDS,
@@ -60,7 +60,7 @@ fn recorded_frames_are_at_their_stated_times() {
     let mut raw = Rk4Pool::new(&r.preset.unison_spec()).unwrap();
     raw.strike(Strike {
         velocity_m_s: r.preset.preset.hammer.velocity_m_s,
-        una_corda: false,
+        shift: 0.0,
     });
     let h = raw.step_s();
     let force: Vec<f64> = (0..(0.01 / h) as usize)

@@ -34,7 +34,7 @@ fn a_damped_second_key_on_the_board_barely_changes_the_first() {
     two.set_damper_voice(1, true);
     let strike = Strike {
         velocity_m_s: 2.5,
-        una_corda: false,
+        shift: 0.0,
     };
     one.strike(strike);
     two.strike_voice(0, strike);
@@ -69,7 +69,7 @@ fn undamped_strings_ring_in_sympathy_through_the_board() {
             0,
             Strike {
                 velocity_m_s: 2.5,
-                una_corda: false,
+                shift: 0.0,
             },
         );
         let steps = (0.6 / u.step_s()) as usize;

@@ -37,7 +37,7 @@ fn drift(una_corda: bool, seconds: f64) -> (f64, f64, f64) {
     let spec = Preset::resolve("c2").unwrap().unison_spec();
     let strike = Strike {
         velocity_m_s: 2.5,
-        una_corda,
+        shift: if una_corda { 1.0 } else { 0.0 },
     };
     let mut reference = Rk4Pool::new(&spec).unwrap();
     let mut single = Rk4Pool::<f32>::unison(&spec).unwrap();

@@ -195,7 +195,7 @@ fn stealing_fades_the_voice_off_the_board_without_a_click() {
         .collect();
     let hit = Strike {
         velocity_m_s: 3.0,
-        una_corda: false,
+        shift: 0.0,
     };
     // What the steal changes in the sound: the pressure minus that of C4 left alone.
     #[derive(Clone, Copy)]

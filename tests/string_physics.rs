@@ -245,7 +245,7 @@ fn energy_never_increases_with_damping_and_hammer() {
     let mut u = Rk4Pool::new(&preset.unison_spec()).unwrap();
     u.strike(Strike {
         velocity_m_s: 2.5,
-        una_corda: false,
+        shift: 0.0,
     });
     let e0 = u.energy().total_j();
     let mut prev = e0;
@@ -280,7 +280,7 @@ fn c2_first_partial_is_on_pitch() {
         &preset,
         Strike {
             velocity_m_s: 2.5,
-            una_corda: false,
+            shift: 0.0,
         },
         None,
         1.5,

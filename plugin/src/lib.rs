@@ -319,9 +319,9 @@ impl PluginMainThreadParams for MainThread<'_> {
         match i {
             params::GAIN_DB => write!(writer, "{value:.1} dB"),
             params::VELOCITY_CURVE => write!(writer, "{value:.2}"),
-            params::SUSTAIN if value <= 0.0 => write!(writer, "up"),
-            params::SUSTAIN if value >= 1.0 => write!(writer, "down"),
-            params::SUSTAIN => write!(writer, "{:.0} %", 100.0 * value),
+            params::SUSTAIN | params::SOFT if value <= 0.0 => write!(writer, "up"),
+            params::SUSTAIN | params::SOFT if value >= 1.0 => write!(writer, "down"),
+            params::SUSTAIN | params::SOFT => write!(writer, "{:.0} %", 100.0 * value),
             _ if p.max == 1.0 && p.stepped => {
                 write!(writer, "{}", if value >= 0.5 { "down" } else { "up" })
             }
@@ -339,7 +339,7 @@ impl PluginMainThreadParams for MainThread<'_> {
                 "up" | "off" | "0" => 0.0,
                 _ => return None,
             },
-            None if i == params::SUSTAIN => match text {
+            None if i == params::SUSTAIN || i == params::SOFT => match text {
                 "down" | "on" => 1.0,
                 "up" | "off" => 0.0,
                 _ => match text.strip_suffix('%') {

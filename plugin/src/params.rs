@@ -66,7 +66,11 @@ pub const PARAMS: [Spec; 9] = [
         ..switch(1, "Sustain pedal", "sustain")
     },
     switch(2, "Sostenuto pedal", "sostenuto"),
-    switch(3, "Soft pedal (una corda)", "soft"),
+    // Continuous: the soft pedal's shift of the action (the una corda at 1).
+    Spec {
+        stepped: false,
+        ..switch(3, "Soft pedal (una corda)", "soft")
+    },
     Spec {
         id: 4,
         name: "Output gain (dB)",

@@ -183,7 +183,7 @@ mod tests {
                 "`gain_db` is nan",
             ),
             (good.replace("\"concert\"", "\"harpsichord\""), "one of"),
-            (good.replace("soft = 0\n", ""), "no field `soft`"),
+            (good.replace("soft = 0.0\n", ""), "no field `soft`"),
             (format!("{good}colour = 3\n"), "`colour` is not known"),
             ("\u{0}\u{1}binary".to_string(), "not TOML"),
         ];

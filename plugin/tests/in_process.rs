@@ -48,7 +48,8 @@ fn checked(f: &mut dyn FnMut()) -> u32 {
 /// between MIDI's velocity steps), MIDI notes (one refined by a CC88 prefix), a CLAP release
 /// velocity and a host's release without one, the sustain pedal
 /// as MIDI CC64 and part way down as a parameter and as CC64 (a release under it), the soft pedal
-/// as a parameter, releases with the pedal down and up, a wildcard note-off.
+/// part way down as a parameter and as CC67, releases with the pedal down and up, a wildcard
+/// note-off.
 fn script() -> Vec<(u64, Play)> {
     let ms = |t: f64| (t * RATE_HZ / 1000.0).round() as u64;
     let mut s = vec![
@@ -58,7 +59,7 @@ fn script() -> Vec<(u64, Play)> {
         (ms(60.0), Play::Midi([0xB0, 64, 127])),
         (ms(80.0), Play::Off(Some(60), 0.0)),
         (ms(90.0), Play::Midi([0x80, 64, 30])),
-        (ms(110.0), Play::Param(SOFT, 1.0)),
+        (ms(110.0), Play::Param(SOFT, 0.6)),
         (ms(120.0), Play::On(48, 90.0 / 127.0)),
         (ms(129.0), Play::Midi([0xB1, 88, 64])),
         (ms(130.0), Play::Midi([0x91, 36, 110])),
@@ -66,6 +67,8 @@ fn script() -> Vec<(u64, Play)> {
         (ms(145.0), Play::Off(Some(48), 0.2)),
         (ms(150.0), Play::Midi([0xB0, 64, 50])),
         (ms(160.0), Play::Midi([0xB0, 64, 0])),
+        (ms(165.0), Play::Midi([0xB0, 67, 100])),
+        (ms(168.0), Play::On(55, 0.7)),
         (ms(170.0), Play::Param(SOFT, 0.0)),
         (ms(175.0), Play::On(72, 0.4321)),
         (ms(200.0), Play::Off(None, 0.0)),
@@ -94,7 +97,10 @@ fn as_piano_events(script: &[(u64, Play)]) -> Vec<TimedEvent> {
                 Play::Off(None, _) => Event::AllNotesOff,
                 Play::Choke(_) => return None,
                 Play::Midi([s, d1, d2]) => midi.decode(s, d1, d2)?,
-                Play::Param(SOFT, v) => Event::pedal(Pedal::Soft, v >= 0.5),
+                Play::Param(SOFT, depth) => Event::Pedal {
+                    pedal: Pedal::Soft,
+                    depth,
+                },
                 Play::Param(SUSTAIN, depth) => Event::Pedal {
                     pedal: Pedal::Sustain,
                     depth,

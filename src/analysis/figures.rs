@@ -5,11 +5,13 @@
 //! tabulated) as the minimum and maximum of the force in each 5 ms bin, which is what a plot of
 //! every sample shows.
 
+use super::listening::{power_db, power_spectrum};
 use super::mobility::{mobility_curves, TERM_NAMES};
 use super::spectral::spectrogram;
 use crate::engine::physics::soundboard::SoundboardModes;
 use crate::engine::Direction;
 use crate::render::Recording;
+use plotters::coord::ranged1d::ValueFormatter;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::fmt::Write as _;
@@ -102,12 +104,11 @@ pub fn figure2(
         csv.push('\n');
     }
     let draw = || -> Result2<()> {
-        let root = BitMapBackend::new(&png, (1300, 800)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (title, body) = root.split_vertically(40);
-        title.titled(
+        let (root, body) = titled_canvas(
+            &png,
+            (1300, 800),
             &format!("Fig. 2 — driving-point mobility at {point}: full model ({} modes, blue) vs reduced ({} modes, red)", full.len(), reduced.len()),
-            (FONT, 20),
+            20,
         )?;
         let all = cf
             .magnitude
@@ -165,6 +166,127 @@ pub fn write_all(
     Ok(written)
 }
 
+/// The soft pedal's depths that [`soft_pedal`] draws: up, on the unworn felt between the
+/// grooves, the last string rounding the hammer's shoulder, nearly off it, and the una corda.
+pub const SOFT_PEDAL_DEPTHS: [f64; 5] = [0.0, 0.5, 0.8, 0.9, 1.0];
+
+/// Figure 7, beyond the paper: one key struck with the soft pedal at each of `runs`' depths
+/// (depth, recording): (a) the summed felt force on its strings, and (b) the upper envelope of
+/// the transmitted T force's spectrum over the first half second (its partials' levels); `title` names the key and blow. Writes the
+/// PNG and a CSV of both panels.
+pub fn soft_pedal(
+    dir: &Path,
+    title: &str,
+    runs: &[(f64, Recording)],
+) -> Result<Vec<PathBuf>, FigureError> {
+    register_font();
+    let Some((_, first)) = runs.first() else {
+        return Ok(vec![]);
+    };
+    let fs = first.rate_hz;
+    let force: Vec<Vec<f64>> = runs
+        .iter()
+        .map(|(_, r)| r.channel(|f| f.obs.hammer_force_n.iter().sum()))
+        .collect();
+    // The spectrum's upper envelope: every 20 Hz, its loudest bin within a window wider than
+    // the partials' spacing (a sixth of the frequency, at least 150 Hz), so that each depth's
+    // partial levels read as one curve.
+    let grid: Vec<f64> = (2..=150).map(|i| 20.0 * i as f64).collect();
+    let spectra: Vec<Vec<f64>> = runs
+        .iter()
+        .map(|(_, r)| {
+            let (df, p) = power_spectrum(&r.channel(|f| f.obs.total_force_n[0]), fs, 0.0, 0.5);
+            grid.iter()
+                .map(|&f| {
+                    let half = (f / 6.0).max(150.0) / 2.0;
+                    let from = (((f - half) / df).floor().max(0.0) as usize).min(p.len());
+                    let to = (((f + half) / df).ceil() as usize).clamp(from, p.len());
+                    power_db(p[from..to].iter().fold(0.0, |m: f64, &v| m.max(v)))
+                })
+                .collect()
+        })
+        .collect();
+    let n = ((0.008 * fs) as usize).min(first.frames.len());
+    let mut csv = String::from("panel,depth,x,value\n");
+    for ((depth, r), f) in runs.iter().zip(&force) {
+        for (k, v) in f[..n].iter().enumerate() {
+            let _ = writeln!(csv, "force,{depth},{:.4},{v:.5}", r.time_s(k) * 1e3);
+        }
+    }
+    for ((depth, _), db) in runs.iter().zip(&spectra) {
+        for (f, v) in grid.iter().zip(db) {
+            let _ = writeln!(csv, "envelope,{depth},{f},{v:.2}");
+        }
+    }
+    let colour = |i: usize| colormap(i as f64 / (runs.len().max(2) - 1) as f64);
+    let png = dir.join("fig7_soft_pedal.png");
+    let draw = || -> Result2<()> {
+        let (root, body) = titled_canvas(
+            &png,
+            (1300, 560),
+            &format!("Fig. 7 — the soft pedal's depth ({title})"),
+            20,
+        )?;
+        let panels = body.split_evenly((1, 2));
+        let y_max = 1.1
+            * force
+                .iter()
+                .flat_map(|f| &f[..n])
+                .fold(0f64, |m, &v| m.max(v));
+        let mut chart = ChartBuilder::on(&panels[0])
+            .caption("(a) summed felt force", (FONT, 17))
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..8.0, -0.02 * y_max..y_max)?;
+        label_axes(&mut chart, "time (ms)", "force (N)", 13)?;
+        for (i, ((depth, r), f)) in runs.iter().zip(&force).enumerate() {
+            let c = colour(i);
+            chart
+                .draw_series(LineSeries::new(
+                    (0..n).map(|k| (r.time_s(k) * 1e3, f[k])),
+                    c.stroke_width(2),
+                ))?
+                .label(format!("depth {depth}"))
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], c.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .label_font((FONT, 13))
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.9))
+            .draw()?;
+        let top_db = spectra
+            .iter()
+            .flatten()
+            .fold(f64::NEG_INFINITY, |m, &v| m.max(v));
+        let mut chart = ChartBuilder::on(&panels[1])
+            .caption(
+                "(b) transmitted T force, 0–0.5 s: its partials' envelope",
+                (FONT, 17),
+            )
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..3000.0, top_db - 70.0..top_db + 3.0)?;
+        label_axes(&mut chart, "frequency (Hz)", "power (dB re 1 N²)", 13)?;
+        for (i, db) in spectra.iter().enumerate() {
+            let points = grid
+                .iter()
+                .zip(db)
+                .map(|(&f, &v)| (f, v.max(top_db - 70.0)));
+            chart.draw_series(LineSeries::new(points, colour(i).stroke_width(2)))?;
+        }
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(plot_err(&png))?;
+    Ok(vec![
+        png,
+        write_text(dir.join("fig7_soft_pedal.csv"), &csv)?,
+    ])
+}
+
 /// The T60 of each key's first partial — its fastest and slowest string mode, a bar per key from
 /// one to the other (`keys`: key 1–88, fastest, slowest, in s) — beside published values
 /// (`published`: key, T60 in s, source) and a recorded grand's early and late T60 (`recorded`:
@@ -196,14 +318,7 @@ pub fn partial_decay(
             .x_label_area_size(40)
             .y_label_area_size(60)
             .build_cartesian_2d(0.0..89.0, ((lo * 0.7).max(1e-3)..hi * 1.5).log_scale())?;
-        chart
-            .configure_mesh()
-            .x_desc("key (1 = A0, 40 = C4, 88 = C8)")
-            .y_desc("T60 (s)")
-            .x_label_formatter(&tick)
-            .y_label_formatter(&tick)
-            .label_style((FONT, 13))
-            .draw()?;
+        label_axes(&mut chart, "key (1 = A0, 40 = C4, 88 = C8)", "T60 (s)", 13)?;
         chart.draw_series(keys.iter().map(|&(k, fast, slow)| {
             PathElement::new(
                 vec![(k as f64, fast), (k as f64, slow)],
@@ -262,6 +377,47 @@ fn plot_err(path: &Path) -> impl Fn(Box<dyn std::error::Error + '_>) -> FigureEr
 }
 
 type Result2<T> = Result<T, Box<dyn std::error::Error>>;
+
+/// Axis titles and tick labels (numbers as [`tick`] writes them, in `label_px`) on a chart of
+/// plain numbers, its mesh drawn.
+fn label_axes<X, Y>(
+    chart: &mut ChartContext<'_, BitMapBackend<'_>, Cartesian2d<X, Y>>,
+    x_desc: &str,
+    y_desc: &str,
+    label_px: u32,
+) -> Result2<()>
+where
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .x_label_formatter(&tick)
+        .y_label_formatter(&tick)
+        .label_style((FONT, label_px))
+        .draw()?;
+    Ok(())
+}
+
+/// A drawing area of a bitmap.
+type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+
+/// A white canvas of `size` pixels drawn to `png`, with `title` across its top in `font_px`:
+/// the canvas (to present once drawn) and the area under the title.
+fn titled_canvas<'a>(
+    png: &'a Path,
+    size: (u32, u32),
+    title: &str,
+    font_px: u32,
+) -> Result2<(Area<'a>, Area<'a>)> {
+    let root = BitMapBackend::new(png, size).into_drawing_area();
+    root.fill(&WHITE)?;
+    let (head, body) = root.split_vertically(40);
+    head.titled(title, (FONT, font_px))?;
+    Ok((root, body))
+}
 
 /// One recorded channel with each sample's physical time ([`Recording::time_s`]).
 struct Trace {
@@ -366,14 +522,7 @@ fn figure3(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
             .x_label_area_size(45)
             .y_label_area_size(60)
             .build_cartesian_2d(0.0..8.0, -0.02 * y_max..y_max)?;
-        chart
-            .configure_mesh()
-            .x_desc("time (ms)")
-            .y_desc("force (N)")
-            .x_label_formatter(&tick)
-            .y_label_formatter(&tick)
-            .label_style((FONT, 15))
-            .draw()?;
+        label_axes(&mut chart, "time (ms)", "force (N)", 15)?;
         // The normal strike's two strings meet the hammer almost alike: the first is drawn wide
         // and the second dashed over it, so that both show where they coincide.
         for (i, (label, data)) in series.iter().enumerate() {
@@ -529,10 +678,7 @@ fn band_grid(
     }
     let png = dir.join(format!("{stem}.png"));
     let draw = || -> Result2<()> {
-        let root = BitMapBackend::new(&png, size).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (head, body) = root.split_vertically(40);
-        head.titled(title, (FONT, 22))?;
+        let (root, body) = titled_canvas(&png, size, title, 22)?;
         let panels = body.split_evenly((3, columns.len()));
         for d in 0..3 {
             let y = symmetric_range(
@@ -641,12 +787,11 @@ fn figure6(dir: &Path, uc: &Recording, normal: &Recording) -> Result<Vec<PathBuf
     let dt = hop as f64 / fs;
     let freqs = &freqs[..];
     let draw = || -> Result2<()> {
-        let root = BitMapBackend::new(&png, (1300, 560)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (title, body) = root.split_vertically(40);
-        title.titled(
+        let (root, body) = titled_canvas(
+            &png,
+            (1300, 560),
             &format!("Fig. 6 — spectrogram of the transmitted T force (dB re 1 N, {range_db:.0} dB range)"),
-            (FONT, 20),
+            20,
         )?;
         let (spectra, bar) = body.split_horizontally(body.dim_in_pixel().0 - COLOUR_BAR_PX);
         colour_bar(&bar, top - range_db, top)?;

@@ -95,7 +95,7 @@ fn record(
 ) -> Result<Recording, BuildError> {
     let strike = Strike {
         velocity_m_s,
-        una_corda: false,
+        shift: 0.0,
     };
     let mut preset = preset.clone();
     if hearing == Hearing::Listener {

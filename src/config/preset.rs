@@ -8,6 +8,7 @@ use crate::board::BoardSpec;
 use crate::config::asset::{self, AssetError};
 use crate::engine::physics::contact::{hertz_stiffness_n_m, Contact};
 use crate::engine::physics::damper::{self, DamperParams, FeltModel};
+use crate::engine::physics::felt_profile::{FeltProfile, DEFAULT_PROFILE};
 use crate::engine::physics::hammer::HammerParams;
 use crate::engine::physics::soundboard::SoundboardModes;
 use crate::engine::physics::string::{ModeSet, StringParams};
@@ -95,6 +96,10 @@ pub struct Preset {
     pub name: String,
     pub strings: StringsSection,
     pub hammer: HammerSection,
+    /// The hammer's felt across its width, which the soft pedal moves the strings over; the
+    /// default profile when absent.
+    #[serde(default)]
+    pub hammer_felt: HammerFeltSection,
     pub damper: DamperSection,
     pub contact: ContactSection,
     pub soundboard: SoundboardSection,
@@ -159,6 +164,73 @@ pub struct HammerSection {
     /// The felt's hysteresis `alpha` (s); 0 (the default) is the paper's elastic felt.
     #[serde(default)]
     pub hysteresis_s: f64,
+}
+
+/// The felt across the hammer's width ([`FeltProfile`]'s fields, each defaulting to
+/// [`DEFAULT_PROFILE`]'s).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HammerFeltSection {
+    pub string_spacing_m: f64,
+    pub overhang_m: f64,
+    pub shoulder_m: f64,
+    pub shoulder_depth_m: f64,
+    pub groove_width_m: f64,
+    pub groove_depth_m: f64,
+    pub unworn_stiffness_ratio: f64,
+    pub unworn_exponent_change: f64,
+}
+
+impl Default for HammerFeltSection {
+    fn default() -> HammerFeltSection {
+        HammerFeltSection::of(&DEFAULT_PROFILE)
+    }
+}
+
+impl HammerFeltSection {
+    fn of(p: &FeltProfile) -> HammerFeltSection {
+        HammerFeltSection {
+            string_spacing_m: p.string_spacing_m,
+            overhang_m: p.overhang_m,
+            shoulder_m: p.shoulder_m,
+            shoulder_depth_m: p.shoulder_depth_m,
+            groove_width_m: p.groove_width_m,
+            groove_depth_m: p.groove_depth_m,
+            unworn_stiffness_ratio: p.unworn_stiffness_ratio,
+            unworn_exponent_change: p.unworn_exponent_change,
+        }
+    }
+
+    pub fn profile(&self) -> FeltProfile {
+        FeltProfile {
+            string_spacing_m: self.string_spacing_m,
+            overhang_m: self.overhang_m,
+            shoulder_m: self.shoulder_m,
+            shoulder_depth_m: self.shoulder_depth_m,
+            groove_width_m: self.groove_width_m,
+            groove_depth_m: self.groove_depth_m,
+            unworn_stiffness_ratio: self.unworn_stiffness_ratio,
+            unworn_exponent_change: self.unworn_exponent_change,
+        }
+    }
+
+    /// The profile holds a unison of `n_strings`, or the field (`hammer_felt.…`, in a preset or a
+    /// keyboard) that does not, with its value and what is allowed.
+    pub(crate) fn check(&self, n_strings: usize) -> Result<(), (&'static str, String, String)> {
+        self.profile().check(n_strings).map_err(|e| {
+            let field = match e.field {
+                "string_spacing_m" => "hammer_felt.string_spacing_m",
+                "overhang_m" => "hammer_felt.overhang_m",
+                "shoulder_m" => "hammer_felt.shoulder_m",
+                "shoulder_depth_m" => "hammer_felt.shoulder_depth_m",
+                "groove_width_m" => "hammer_felt.groove_width_m",
+                "groove_depth_m" => "hammer_felt.groove_depth_m",
+                "unworn_stiffness_ratio" => "hammer_felt.unworn_stiffness_ratio",
+                _ => "hammer_felt.unworn_exponent_change",
+            };
+            (field, e.value.to_string(), e.allowed)
+        })
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -447,6 +519,14 @@ impl Preset {
         range("hammer.velocity_m_s", h.velocity_m_s, 0.01, 10.0)?;
         range("hammer.release_gap_m", h.release_gap_m, 0.0, 0.05)?;
         range("hammer.hysteresis_s", h.hysteresis_s, 0.0, MAX_HYSTERESIS_S)?;
+        // A check that names the field, its value and what is allowed, refused as that field.
+        let refused = |(field, value, allowed)| PresetError::Range {
+            path: path.to_owned(),
+            field,
+            value,
+            allowed,
+        };
+        self.hammer_felt.check(s.count).map_err(refused)?;
         range(
             "damper.position_ratio",
             self.damper.position_ratio,
@@ -459,12 +539,7 @@ impl Preset {
             self.damper.rest_compression_m,
             ["damper.rest_compression_m", "damper.full_lift_m"],
         )
-        .map_err(|(field, value, allowed)| PresetError::Range {
-            path: path.to_owned(),
-            field,
-            value,
-            allowed,
-        })?;
+        .map_err(refused)?;
         // The felt lies on the speaking length.
         let d = &self.damper;
         let (x_m, half_m) = (d.position_ratio * s.speaking_length_m, d.width_m / 2.0);
@@ -702,6 +777,7 @@ impl LoadedPreset {
                 strike_ratio: h.strike_ratio,
                 release_gap_m: h.release_gap_m,
                 hysteresis_s: h.hysteresis_s,
+                profile: self.preset.hammer_felt.profile(),
             },
             damper: self.preset.damper.present.then_some(DamperParams {
                 position_ratio: self.preset.damper.position_ratio,

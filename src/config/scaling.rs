@@ -8,9 +8,10 @@
 //! per-note [`Preset`] bridged at its own point of the soundboard.
 
 use crate::config::preset::{
-    bridge_point_index, check_damper_travel, heard, read_text, FeltModelName, LoadedPreset, Preset,
-    PresetError, RadiationSection, StringsSection, MAX_EXPONENT, MAX_FULL_SCALE_PA,
-    MAX_HAMMER_MASS_KG, MAX_HYSTERESIS_S, MIN_EXPONENT, MIN_FULL_SCALE_PA, MIN_HAMMER_MASS_KG,
+    bridge_point_index, check_damper_travel, heard, read_text, FeltModelName, HammerFeltSection,
+    LoadedPreset, Preset, PresetError, RadiationSection, StringsSection, MAX_EXPONENT,
+    MAX_FULL_SCALE_PA, MAX_HAMMER_MASS_KG, MAX_HYSTERESIS_S, MIN_EXPONENT, MIN_FULL_SCALE_PA,
+    MIN_HAMMER_MASS_KG,
 };
 use crate::engine::physics::damper::{DamperParams, FeltModel};
 use crate::engine::physics::string::StringParams;
@@ -57,6 +58,8 @@ pub struct Scaling {
     pub damper_model: Option<FeltModel>,
     /// Every key's damper travel (`[damper_travel]`); `None`: the base preset's.
     pub damper_travel: Option<DamperTravel>,
+    /// Every key's hammer felt across its width (`[hammer_felt]`); `None`: the base preset's.
+    pub hammer_felt: Option<HammerFeltSection>,
     pub voicing: Vec<VoicingAnchor>,
     /// Registers whose string modes reach another frequency than `layout.max_mode_freq_hz`
     /// (`mode_limits`), in increasing keys.
@@ -165,6 +168,9 @@ struct ScalingFile {
     damper_model: Option<FeltModelField>,
     /// Inherited from the base keyboard when absent.
     damper_travel: Option<DamperTravel>,
+    /// Inherited from the base keyboard when absent; a field it leaves out takes the default
+    /// profile's.
+    hammer_felt: Option<HammerFeltSection>,
     #[serde(default)]
     voicing: Vec<VoicingAnchor>,
     #[serde(default)]
@@ -494,6 +500,9 @@ impl Scaling {
             damper_travel: file
                 .damper_travel
                 .or_else(|| base.as_ref().and_then(|b| b.damper_travel)),
+            hammer_felt: file
+                .hammer_felt
+                .or_else(|| base.as_ref().and_then(|b| b.hammer_felt)),
             voicing: inherit_points(file.voicing, base.as_ref().map(|b| &b.voicing)),
             mode_limits: inherit_points(file.mode_limits, base.as_ref().map(|b| &b.mode_limits)),
             base_preset: file
@@ -666,6 +675,13 @@ impl Scaling {
                 ],
             )
             .map_err(|(field, value, allowed)| bad(field, value, &allowed))?;
+        }
+        if let Some(felt) = &self.hammer_felt {
+            // Every unison a keyboard may hold: single strings, bichords, trichords.
+            for n_strings in 1..=3 {
+                felt.check(n_strings)
+                    .map_err(|(field, value, allowed)| bad(field, value, &allowed))?;
+            }
         }
         for a in &self.dampers {
             for (field, v, lo, hi) in [
@@ -1053,6 +1069,9 @@ impl LoadedScaling {
         if let Some(t) = self.scaling.damper_travel {
             let d = &mut preset.damper;
             (d.full_lift_m, d.rest_compression_m) = (t.full_lift_m, t.rest_compression_m);
+        }
+        if let Some(felt) = self.scaling.hammer_felt {
+            preset.hammer_felt = felt;
         }
         let h = &mut preset.hammer;
         h.mass_kg = self.interpolate(key, |a| a.hammer_mass_kg);

@@ -5,6 +5,7 @@
 //! and implements the few hooks of [`Policy`] (what its strings and board do); the decisions are
 //! the provided methods.
 
+use super::physics::hammer::{FeltLaw, HammerParams};
 use super::spec::{BuildError, Strike, UnisonSpec, MAX_STRINGS};
 use std::f64::consts::PI;
 
@@ -20,8 +21,9 @@ pub struct VoiceState {
     pub active: bool,
     /// The hammer is in play (from the strike until it recedes clear of the strings).
     pub hammer_on: bool,
-    /// The strings the hammer strikes (the first ones; una corda leaves the last out).
-    pub struck: [bool; MAX_STRINGS],
+    /// The felt's law on each string the hammer strikes, where the soft pedal's shift put it
+    /// ([`Strike::felt_laws`]); `None` for a string it misses.
+    pub felt: [Option<FeltLaw>; MAX_STRINGS],
     /// How far the key or a pedal lifts the damper: 0 resting on the strings, 1 clear of them,
     /// in between part-lifted ([`Policy::touch_felt`]).
     pub damper_lift: f64,
@@ -60,7 +62,7 @@ impl Default for VoiceState {
             key: None,
             active: false,
             hammer_on: false,
-            struck: [false; MAX_STRINGS],
+            felt: [None; MAX_STRINGS],
             damper_lift: 1.0,
             damper_down: false,
             damper_share: 0.0,
@@ -146,6 +148,8 @@ pub trait Policy {
     /// Where the hammer starts on the first `struck` strings of voice `k`: the highest of their
     /// displacements at the striking point (a sounding key is struck in its motion).
     fn strike_contact_m(&self, k: usize, struck: usize) -> f64;
+    /// The hammer of `key`.
+    fn key_hammer(&self, key: usize) -> &HammerParams;
     fn set_hammer(&mut self, k: usize, position_m: f64, velocity_m_s: f64);
     fn hammer_finite(&self, k: usize) -> bool;
     /// Mechanical energy of voice `k`'s strings and contact springs (J; 0 while not simulated),
@@ -247,11 +251,17 @@ pub trait Policy {
             self.enter(k);
         }
         self.ready_to_strike(k);
-        let n = strike.strings_struck(self.key_strings(key));
-        let s = self.state_mut(k);
-        s.struck = [false; MAX_STRINGS];
-        s.struck[..n].iter_mut().for_each(|s| *s = true);
-        let contact = self.strike_contact_m(k, n);
+        let felt = strike.felt_laws(self.key_hammer(key), self.key_strings(key));
+        // The strings the hammer meets are the first ones (the shift moves the last off the felt),
+        // and it starts touching the nearest felt's surface.
+        let n = felt.iter().flatten().count();
+        let nearest_m = felt
+            .iter()
+            .flatten()
+            .map(|law| law.offset_m)
+            .fold(f64::INFINITY, f64::min);
+        self.state_mut(k).felt = felt;
+        let contact = self.strike_contact_m(k, n) + nearest_m;
         self.set_hammer(k, contact, strike.velocity_m_s);
         let s = self.state_mut(k);
         (s.hammer_on, s.active) = (true, true);

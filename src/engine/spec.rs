@@ -4,7 +4,7 @@
 
 use crate::engine::physics::contact::Contact;
 use crate::engine::physics::damper::DamperParams;
-use crate::engine::physics::hammer::HammerParams;
+use crate::engine::physics::hammer::{FeltLaw, HammerParams};
 use crate::engine::physics::soundboard::{BridgePoint, DroppedModes, SoundboardModes};
 use crate::engine::physics::string::{ModeSet, StringParams};
 use std::f64::consts::PI;
@@ -90,18 +90,41 @@ pub enum VoiceModes {
 pub struct Strike {
     /// Hammer speed when it reaches the strings (m/s).
     pub velocity_m_s: f64,
-    /// Soft pedal: the hammer misses the last string of the unison (one of two, two of three).
-    pub una_corda: bool,
+    /// The soft pedal's shift of the action when the key is struck, a fraction of the full shift:
+    /// 0 the normal strike, 1 the una corda (the last string of the unison missed, the others in
+    /// their neighbours' grooves), between them the felt's other parts
+    /// ([`crate::engine::physics::felt_profile`]).
+    pub shift: f64,
 }
 
 impl Strike {
-    /// How many of a unison's `n_strings` strings the hammer strikes (the first ones).
-    pub fn strings_struck(&self, n_strings: usize) -> usize {
-        if self.una_corda && n_strings > 1 {
-            n_strings - 1
-        } else {
-            n_strings
+    /// Every string struck, each in its groove.
+    pub fn normal(velocity_m_s: f64) -> Strike {
+        Strike {
+            velocity_m_s,
+            shift: 0.0,
         }
+    }
+
+    /// The full soft pedal: the paper's una corda.
+    pub fn una_corda(velocity_m_s: f64) -> Strike {
+        Strike {
+            velocity_m_s,
+            shift: 1.0,
+        }
+    }
+
+    /// The felt law each string of a unison of `n_strings` meets (`None`: missed).
+    pub fn felt_laws(
+        &self,
+        hammer: &HammerParams,
+        n_strings: usize,
+    ) -> [Option<FeltLaw>; MAX_STRINGS] {
+        std::array::from_fn(|s| {
+            (s < n_strings)
+                .then(|| hammer.profile.law(hammer, n_strings, s, self.shift))
+                .flatten()
+        })
     }
 }
 

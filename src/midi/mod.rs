@@ -1,7 +1,7 @@
 //! MIDI input: the byte-stream parser that live input (midir) feeds, the standard-MIDI-file reader,
 //! and their common mapping to piano events ([`Decoder`]): note on → hammer strike
 //! with a speed from the velocity curve, refined by a CC88 high-resolution velocity prefix; note
-//! off (or velocity 0) → damper; CC64 sustain, CC66 sostenuto, CC67 soft pedal (≥ 64: una corda),
+//! off (or velocity 0) → damper; CC64 sustain, CC66 sostenuto, CC67 soft pedal (its depth shifts the action: 127 the una corda),
 //! CC120 all sound off, CC121 reset controllers, CC123–127 all notes off; pitch bend and other
 //! messages are ignored.
 
@@ -75,7 +75,7 @@ pub enum Pedal {
     Sustain,
     /// CC66: dampers held off the keys down when it is pressed.
     Sostenuto,
-    /// CC67: una corda.
+    /// CC67: the action shifted sideways by the pedal's depth (the una corda fully down).
     Soft,
 }
 

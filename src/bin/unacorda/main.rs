@@ -7,6 +7,7 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
+use unacorda::analysis::figures::SOFT_PEDAL_DEPTHS;
 use unacorda::audio::wav::WavStream;
 use unacorda::board::generate_asset;
 use unacorda::config::output::channel_layout;
@@ -66,7 +67,7 @@ enum Command {
         key: Option<String>,
         /// Play a standard MIDI file on the keyboard (all tracks, tempo map, pedals) instead of
         /// striking one note.
-        #[arg(long, value_name = "FILE.mid", conflicts_with_all = ["key", "una_corda", "velocity", "midi_velocity", "release_at"])]
+        #[arg(long, value_name = "FILE.mid", conflicts_with_all = ["key", "una_corda", "soft", "velocity", "midi_velocity", "release_at"])]
         midi: Option<PathBuf>,
         /// With --midi: size of the voice pool, 1–256 (the quietest voice is stolen when it is full).
         #[arg(long, default_value_t = unacorda::play::DEFAULT_VOICES, value_name = "N")]
@@ -96,9 +97,13 @@ enum Command {
         /// Keyboard for --key and --midi: built-in name (concert, the default; paper, the paper's model) or path to a .toml file.
         #[arg(long, default_value = "concert")]
         keyboard: String,
-        /// Soft pedal: the hammer strikes one string of two (two of three).
-        #[arg(long)]
+        /// The full soft pedal: the hammer strikes one string of two (two of three); --soft 1.
+        #[arg(long, conflicts_with = "soft")]
         una_corda: bool,
+        /// The soft pedal's depth, 0–1: the action shifted by that fraction of a string spacing,
+        /// each string meeting another part of the felt (1 is --una-corda).
+        #[arg(long, value_name = "DEPTH", allow_negative_numbers = true)]
+        soft: Option<f64>,
         /// `rk4`, the paper's RK4 at 10 × f_max (the reference; the default of --preset); or
         /// `exact`, each key's coupled modes advanced exactly at the output rate, the keys
         /// coupled through the board (within 0.2 cents and 1 % of RK4 on c2, C4, A0; the
@@ -386,6 +391,7 @@ fn run(cli: Cli) -> Result<()> {
             tail,
             keyboard,
             una_corda,
+            soft,
             integrator,
             velocity,
             midi_velocity,
@@ -438,6 +444,14 @@ fn run(cli: Cli) -> Result<()> {
                     ),
                 };
             }
+            let shift = match (una_corda, soft) {
+                (true, _) => 1.0,
+                (false, Some(depth)) if (0.0..=1.0).contains(&depth) => depth,
+                (false, Some(depth)) => {
+                    bail!("--soft {depth}: expected the soft pedal's depth in [0, 1]")
+                }
+                (false, None) => 0.0,
+            };
             if let Some(seconds) = seconds {
                 if !(0.001..=600.0).contains(&seconds) {
                     bail!("--seconds {seconds}: expected a duration in [0.001, 600] s");
@@ -507,7 +521,7 @@ fn run(cli: Cli) -> Result<()> {
                 integrator.into(),
                 Strike {
                     velocity_m_s,
-                    una_corda,
+                    shift,
                 },
                 release_at,
                 length,
@@ -533,7 +547,11 @@ fn run(cli: Cli) -> Result<()> {
                 rec.rate_hz,
                 channel_layout(channels),
                 peak_dbfs,
-                if una_corda { "una corda" } else { "normal" },
+                match shift {
+                    0.0 => "normal".to_string(),
+                    1.0 => "una corda".to_string(),
+                    _ => format!("soft pedal at {shift}"),
+                },
                 match integrator {
                     IntegratorArg::Rk4 => "RK4",
                     IntegratorArg::Exact => "exact",
@@ -571,7 +589,7 @@ fn run(cli: Cli) -> Result<()> {
                                 loaded,
                                 Strike {
                                     velocity_m_s: v,
-                                    una_corda,
+                                    shift: if una_corda { 1.0 } else { 0.0 },
                                 },
                                 None,
                                 seconds,
@@ -584,6 +602,29 @@ fn run(cli: Cli) -> Result<()> {
                     .map(|h| h.join().expect("simulation thread"))
             });
             let runs = [una_corda?, normal?];
+            eprintln!(
+                "simulating {} at five depths of the soft pedal, 0.5 s each on RK4 (Figure 7)…",
+                loaded.preset.name
+            );
+            let depths: Vec<(f64, Recording)> = std::thread::scope(|scope| {
+                let handles: Vec<_> = SOFT_PEDAL_DEPTHS
+                    .map(|shift| {
+                        let loaded = &loaded;
+                        scope.spawn(move || {
+                            let strike = Strike {
+                                velocity_m_s: v,
+                                shift,
+                            };
+                            simulate(loaded, strike, None, 0.5, |_| {}).map(|r| (shift, r))
+                        })
+                    })
+                    .into_iter()
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().expect("simulation thread"))
+                    .collect::<Result<_, _>>()
+            })?;
             let spec = match &board {
                 Some(path) => unacorda::config::preset::load_board_spec(path)?,
                 None => unacorda::config::preset::parse_board_spec(
@@ -602,6 +643,11 @@ fn run(cli: Cli) -> Result<()> {
             )?;
             written.extend(unacorda::analysis::figures::write_all(
                 &out_dir, &runs[0], &runs[1],
+            )?);
+            written.extend(unacorda::analysis::figures::soft_pedal(
+                &out_dir,
+                &format!("{}, {v} m/s", loaded.preset.name),
+                &depths,
             )?);
             for w in written {
                 eprintln!("wrote {}", w.display());

@@ -166,7 +166,7 @@ mod tests {
         let mut u = ExactUnison::new(&small_c2(rate_hz)).unwrap();
         u.strike(Strike {
             velocity_m_s: 2.5,
-            una_corda: false,
+            shift: 0.0,
         });
         for _ in 0..(0.5e-3 * rate_hz).round() as usize {
             u.step();
@@ -188,7 +188,7 @@ mod tests {
             u.pool.set_simd(simd);
             u.strike(Strike {
                 velocity_m_s: 2.5,
-                una_corda: false,
+                shift: 0.0,
             });
             let mut x = vec![[0.0; 2]; 96_000];
             u.run(&mut x);

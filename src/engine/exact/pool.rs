@@ -7,6 +7,7 @@ use super::interface::{HeardSource, SharedBoard, SOURCE_DELAY_STEPS};
 use super::kernels::{Simd, BLOCK};
 use super::key::{ExactKey, LEFT_BELOW, LEFT_UNDER_J};
 use super::voice::Voice;
+use crate::engine::physics::hammer::HammerParams;
 use crate::engine::pool::{Policy, VoiceState};
 use crate::engine::spec::{
     BuildError, LinearState, Observation, UnisonSpec, VoiceModes, CHANNELS, STEAL_FADE_S,
@@ -595,6 +596,10 @@ impl Policy for ExactPool {
         self.keys[key].n_strings
     }
 
+    fn key_hammer(&self, key: usize) -> &HammerParams {
+        &self.keys[key].hammer
+    }
+
     fn key_has_damper(&self, key: usize) -> bool {
         self.keys[key].has_damper()
     }
@@ -781,7 +786,7 @@ mod tests {
         let mut pool = ExactPool::build_pool(&specs, 3, rate).unwrap();
         let strike = Strike {
             velocity_m_s: 3.0,
-            una_corda: false,
+            shift: 0.0,
         };
         let (mut kept, mut checks) = (0, 0);
         let mut check = |pool: &ExactPool, what: &str| {
@@ -856,7 +861,7 @@ mod tests {
             0,
             Strike {
                 velocity_m_s: 3.0,
-                una_corda: false,
+                shift: 0.0,
             },
         );
         let mut out = vec![[0.0; CHANNELS]; (0.2 * rate) as usize];
@@ -905,7 +910,7 @@ mod tests {
             1,
             Strike {
                 velocity_m_s: 1.0,
-                una_corda: false,
+                shift: 0.0,
             },
         );
         assert!(
@@ -947,7 +952,7 @@ mod tests {
         }
         let strike = Strike {
             velocity_m_s: 3.0,
-            una_corda: false,
+            shift: 0.0,
         };
         blocks.strike_voice(0, strike);
         blocks.strike_voice(2, strike);

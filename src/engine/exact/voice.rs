@@ -246,15 +246,18 @@ impl Voice {
     /// The felt force on each struck string now (N).
     pub(crate) fn hammer_force_n(&self, key: &ExactKey) -> [f64; MAX_STRINGS] {
         std::array::from_fn(|s| {
-            if self.state.hammer_on && s < key.n_strings && self.state.struck[s] {
+            if let (true, true, Some(law)) =
+                (self.state.hammer_on, s < key.n_strings, self.state.felt[s])
+            {
                 let ve = if key.hammer.is_hysteretic() {
                     self.read_z(&key.strike_velocity_row[s], &key.strike_velocity_settle[s])
                 } else {
                     0.0
                 };
-                key.hammer.felt_force_n(
+                law.force_n(
                     self.hammer_y - self.strike_point_m(key, s),
                     self.hammer_v - ve,
+                    key.hammer.hysteresis_s,
                 )
             } else {
                 0.0
@@ -432,7 +435,7 @@ impl Voice {
         self.d = next;
         if self.state.hammer_on {
             let points = (0..key.n_strings)
-                .filter(|&s| self.state.struck[s])
+                .filter(|&s| self.state.felt[s].is_some())
                 .map(|s| self.strike_point_m(key, s));
             if key.hammer.is_clear(self.hammer_y, self.hammer_v, points) {
                 self.state.hammer_on = false;
@@ -478,16 +481,16 @@ impl Voice {
                     .map(|s| step.stage_q[i][s] * fq[s] + step.stage_eq[i][s] * feq[s])
                     .sum::<f64>()
         };
-        let struck = self.state.struck;
+        let (laws, alpha_s) = (self.state.felt, key.hammer.hysteresis_s);
         let felt = |power, fq: &[f64; MAX_STRINGS], feq: &[f64; MAX_STRINGS], y: f64, v: f64| {
             std::array::from_fn(|s| {
-                if s < ns && struck[s] {
+                if let (true, Some(law)) = (s < ns, laws[s]) {
                     let ve = if hysteretic {
                         at(ns + s, power, fq, feq)
                     } else {
                         0.0
                     };
-                    key.hammer.felt_force_n(y - at(s, power, fq, feq), v - ve)
+                    law.force_n(y - at(s, power, fq, feq), v - ve, alpha_s)
                 } else {
                     0.0
                 }
@@ -508,7 +511,7 @@ impl Voice {
         let mut inputs: [&Split; FELT_INPUTS] = [&step.ef; FELT_INPUTS];
         let mut forces = [0.0; FELT_INPUTS];
         let mut k = 0;
-        for s in (0..ns).filter(|&s| struck[s]) {
+        for s in (0..ns).filter(|&s| laws[s].is_some()) {
             for (g, f) in step.drive_f[s].iter().zip([fu[s], fa[s] + fb[s], fc[s]]) {
                 (inputs[k], forces[k]) = (g, f);
                 k += 1;

@@ -9,6 +9,11 @@
 //! compressed fast is then stiffer than one compressed slowly, and it loses energy over each
 //! compression and release: a fortissimo blow is shorter and brighter than a pianissimo one.
 //! `alpha = 0` is the paper's elastic felt, bit for bit.
+//!
+//! Where each string meets the felt — in its groove, or elsewhere under the soft pedal — sets its
+//! law ([`FeltLaw`], from the hammer's [`FeltProfile`]).
+
+pub use super::felt_profile::FeltProfile;
 
 /// The fastest blow a key is built to resolve (m/s): MIDI velocity 127's hammer speed
 /// (`midi::VELOCITY_ANCHORS_M_S`).
@@ -21,6 +26,8 @@ pub const STEPS_PER_CONTACT: f64 = 16.0;
 /// Hammer parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HammerParams {
+    /// The felt across the hammer's width, which the soft pedal's shift moves the strings over.
+    pub profile: FeltProfile,
     /// Mass m_H (kg).
     pub mass_kg: f64,
     /// Felt stiffness K_H (N/m^p).
@@ -36,22 +43,64 @@ pub struct HammerParams {
     pub hysteresis_s: f64,
 }
 
-impl HammerParams {
-    /// Felt force for a compression `xi_m` (m) growing at `rate_m_s` (the hammer's velocity less
-    /// the string's at the striking point): `K xi^p` (Eq. 8), and with hysteresis
+/// The felt's law where one string meets it (Eq. 8 at that place on the hammer: see
+/// [`FeltProfile`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FeltLaw {
+    /// Stiffness K (N/m^p).
+    pub stiffness_n_m_p: f64,
+    /// Exponent p (-).
+    pub exponent: f64,
+    /// How far the felt's surface there lies behind the hammer's reference, a groove's (m): the
+    /// compression is `y_H - y_e - offset_m`.
+    pub offset_m: f64,
+}
+
+impl FeltLaw {
+    /// Felt force for the hammer `y_H - y_e` = `gap_m` (m) from the string, the felt compressed
+    /// by `xi = gap_m - offset_m` growing at `rate_m_s` (the hammer's velocity less the
+    /// string's at the striking point): `K xi^p` (Eq. 8), and with the hysteresis `alpha_s`
     /// `K [xi^p + alpha p xi^(p-1) dxi/dt]`, at least 0 (a felt pushes, never pulls); zero when
     /// the felt is not compressed.
     #[inline(always)]
-    pub fn felt_force_n(&self, xi_m: f64, rate_m_s: f64) -> f64 {
+    pub fn force_n(&self, gap_m: f64, rate_m_s: f64, alpha_s: f64) -> f64 {
+        let xi_m = gap_m - self.offset_m;
         if xi_m <= 0.0 {
             return 0.0;
         }
         let elastic = xi_m.powf(self.exponent);
-        if !self.is_hysteretic() {
+        if alpha_s == 0.0 {
             return self.stiffness_n_m_p * elastic;
         }
-        let rate = self.hysteresis_s * self.exponent * elastic / xi_m * rate_m_s;
+        let rate = alpha_s * self.exponent * elastic / xi_m * rate_m_s;
         (self.stiffness_n_m_p * (elastic + rate)).max(0.0)
+    }
+
+    /// Potential energy stored in the felt for the hammer `gap_m` from the string (J).
+    pub fn energy_j(&self, gap_m: f64) -> f64 {
+        let xi_m = gap_m - self.offset_m;
+        if xi_m > 0.0 {
+            self.stiffness_n_m_p * xi_m.powf(self.exponent + 1.0) / (self.exponent + 1.0)
+        } else {
+            0.0
+        }
+    }
+}
+
+impl HammerParams {
+    /// The felt's law in a groove: `K xi^p`, its surface the reference.
+    pub fn groove_law(&self) -> FeltLaw {
+        FeltLaw {
+            stiffness_n_m_p: self.stiffness_n_m_p,
+            exponent: self.exponent,
+            offset_m: 0.0,
+        }
+    }
+
+    /// Felt force in a groove ([`FeltLaw::force_n`] of [`Self::groove_law`]).
+    #[inline(always)]
+    pub fn felt_force_n(&self, xi_m: f64, rate_m_s: f64) -> f64 {
+        self.groove_law().force_n(xi_m, rate_m_s, self.hysteresis_s)
     }
 
     /// Whether the felt's force depends on its rate of compression (then its callers read the
@@ -113,23 +162,14 @@ impl HammerParams {
         let shortest_s = self.rigid_contact_s(FASTEST_BLOW_M_S);
         ((STEPS_PER_CONTACT * h_s / shortest_s).ceil() as usize).clamp(1, 16)
     }
-
-    /// Potential energy stored in the felt at compression `xi_m` (J).
-    pub fn felt_energy_j(&self, xi_m: f64) -> f64 {
-        if xi_m > 0.0 {
-            self.stiffness_n_m_p * xi_m.powf(self.exponent + 1.0) / (self.exponent + 1.0)
-        } else {
-            0.0
-        }
-    }
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// Chaigne & Askenfelt's C4 hammer (the paper keyboard's), elastic or hysteretic.
-    fn c4(hysteresis_s: f64) -> HammerParams {
+    pub(crate) fn c4(hysteresis_s: f64) -> HammerParams {
         HammerParams {
             mass_kg: 2.97e-3,
             stiffness_n_m_p: 4.5e9,
@@ -137,6 +177,7 @@ mod tests {
             strike_ratio: 0.12,
             release_gap_m: 0.0,
             hysteresis_s,
+            profile: crate::engine::physics::felt_profile::DEFAULT_PROFILE,
         }
     }
 

@@ -4,11 +4,13 @@
 //! - [`soundboard`]: the reduced modal soundboard (Eq. 4–5),
 //! - [`contact`]: the string–bridge contact springs and dampers (Eq. 6–7),
 //! - [`hammer`]: the nonlinear felt hammer (Eq. 8–9),
+//! - [`felt_profile`]: the hammer's felt across its width, which the soft pedal moves over,
 //! - [`damper`]: the felt that silences a released key.
 
 pub mod contact;
 pub mod damper;
 pub mod duplex;
+pub mod felt_profile;
 pub mod hammer;
 pub mod soundboard;
 pub mod string;

@@ -8,6 +8,7 @@
 //! is the baseline the optimised engine's speed is reported against.
 
 use crate::engine::physics::duplex::duplex_damping_matrix;
+use crate::engine::physics::hammer::FeltLaw;
 use crate::engine::spec::Direction;
 use crate::engine::spec::{Strike, UnisonSpec, MAX_STRINGS};
 use faer::linalg::matmul::matmul;
@@ -35,7 +36,7 @@ pub struct DenseUnison {
     y: Mat<f64>,
     u: Mat<f64>,
     fb: Mat<f64>,
-    struck: [bool; MAX_STRINGS],
+    felt: [Option<FeltLaw>; MAX_STRINGS],
     hammer_on: bool,
     h: f64,
 }
@@ -166,7 +167,7 @@ impl DenseUnison {
             y: col(OUTPUTS),
             u: col(ns),
             fb: col(3 * (ns + 1)),
-            struck: [false; MAX_STRINGS],
+            felt: [None; MAX_STRINGS],
             hammer_on: false,
             h: 1.0 / spec.sample_rate_hz,
         }
@@ -211,16 +212,16 @@ impl DenseUnison {
     /// strings' current displacement, moving at the strike's speed.
     pub fn strike(&mut self, strike: Strike) {
         let ns = self.n_strings;
-        let n_struck = strike.strings_struck(ns);
+        self.felt = strike.felt_laws(&self.spec.hammer, ns);
         self.outputs_of_x();
-        let mut contact = f64::NEG_INFINITY;
+        let (mut contact, mut nearest_m) = (f64::NEG_INFINITY, f64::INFINITY);
         for s in 0..ns {
-            self.struck[s] = s < n_struck;
-            if self.struck[s] {
+            if let Some(law) = self.felt[s] {
                 contact = contact.max(self.y[(out_ye(s), 0)]);
+                nearest_m = nearest_m.min(law.offset_m);
             }
         }
-        self.x[(2 * self.nq, 0)] = contact;
+        self.x[(2 * self.nq, 0)] = contact + nearest_m;
         self.x[(2 * self.nq + 1, 0)] = strike.velocity_m_s;
         self.hammer_on = true;
     }
@@ -246,13 +247,16 @@ impl DenseUnison {
         }
         // Hammer forces (Eq. 8) on the struck strings.
         for s in 0..ns {
-            self.u[(s, 0)] = if self.hammer_on && self.struck[s] {
-                let (yh, vh) = (self.xs[(2 * nq, 0)], self.xs[(2 * nq + 1, 0)]);
-                self.spec
-                    .hammer
-                    .felt_force_n(yh - self.y[(out_ye(s), 0)], vh - self.y[(out_ve(s), 0)])
-            } else {
-                0.0
+            self.u[(s, 0)] = match (self.hammer_on, self.felt[s]) {
+                (true, Some(law)) => {
+                    let (yh, vh) = (self.xs[(2 * nq, 0)], self.xs[(2 * nq + 1, 0)]);
+                    law.force_n(
+                        yh - self.y[(out_ye(s), 0)],
+                        vh - self.y[(out_ve(s), 0)],
+                        self.spec.hammer.hysteresis_s,
+                    )
+                }
+                _ => 0.0,
             };
         }
         gemv(&mut self.k, Accum::Replace, &self.a, &self.xs);
@@ -292,7 +296,7 @@ impl DenseUnison {
         if self.hammer_on && vh < 0.0 {
             self.outputs_of_x();
             let points = (0..self.n_strings)
-                .filter(|&s| self.struck[s])
+                .filter(|&s| self.felt[s].is_some())
                 .map(|s| self.y[(out_ye(s), 0)]);
             if self.spec.hammer.is_clear(yh, vh, points) {
                 self.hammer_on = false;

@@ -585,7 +585,7 @@ impl<T: Real> Rk4Pool<T> {
         };
         let km = &self.model.keys[key];
         let strike_points = (0..voice.n_strings)
-            .filter(|&s| state.struck[s])
+            .filter(|&s| state.felt[s].is_some())
             .map(|s| T::dot_wide::<false>(&km.hammer_shape, &self.q[voice.ranges[s][0].clone()]));
         if km
             .hammer
@@ -615,7 +615,7 @@ mod tests {
         portable.fast_path = false;
         let strike = Strike {
             velocity_m_s: 2.5,
-            una_corda: false,
+            shift: 0.0,
         };
         fast.strike(strike);
         portable.strike(strike);

@@ -44,7 +44,7 @@ impl<T: Real> Rk4Pool<T> {
                 obs.bridge_force_n[s][d] = f;
                 obs.total_force_n[d] += f;
             }
-            if self.states[k].hammer_on && self.states[k].struck[s] {
+            if let (true, Some(law)) = (self.states[k].hammer_on, self.states[k].felt[s]) {
                 let r = voice.ranges[s][0].clone();
                 let ye = T::dot_wide::<false>(&km.hammer_shape, &q[r.clone()]);
                 let ve = if km.hammer.is_hysteretic() {
@@ -52,9 +52,11 @@ impl<T: Real> Rk4Pool<T> {
                 } else {
                     0.0
                 };
-                obs.hammer_force_n[s] = km
-                    .hammer
-                    .felt_force_n(self.hammer_y[k] - ye, self.hammer_v[k] - ve);
+                obs.hammer_force_n[s] = law.force_n(
+                    self.hammer_y[k] - ye,
+                    self.hammer_v[k] - ve,
+                    km.hammer.hysteresis_s,
+                );
             }
         }
         obs
@@ -115,7 +117,7 @@ impl<T: Real> Rk4Pool<T> {
                 eval += 4 * km.damper_shapes.len() * voice.n_strings * (nt + np);
             }
             if f[k].hammer_on {
-                eval += 4 * nt * f[k].struck.iter().filter(|&&s| s).count();
+                eval += 4 * nt * f[k].felt.iter().flatten().count();
             }
         }
         // Four evaluations, and the stage updates: 4 + 8 + 8 + 6 per mode.
@@ -167,12 +169,12 @@ impl<T: Real> Rk4Pool<T> {
             if self.states[k].hammer_on {
                 hammer_j += 0.5 * km.hammer.mass_kg * self.hammer_v[k].powi(2);
                 for s in 0..voice.n_strings {
-                    if self.states[k].struck[s] {
+                    if let Some(law) = self.states[k].felt[s] {
                         let ye = T::dot_wide::<false>(
                             &km.hammer_shape,
                             &self.q[voice.ranges[s][0].clone()],
                         );
-                        hammer_j += km.hammer.felt_energy_j(self.hammer_y[k] - ye);
+                        hammer_j += law.energy_j(self.hammer_y[k] - ye);
                     }
                 }
             }

@@ -1,6 +1,7 @@
 //! The pool policy ([`Policy`]) on RK4's flat arrays: the hooks the shared policy calls.
 
 use super::*;
+use crate::engine::physics::hammer::HammerParams;
 
 /// The pool policy ([`Policy`]) on RK4's flat arrays.
 impl<T: Real> Policy for Rk4Pool<T> {
@@ -30,6 +31,10 @@ impl<T: Real> Policy for Rk4Pool<T> {
 
     fn key_strings(&self, key: usize) -> usize {
         self.model.keys[key].n_strings
+    }
+
+    fn key_hammer(&self, key: usize) -> &HammerParams {
+        &self.model.keys[key].hammer
     }
 
     fn key_has_damper(&self, key: usize) -> bool {

@@ -131,7 +131,7 @@ pub(super) fn evaluate<T: Real, const SIMD: bool>(
         if states[k].hammer_on {
             let mut felt_total = 0.0;
             for s in 0..voice.n_strings {
-                if states[k].struck[s] {
+                if let Some(law) = &states[k].felt[s] {
                     let r = voice.ranges[s][0].clone();
                     let ye = T::dot::<SIMD>(&km.hammer_shape, &q[r.clone()]).to_f64();
                     let ve = if km.hammer.is_hysteretic() {
@@ -139,7 +139,7 @@ pub(super) fn evaluate<T: Real, const SIMD: bool>(
                     } else {
                         0.0
                     };
-                    let f = km.hammer.felt_force_n(hammer_y[k] - ye, hammer_v[k] - ve);
+                    let f = law.force_n(hammer_y[k] - ye, hammer_v[k] - ve, km.hammer.hysteresis_s);
                     felt_total += f;
                     T::axpy::<SIMD>(&mut acc[r], &km.hammer_shape, T::from_f64(f));
                 }
