@@ -242,7 +242,8 @@ pub trait Policy {
 
     /// Launch voice `k`'s hammer at its strings (Eq. 14–15): it starts touching the struck strings
     /// at their current displacement and moves towards them at `strike.velocity_m_s`. A voice
-    /// without a key ignores it.
+    /// without a key, or whose hammer would miss every string (a felt profile that cannot hold
+    /// its unison, [`crate::engine::physics::felt_profile::FeltProfile::check`]), ignores it.
     fn strike_voice(&mut self, k: usize, strike: Strike) {
         let Some(key) = self.state(k).key else {
             return;
@@ -255,6 +256,9 @@ pub trait Policy {
         // The strings the hammer meets are the first ones (the shift moves the last off the felt),
         // and it starts touching the nearest felt's surface.
         let n = felt.iter().flatten().count();
+        if n == 0 {
+            return;
+        }
         let nearest_m = felt
             .iter()
             .flatten()

@@ -98,22 +98,6 @@ pub struct Strike {
 }
 
 impl Strike {
-    /// Every string struck, each in its groove.
-    pub fn normal(velocity_m_s: f64) -> Strike {
-        Strike {
-            velocity_m_s,
-            shift: 0.0,
-        }
-    }
-
-    /// The full soft pedal: the paper's una corda.
-    pub fn una_corda(velocity_m_s: f64) -> Strike {
-        Strike {
-            velocity_m_s,
-            shift: 1.0,
-        }
-    }
-
     /// The felt law each string of a unison of `n_strings` meets (`None`: missed).
     pub fn felt_laws(
         &self,

@@ -607,7 +607,7 @@ fn run(cli: Cli) -> Result<()> {
                 loaded.preset.name
             );
             let depths: Vec<(f64, Recording)> = std::thread::scope(|scope| {
-                let handles: Vec<_> = SOFT_PEDAL_DEPTHS
+                SOFT_PEDAL_DEPTHS
                     .map(|shift| {
                         let loaded = &loaded;
                         scope.spawn(move || {
@@ -618,9 +618,6 @@ fn run(cli: Cli) -> Result<()> {
                             simulate(loaded, strike, None, 0.5, |_| {}).map(|r| (shift, r))
                         })
                     })
-                    .into_iter()
-                    .collect();
-                handles
                     .into_iter()
                     .map(|h| h.join().expect("simulation thread"))
                     .collect::<Result<_, _>>()

@@ -10,8 +10,8 @@
 //! felt of the normal strike.
 //!
 //! Along the way each string meets:
-//! - **a groove** (at every `x_j`, `groove_width_m` wide): felt compacted by the strings, today's
-//!   law `K xi^p` (Eq. 8) at its middle;
+//! - **a groove** (at every `x_j`, `groove_width_m` wide): felt compacted by the strings,
+//!   the hammer's own law `K xi^p` (Eq. 8) at its middle;
 //! - **unworn felt** between and beside the grooves: softer (`unworn_stiffness_ratio` of the
 //!   groove's force at [`UNWORN_REFERENCE_M`] of compression) and less steep
 //!   (`unworn_exponent_change`, as the felt's exponent falls with its density from treble to bass
@@ -109,7 +109,8 @@ impl FeltProfile {
     }
 
     /// The felt law string `string` of a unison of `n_strings` meets at the shift `shift` (0 the
-    /// normal strike, 1 the full soft pedal; clamped), or `None` where the hammer misses it.
+    /// normal strike, 1 the full soft pedal; clamped, and 0 if not a number), or `None` where the
+    /// hammer misses it.
     pub fn law(
         &self,
         hammer: &HammerParams,
@@ -117,7 +118,12 @@ impl FeltProfile {
         string: usize,
         shift: f64,
     ) -> Option<FeltLaw> {
-        let u_m = self.rest_m(n_strings, string) - shift.clamp(0.0, 1.0) * self.string_spacing_m;
+        let shift = if shift.is_finite() {
+            shift.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let u_m = self.rest_m(n_strings, string) - shift * self.string_spacing_m;
         let half_m = self.half_width_m(n_strings);
         if u_m.abs() >= half_m {
             return None;
@@ -253,6 +259,11 @@ mod tests {
                     h.profile.law(&h, n, s, 0.0),
                     Some(own(&h)),
                     "{n} strings, {s}"
+                );
+                assert_eq!(
+                    h.profile.law(&h, n, s, f64::NAN),
+                    Some(own(&h)),
+                    "not a number"
                 );
                 let full = h.profile.law(&h, n, s, 1.0);
                 if n == 1 {
