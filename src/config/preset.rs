@@ -214,10 +214,10 @@ impl HammerFeltSection {
         }
     }
 
-    /// The profile holds a unison of `n_strings`, or the field (`hammer_felt.…`, in a preset or a
-    /// keyboard) that does not, with its value and what is allowed.
-    pub(crate) fn check(&self, n_strings: usize) -> Result<(), (&'static str, String, String)> {
-        self.profile().check(n_strings).map_err(|e| {
+    /// The profile holds every unison ([`FeltProfile::check`]), or the field (`hammer_felt.…`, in
+    /// a preset or a keyboard) that does not, with its value and what is allowed.
+    pub(crate) fn check(&self) -> Result<(), (&'static str, String, String)> {
+        self.profile().check().map_err(|e| {
             let field = match e.field {
                 "string_spacing_m" => "hammer_felt.string_spacing_m",
                 "overhang_m" => "hammer_felt.overhang_m",
@@ -526,7 +526,7 @@ impl Preset {
             value,
             allowed,
         };
-        self.hammer_felt.check(s.count).map_err(refused)?;
+        self.hammer_felt.check().map_err(refused)?;
         range(
             "damper.position_ratio",
             self.damper.position_ratio,

@@ -677,11 +677,8 @@ impl Scaling {
             .map_err(|(field, value, allowed)| bad(field, value, &allowed))?;
         }
         if let Some(felt) = &self.hammer_felt {
-            // Every unison a keyboard may hold: single strings, bichords, trichords.
-            for n_strings in 1..=3 {
-                felt.check(n_strings)
-                    .map_err(|(field, value, allowed)| bad(field, value, &allowed))?;
-            }
+            felt.check()
+                .map_err(|(field, value, allowed)| bad(field, value, &allowed))?;
         }
         for a in &self.dampers {
             for (field, v, lo, hi) in [

@@ -149,10 +149,11 @@ impl FeltProfile {
         })
     }
 
-    /// Whether the profile holds a unison of `n_strings`: every groove on the felt's crown at
-    /// shift 0 (each string struck by the hammer's own law), the grooves apart, and the last
+    /// Whether the profile holds every unison a keyboard may have (one to three strings): every
+    /// groove on the felt's crown at shift 0 (each string struck by the hammer's own law), the
+    /// grooves apart, a single string struck at every shift, and a bichord's or trichord's last
     /// string clear of the felt at the full shift.
-    pub fn check(&self, n_strings: usize) -> Result<(), ProfileError> {
+    pub fn check(&self) -> Result<(), ProfileError> {
         let err = |field, value, allowed: String| {
             Err(ProfileError {
                 field,
@@ -227,7 +228,7 @@ impl FeltProfile {
                     "more than {least_m:e} (half a groove plus the shoulder: the outer grooves \
                      on the crown, else a groove wider than the felt strikes no string whole; and \
                      half the spacing: a single string stays struck) up to the string spacing \
-                     ({s:e}: the last of {n_strings} strings clear at the full shift)"
+                     ({s:e}: a bichord's or trichord's last string clear at the full shift)"
                 ),
             );
         }
@@ -324,7 +325,7 @@ mod tests {
     #[test]
     fn profiles_that_cannot_hold_a_unison_are_refused() {
         let ok = DEFAULT_PROFILE;
-        assert_eq!(ok.check(3), Ok(()));
+        assert_eq!(ok.check(), Ok(()));
         let cases = [
             (
                 FeltProfile {
@@ -371,7 +372,7 @@ mod tests {
             ),
         ];
         for (profile, field) in cases {
-            let e = profile.check(3).unwrap_err();
+            let e = profile.check().unwrap_err();
             println!("{field}: {} — {}", e.value, e.allowed);
             assert_eq!(e.field, field);
         }
