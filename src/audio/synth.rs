@@ -364,6 +364,12 @@ impl<E: VoicePool> Synth<E> {
                 let helper = self.helper.as_ref().map(|h| h as &dyn Pair);
                 let cores = pair.filter(|p| !p.declines()).or(helper);
                 let inst = &mut self.piano.instrument;
+                // The voices' energies are read at a housekeeping period's end, by an event
+                // (the choice of a voice), and by the host after the callback.
+                let end = self.frame + n as u64;
+                inst.energies_read_after_run(
+                    end.is_multiple_of(HOUSEKEEPING_FRAMES) || end == next || n == left,
+                );
                 inst.run(&mut self.volume[..n * ratio], cores);
             }
             let mut blown = false;

@@ -91,6 +91,12 @@ pub trait VoicePool: Policy + Clone + Send + std::fmt::Debug + 'static {
     /// Which of their modes the voices step from now on ([`VoiceModes`]; by default as many
     /// as the sound needs). An engine that steps them all ignores it.
     fn set_voice_modes(&mut self, _modes: VoiceModes) {}
+    /// Whether anything reads the voices' energies ([`Policy::voice_energy_j`],
+    /// [`VoicePool::mechanical_energy_j`]) before the next [`VoicePool::run`] after this one:
+    /// an engine that works them out as it steps, while each voice's modes are in cache, then
+    /// leaves them to be worked out on demand. It holds for the next run only; by default they
+    /// are read after every run.
+    fn energies_read_after_run(&mut self, _read: bool) {}
     /// Whether energy may enter the strings now: a hammer is in play (from the strike until it
     /// is released) or a stolen voice is fading (its contact springs change).
     fn is_driven(&self) -> bool {
@@ -222,6 +228,9 @@ voice_pool!(
     },
     fn modes_stepped(&self) -> Option<usize> {
         Some(exact::ExactPool::modes_stepped(self))
+    },
+    fn energies_read_after_run(&mut self, read: bool) {
+        exact::ExactPool::energies_read_after_run(self, read)
     }
 );
 

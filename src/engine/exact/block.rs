@@ -8,7 +8,7 @@
 //! and a copy of the shared board, the two meeting every sample to exchange their halves' known
 //! forces.
 
-use super::interface::{BoardState, SharedBoard};
+use super::interface::{BoardState, BridgePoint, SharedBoard};
 use super::kernels::{
     fold_block, free_block, Reversed, Simd, BLOCK, DIRECTIONS, READS, SOUND_READS,
 };
@@ -25,7 +25,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 /// (its coefficients and the interface's matrices) and timing.
 pub(crate) struct Context<'a> {
     pub(crate) keys: &'a [ExactKey],
-    pub(crate) points: &'a [[Vec<f64>; 3]],
+    pub(crate) points: &'a [BridgePoint],
     pub(crate) board: &'a SharedBoard,
     pub(crate) fade_steps: u32,
     pub(crate) simd: Simd,

@@ -240,12 +240,12 @@ impl SharedBoard {
 
     /// A key's mode shapes at its bridge point (all the board's modes) restricted to the shared
     /// ones (zero on the padding).
-    pub(crate) fn restrict(&self, shape: &[Vec<f64>; 3]) -> [Vec<f64>; 3] {
-        std::array::from_fn(|d| {
+    pub(crate) fn restrict(&self, shape: &[Vec<f64>; 3]) -> BridgePoint {
+        BridgePoint::new(std::array::from_fn(|d| {
             let mut phi: Vec<f64> = self.modes.iter().map(|&k| shape[d][k]).collect();
             phi.resize(self.modes(), 0.0);
             phi
-        })
+        }))
     }
 
     /// A key at `phi` starts (`dz = Z`) or stops (`dz = -Z`) loading the board through the
@@ -339,8 +339,8 @@ impl SharedBoard {
 
     /// The shared modes' displacement at a key's point `phi` after the last step (m, per
     /// direction).
-    pub(crate) fn at(&self, state: &BoardState, phi: &[Vec<f64>; 3], simd: Simd) -> [f64; 3] {
-        project(simd, &state.q, phi)
+    pub(crate) fn at(&self, state: &BoardState, point: &BridgePoint, simd: Simd) -> [f64; 3] {
+        project(simd, &state.q, &point.packed)
     }
 
     /// Their velocity at `phi` (m/s, per direction).
@@ -356,8 +356,8 @@ impl SharedBoard {
     }
 
     /// `sum += Phi f`: a key's force `f` (N, per direction) at its point onto the modes.
-    pub(crate) fn add_force(&self, simd: Simd, phi: &[Vec<f64>; 3], f: [f64; 3], sum: &mut [f64]) {
-        spread(simd, phi, f, sum)
+    pub(crate) fn add_force(&self, simd: Simd, point: &BridgePoint, f: [f64; 3], sum: &mut [f64]) {
+        spread(simd, &point.packed, f, sum)
     }
 
     /// A key joins (`sign` 1) or leaves (`sign` -1) the board with the force it puts on it.
@@ -509,39 +509,43 @@ fn matvec_chunk<const FMA: bool, const C: usize>(a: &[f64], x: &[f64], y: &mut [
     y.copy_from_slice(&acc);
 }
 
-/// `Phi^T q` (per direction) over modes padded to whole lanes.
-fn project(simd: Simd, q: &[f64], phi: &[Vec<f64>; 3]) -> [f64; 3] {
+/// `Phi^T q` (per direction) over modes padded to whole lanes, `Phi` packed
+/// ([`BridgePoint::packed`]).
+fn project(simd: Simd, q: &[f64], packed: &[f32]) -> [f64; 3] {
+    assert_eq!(
+        packed.len(),
+        3 * q.len(),
+        "a point packs three directions of every mode"
+    );
     #[cfg(target_arch = "x86_64")]
     match simd {
         // SAFETY: `Simd::detect` chose these only where the CPU has them.
-        Simd::Avx512 => return unsafe { project_avx512(q, phi) },
-        Simd::Avx2 => return unsafe { project_avx2(q, phi) },
+        Simd::Avx512 => return unsafe { project_avx512(q, packed) },
+        Simd::Avx2 => return unsafe { project_avx2(q, packed) },
         Simd::Portable => {}
     }
     let _ = simd;
-    project_with::<false>(q, phi)
+    project_with::<false>(q, packed)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn project_avx2(q: &[f64], phi: &[Vec<f64>; 3]) -> [f64; 3] {
-    project_with::<true>(q, phi)
+unsafe fn project_avx2(q: &[f64], packed: &[f32]) -> [f64; 3] {
+    project_with::<true>(q, packed)
 }
 
 #[inline(always)]
-fn project_with<const FMA: bool>(q: &[f64], phi: &[Vec<f64>; 3]) -> [f64; 3] {
+fn project_with<const FMA: bool>(q: &[f64], packed: &[f32]) -> [f64; 3] {
     let m = q.len();
     let mut at = [[0.0; LANES]; 3];
-    for (((q, p0), p1), p2) in q[..m]
-        .chunks_exact(LANES)
-        .zip(phi[0][..m].chunks_exact(LANES))
-        .zip(phi[1][..m].chunks_exact(LANES))
-        .zip(phi[2][..m].chunks_exact(LANES))
-    {
-        for l in 0..LANES {
-            at[0][l] = fma::<FMA>(p0[l], q[l], at[0][l]);
-            at[1][l] = fma::<FMA>(p1[l], q[l], at[1][l]);
-            at[2][l] = fma::<FMA>(p2[l], q[l], at[2][l]);
+    for (d, at) in at.iter_mut().enumerate() {
+        for (q, p) in q
+            .chunks_exact(LANES)
+            .zip(packed[d * m..(d + 1) * m].chunks_exact(LANES))
+        {
+            for l in 0..LANES {
+                at[l] = fma::<FMA>(f64::from(p[l]), q[l], at[l]);
+            }
         }
     }
     at.map(|a| a.iter().sum())
@@ -550,75 +554,111 @@ fn project_with<const FMA: bool>(q: &[f64], phi: &[Vec<f64>; 3]) -> [f64; 3] {
 /// [`project`] in AVX-512: a register of [`LANES`] modes a pass.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn project_avx512(q: &[f64], phi: &[Vec<f64>; 3]) -> [f64; 3] {
+unsafe fn project_avx512(q: &[f64], packed: &[f32]) -> [f64; 3] {
     use std::arch::x86_64::*;
     let m = q.len();
-    assert!(phi.iter().all(|p| p.len() >= m) && m.is_multiple_of(LANES));
+    assert!(packed.len() == 3 * m && m.is_multiple_of(LANES));
     let mut at = [_mm512_setzero_pd(); 3];
     for k in (0..m).step_by(LANES) {
-        // SAFETY: `k + LANES <= m`, within `q` and every `phi[d]` (asserted above).
+        // SAFETY: `k + LANES <= m`, within `q` and each direction's `m` values of `packed`
+        // (asserted above).
         let x = _mm512_loadu_pd(q.as_ptr().add(k));
-        for d in 0..3 {
-            at[d] = _mm512_fmadd_pd(_mm512_loadu_pd(phi[d].as_ptr().add(k)), x, at[d]);
+        for (d, at) in at.iter_mut().enumerate() {
+            let p = _mm512_cvtps_pd(_mm256_loadu_ps(packed.as_ptr().add(d * m + k)));
+            *at = _mm512_fmadd_pd(p, x, *at);
         }
     }
     at.map(|a| _mm512_reduce_add_pd(a))
 }
 
-/// `sum += Phi f` over modes padded to whole lanes.
-fn spread(simd: Simd, phi: &[Vec<f64>; 3], f: [f64; 3], sum: &mut [f64]) {
+/// `sum += Phi f` over modes padded to whole lanes, `Phi` packed ([`BridgePoint::packed`]).
+fn spread(simd: Simd, packed: &[f32], f: [f64; 3], sum: &mut [f64]) {
+    assert_eq!(
+        packed.len(),
+        3 * sum.len(),
+        "a point packs three directions of every mode"
+    );
     #[cfg(target_arch = "x86_64")]
     match simd {
         // SAFETY: `Simd::detect` chose these only where the CPU has them.
-        Simd::Avx512 => return unsafe { spread_avx512(phi, f, sum) },
-        Simd::Avx2 => return unsafe { spread_avx2(phi, f, sum) },
+        Simd::Avx512 => return unsafe { spread_avx512(packed, f, sum) },
+        Simd::Avx2 => return unsafe { spread_avx2(packed, f, sum) },
         Simd::Portable => {}
     }
     let _ = simd;
-    spread_with::<false>(phi, f, sum)
+    spread_with::<false>(packed, f, sum)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn spread_avx2(phi: &[Vec<f64>; 3], f: [f64; 3], sum: &mut [f64]) {
-    spread_with::<true>(phi, f, sum)
+unsafe fn spread_avx2(packed: &[f32], f: [f64; 3], sum: &mut [f64]) {
+    spread_with::<true>(packed, f, sum)
 }
 
 #[inline(always)]
-fn spread_with<const FMA: bool>(phi: &[Vec<f64>; 3], f: [f64; 3], sum: &mut [f64]) {
+fn spread_with<const FMA: bool>(packed: &[f32], f: [f64; 3], sum: &mut [f64]) {
     let m = sum.len();
-    for (((s, p0), p1), p2) in sum
-        .chunks_exact_mut(LANES)
-        .zip(phi[0][..m].chunks_exact(LANES))
-        .zip(phi[1][..m].chunks_exact(LANES))
-        .zip(phi[2][..m].chunks_exact(LANES))
-    {
-        for l in 0..LANES {
-            s[l] = fma::<FMA>(
-                p0[l],
-                f[0],
-                fma::<FMA>(p1[l], f[1], fma::<FMA>(p2[l], f[2], s[l])),
-            );
-        }
+    let (p0, rest) = packed.split_at(m);
+    let (p1, p2) = rest.split_at(m);
+    for (k, s) in sum.iter_mut().enumerate() {
+        *s = fma::<FMA>(
+            f64::from(p0[k]),
+            f[0],
+            fma::<FMA>(
+                f64::from(p1[k]),
+                f[1],
+                fma::<FMA>(f64::from(p2[k]), f[2], *s),
+            ),
+        );
     }
 }
 
 /// [`spread`] in AVX-512: a register of [`LANES`] modes a pass.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn spread_avx512(phi: &[Vec<f64>; 3], f: [f64; 3], sum: &mut [f64]) {
+unsafe fn spread_avx512(packed: &[f32], f: [f64; 3], sum: &mut [f64]) {
     use std::arch::x86_64::*;
     let m = sum.len();
-    assert!(phi.iter().all(|p| p.len() >= m) && m.is_multiple_of(LANES));
+    assert!(packed.len() == 3 * m && m.is_multiple_of(LANES));
     let g = f.map(|x| _mm512_set1_pd(x));
+    let phi = |d: usize, k: usize| _mm512_cvtps_pd(_mm256_loadu_ps(packed.as_ptr().add(d * m + k)));
     for k in (0..m).step_by(LANES) {
-        // SAFETY: `k + LANES <= m`, within `sum` and every `phi[d]` (asserted above).
+        // SAFETY: `k + LANES <= m`, within `sum` and each direction's `m` values of `packed`
+        // (asserted above).
         let at = sum.as_mut_ptr().add(k);
         let mut s = _mm512_loadu_pd(at);
-        s = _mm512_fmadd_pd(_mm512_loadu_pd(phi[2].as_ptr().add(k)), g[2], s);
-        s = _mm512_fmadd_pd(_mm512_loadu_pd(phi[1].as_ptr().add(k)), g[1], s);
-        s = _mm512_fmadd_pd(_mm512_loadu_pd(phi[0].as_ptr().add(k)), g[0], s);
+        s = _mm512_fmadd_pd(phi(2, k), g[2], s);
+        s = _mm512_fmadd_pd(phi(1, k), g[1], s);
+        s = _mm512_fmadd_pd(phi(0, k), g[0], s);
         _mm512_storeu_pd(at, s);
+    }
+}
+
+/// A key's bridge point on the shared modes: each direction's mode shapes there (padded to
+/// whole lanes), rounded to single precision. In double (`phi`) for what changes the interface
+/// (a key joining or leaving, its `Z`); the same values packed in single precision, direction
+/// after direction (`packed`), for the displacement read and the force spread at every step —
+/// the per-sample sweep over the voices brings every sounding key's point in from the cache
+/// twice a sample, and half the bytes are half that traffic.
+#[derive(Debug, Clone)]
+pub(crate) struct BridgePoint {
+    pub(crate) phi: [Vec<f64>; 3],
+    packed: Vec<f32>,
+}
+
+impl BridgePoint {
+    fn new(phi: [Vec<f64>; 3]) -> BridgePoint {
+        let packed: Vec<f32> = phi.iter().flatten().map(|&x| x as f32).collect();
+        let m = phi[0].len();
+        BridgePoint {
+            phi: std::array::from_fn(|d| {
+                packed[d * m..(d + 1) * m]
+                    .iter()
+                    .map(|&x| f64::from(x))
+                    .collect()
+            }),
+            packed,
+        }
     }
 }
 
@@ -645,7 +685,7 @@ mod tests {
             .points
             .iter()
             .take(30)
-            .map(|p| board.restrict(&p.shape))
+            .map(|p| board.restrict(&p.shape).phi)
             .collect();
         // A key's Z: the contact springs' direct part (about -2 k_c per direction) and a little
         // more.

@@ -640,13 +640,12 @@ fn markov_sums<const R: usize, const I: usize>(
     out
 }
 
-/// Markov sums in single precision, laid out for [`super::kernels::scatter`] (`BLOCK` zeros,
-/// then tap `k` at `BLOCK + k`).
+/// Markov sums in single precision, laid out for [`super::kernels::scatter`] (tap `k` at `k`).
 fn taps<const R: usize, const I: usize>(sums: &[[[f64; BLOCK]; I]; R]) -> Box<Taps<R, I>> {
-    let mut out = Box::new([[[0f32; 2 * BLOCK]; I]; R]);
-    for (out, sums) in out.iter_mut().zip(sums) {
+    let mut out = Box::new(Taps([[[0f32; BLOCK]; I]; R]));
+    for (out, sums) in out.0.iter_mut().zip(sums) {
         for (out, sums) in out.iter_mut().zip(sums) {
-            for (o, &x) in out[BLOCK..].iter_mut().zip(sums) {
+            for (o, &x) in out.iter_mut().zip(sums) {
                 *o = x as f32;
             }
         }
@@ -1150,14 +1149,14 @@ impl ExactKey {
             + self.modal_felt.as_ref().map_or(0, |f| f.bytes());
         // ef, and the contact step's eh and ef; per string the strike row, drive_f, three force
         // rows; reads, settle, beta, hold, follow, the bridge velocity rows; the block's f32
-        // copies and e^BLOCK; the energies' f32 shifts and weights; the Markov taps; the energy;
-        // the stored modes (a dozen rows more).
+        // copies and e^BLOCK; the energies' f32 shifts and weights; the energy; the stored modes
+        // (a dozen rows more); each prefix's Markov taps.
         (3 + self.n_strings * 7 + READS + 4 * DIRECTIONS + 3 + 12) * split
             + (1 + READS + DIRECTIONS) * split / 2
             + split
             + 2 * DIRECTIONS * split / 2
             + split / 4
-            + 8 * BLOCK * READS * DIRECTIONS
+            + self.prefixes.len() * std::mem::size_of::<Taps<READS, DIRECTIONS>>()
             + 8 * self.n_modes()
             + damper
     }

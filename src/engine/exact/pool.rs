@@ -3,7 +3,7 @@
 //! fade, strike in the current motion, dampers, silent voices retired, runaways reset).
 
 use super::block::{begin, end, run, run_on_two, Context, Steps};
-use super::interface::{HeardSource, SharedBoard, SOURCE_DELAY_STEPS};
+use super::interface::{BridgePoint, HeardSource, SharedBoard, SOURCE_DELAY_STEPS};
 use super::kernels::{Simd, BLOCK};
 use super::key::{ExactKey, LEFT_BELOW, LEFT_UNDER_J};
 use super::voice::Voice;
@@ -23,7 +23,7 @@ use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
 pub struct ExactPool {
     keys: Vec<ExactKey>,
     /// Each key's mode shapes at its bridge point, on the shared modes.
-    points: Vec<[Vec<f64>; 3]>,
+    points: Vec<BridgePoint>,
     voices: Vec<Voice>,
     voice_of_key: Vec<Option<usize>>,
     board: SharedBoard,
@@ -38,6 +38,9 @@ pub struct ExactPool {
     radiated_m3_s: [f64; CHANNELS],
     /// Which of their modes the voices step ([`VoiceModes`]).
     voice_modes: VoiceModes,
+    /// Whether anything reads the voices' energies after the next run
+    /// ([`ExactPool::energies_read_after_run`]); set again to `true` by every run.
+    energies_read: bool,
 }
 
 impl ExactPool {
@@ -89,7 +92,15 @@ impl ExactPool {
             heard: HeardSource::new(),
             radiated_m3_s: [0.0; CHANNELS],
             voice_modes: VoiceModes::default(),
+            energies_read: true,
         })
+    }
+
+    /// Whether anything reads the voices' energies between the next run and the one after
+    /// ([`crate::engine::VoicePool::energies_read_after_run`]): if not, that run's last block
+    /// leaves them to be worked out on demand.
+    pub fn energies_read_after_run(&mut self, read: bool) {
+        self.energies_read = read;
     }
 
     /// Which of their modes the voices step from now on ([`VoiceModes`]); every active voice
@@ -211,7 +222,7 @@ impl ExactPool {
                 .min()
                 .unwrap_or(BLOCK);
             let n = (sound.len() - done).min(BLOCK).min(fade);
-            let last = done + n == sound.len();
+            let last = done + n == sound.len() && self.energies_read;
             self.block(&mut sound[done..done + n], pair, last);
             if let Some(w) = watched_n.as_deref_mut() {
                 w[done..done + n].copy_from_slice(&self.steps.watched_n[..n]);
@@ -219,6 +230,7 @@ impl ExactPool {
             self.finish_fades();
             done += n;
         }
+        self.energies_read = true;
     }
 
     /// Each voice whose damper is part-lifted, not down, loses its felt's share of damping over
@@ -271,15 +283,15 @@ impl ExactPool {
                 (Some(old), Some(new)) if old.0 == new.0 => {
                     let (a, b) = (settle(old), settle(new));
                     let dz = std::array::from_fn(|i| std::array::from_fn(|d| b[i][d] - a[i][d]));
-                    self.board.update(&self.points[new.0], &dz);
+                    self.board.update(&self.points[new.0].phi, &dz);
                 }
                 (old, new) => {
                     if let Some(old) = old {
                         let z = settle(old).map(|r| r.map(|x| -x));
-                        self.board.update(&self.points[old.0], &z);
+                        self.board.update(&self.points[old.0].phi, &z);
                     }
                     if let Some(new) = new {
-                        self.board.update(&self.points[new.0], &settle(new));
+                        self.board.update(&self.points[new.0].phi, &settle(new));
                     }
                 }
             }
@@ -380,7 +392,7 @@ impl ExactPool {
         };
         let shared = self
             .board
-            .velocity_at(&self.steps.part, &self.points[key_index]);
+            .velocity_at(&self.steps.part, &self.points[key_index].phi);
         let ns = key.n_strings as f64;
         for d in 0..3 {
             let own = v.read_z(&key.modes.bridge_velocity_row[d], &key.velocity_settle[d]);
@@ -657,14 +669,15 @@ impl Policy for ExactPool {
         v.d = now;
         v.d_before = now;
         v.force_n = v.static_force_n(key);
-        self.board.join(part, point, v.force_n, 1.0);
+        self.board.join(part, &point.phi, v.force_n, 1.0);
     }
 
     fn leave(&mut self, k: usize) {
         let v = &self.voices[k];
         if let Some(key) = v.state.key {
             let part = &mut self.steps.part;
-            self.board.join(part, &self.points[key], v.force_n, -1.0);
+            self.board
+                .join(part, &self.points[key].phi, v.force_n, -1.0);
         }
     }
 
@@ -838,6 +851,52 @@ mod tests {
         assert!(
             kept >= checks,
             "the energies are kept: {kept} in {checks} checks"
+        );
+    }
+
+    #[test]
+    fn a_run_after_which_nothing_reads_the_energies_leaves_them_to_be_worked_out() {
+        // Told that nothing reads them, a run keeps no energy; the next run keeps them again
+        // (the hint holds for one run), and a voice's energy read after the first is the same
+        // worked out on demand.
+        let (specs, rate) = grand_keys(&["C2", "C4"]);
+        let mut pool = ExactPool::build_pool(&specs, 2, rate).unwrap();
+        for k in 0..2 {
+            pool.assign(k, k);
+            pool.set_active(k, true);
+            pool.strike_voice(
+                k,
+                Strike {
+                    velocity_m_s: 3.0,
+                    shift: 0.0,
+                },
+            );
+        }
+        let mut out = vec![[0.0; CHANNELS]; 64];
+        for _ in 0..40 {
+            pool.run(&mut out, None);
+        }
+        let mut twin = pool.clone();
+        pool.energies_read_after_run(false);
+        pool.run(&mut out, None);
+        twin.run(&mut out, None);
+        let (kept, _) = pool.kept_and_stale_energies();
+        let (twin_kept, stale) = twin.kept_and_stale_energies();
+        println!("energies kept after a run told nothing reads them: {kept}; after one not told: {twin_kept}");
+        assert_eq!(kept, 0, "a run after which nothing reads them keeps none");
+        assert_eq!(
+            (twin_kept, stale),
+            (2, 0),
+            "a run keeps every voice's by default"
+        );
+        for k in 0..2 {
+            assert_eq!(pool.voice_energy_j(k), twin.voice_energy_j(k), "voice {k}");
+        }
+        pool.run(&mut out, None);
+        assert_eq!(
+            pool.kept_and_stale_energies(),
+            (2, 0),
+            "the hint holds for one run"
         );
     }
 

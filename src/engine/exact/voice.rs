@@ -352,7 +352,14 @@ impl Voice {
                     x[DIRECTIONS + j] = self.damper_n[j] as f32;
                     self.block_inputs[DIRECTIONS + j][BLOCK - 1 - t] = x[DIRECTIONS + j];
                 }
-                scatter(simd, &damper.markov, &x, t, &mut self.pending);
+                scatter(
+                    simd,
+                    &damper.markov,
+                    &x,
+                    &self.block_inputs,
+                    t,
+                    &mut self.pending,
+                );
                 let all: [f64; DAMPED_READS] =
                     std::array::from_fn(|i| self.block_read[i][t] + f64::from(self.pending[i][t]));
                 // The felt's velocity after the step, from u (module notes of `key`): what the
@@ -376,7 +383,17 @@ impl Voice {
                     .try_into()
                     .expect("the first reads are the undamped key's");
                 let x: [f32; DIRECTIONS] = std::array::from_fn(|d| x[d]);
-                scatter(simd, &key.prefixes[self.live].markov, &x, t, pending);
+                let inputs: &Reversed<DIRECTIONS> = self.block_inputs[..DIRECTIONS]
+                    .try_into()
+                    .expect("the first inputs are the bridge's");
+                scatter(
+                    simd,
+                    &key.prefixes[self.live].markov,
+                    &x,
+                    inputs,
+                    t,
+                    pending,
+                );
                 for (i, r) in read.iter_mut().enumerate() {
                     *r = self.block_read[i][t] + f64::from(pending[i][t]);
                 }
