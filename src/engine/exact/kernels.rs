@@ -452,27 +452,27 @@ pub(crate) type Pending<const R: usize> = [[f32; BLOCK]; R];
 /// `pending[i][s] += sum_d taps[i][d][s - t] x_d`. After it `pending[i][t]` is what the inputs
 /// of steps `0..=t` add to read `i` after step `t` — the convolution with the Markov parameters,
 /// summed as the inputs arrive, in whole registers over the steps to come (no sums across
-/// lanes, which a dot product per step would need). `inputs` holds the
-/// block's inputs so far ([`Reversed`], step `t`'s among them): the AVX-512 form adds what the
-/// first half of the block's inputs bring to its second half in one pass at the half, each row's
-/// taps brought in once rather than at every step (the same sums, in the same order).
+/// lanes, which a dot product per step would need). `inputs` holds the block's inputs so far
+/// ([`Reversed`]), step `t`'s (`x`) the last of them: the AVX-512 form adds what the first half
+/// of the block's inputs bring to its second half in one pass at the half, each row's taps
+/// brought in once rather than at every step (the same sums, in the same order).
 pub(crate) fn scatter<const R: usize, const I: usize>(
     simd: Simd,
     taps: &Taps<R, I>,
-    x: &[f32; I],
     inputs: &Reversed<I>,
     t: usize,
     pending: &mut Pending<R>,
 ) {
+    let x: [f32; I] = std::array::from_fn(|d| inputs[d][BLOCK - 1 - t]);
     #[cfg(target_arch = "x86_64")]
     match simd {
         // SAFETY: `Simd::detect` chose these only where the CPU has them.
-        Simd::Avx512 => return unsafe { scatter_avx512::<R, I>(taps, x, inputs, t, pending) },
-        Simd::Avx2 => return unsafe { scatter_avx2::<R, I>(taps, x, t, pending) },
+        Simd::Avx512 => return unsafe { scatter_avx512::<R, I>(taps, &x, inputs, t, pending) },
+        Simd::Avx2 => return unsafe { scatter_avx2::<R, I>(taps, &x, t, pending) },
         Simd::Portable => {}
     }
-    let _ = (simd, inputs);
-    scatter_with::<false, R, I>(taps, x, t, pending)
+    let _ = simd;
+    scatter_with::<false, R, I>(taps, &x, t, pending)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -1131,7 +1131,7 @@ mod tests {
             for d in 0..DIRECTIONS {
                 inputs[d][BLOCK - 1 - t] = x[d];
             }
-            scatter(simd, &taps, x, &inputs, t, &mut pending);
+            scatter(simd, &taps, &inputs, t, &mut pending);
         }
         let mut worst = 0f64;
         for (i, pending) in pending.iter().enumerate() {
@@ -1151,11 +1151,10 @@ mod tests {
 
     #[test]
     fn scatter_sums_the_block_convolution_alike_in_every_form() {
-        let portable = convolved(Simd::Portable);
+        convolved(Simd::Portable);
         let detected = Simd::detect();
         if detected.avx2() {
             let avx2 = convolved(Simd::Avx2);
-            let _ = portable;
             if detected == Simd::Avx512 {
                 // The same products summed in the same order, each with one rounding (FMA).
                 assert_eq!(

@@ -340,22 +340,18 @@ impl Voice {
         if t == 0 {
             self.pending = [[0.0; BLOCK]; DAMPED_READS];
         }
-        let mut x = [0f32; DAMPED_INPUTS];
         for d in 0..DIRECTIONS {
-            x[d] = self.d[d] as f32;
-            self.block_inputs[d][BLOCK - 1 - t] = x[d];
+            self.block_inputs[d][BLOCK - 1 - t] = self.d[d] as f32;
         }
         let mut read = [0.0; READS];
         match (self.damped(key), &key.damper) {
             (true, Some(damper)) => {
                 for j in 0..damper.channels {
-                    x[DIRECTIONS + j] = self.damper_n[j] as f32;
-                    self.block_inputs[DIRECTIONS + j][BLOCK - 1 - t] = x[DIRECTIONS + j];
+                    self.block_inputs[DIRECTIONS + j][BLOCK - 1 - t] = self.damper_n[j] as f32;
                 }
                 scatter(
                     simd,
                     &damper.markov,
-                    &x,
                     &self.block_inputs,
                     t,
                     &mut self.pending,
@@ -382,18 +378,10 @@ impl Voice {
                 let pending: &mut Pending<READS> = (&mut self.pending[..READS])
                     .try_into()
                     .expect("the first reads are the undamped key's");
-                let x: [f32; DIRECTIONS] = std::array::from_fn(|d| x[d]);
                 let inputs: &Reversed<DIRECTIONS> = self.block_inputs[..DIRECTIONS]
                     .try_into()
                     .expect("the first inputs are the bridge's");
-                scatter(
-                    simd,
-                    &key.prefixes[self.live].markov,
-                    &x,
-                    inputs,
-                    t,
-                    pending,
-                );
+                scatter(simd, &key.prefixes[self.live].markov, inputs, t, pending);
                 for (i, r) in read.iter_mut().enumerate() {
                     *r = self.block_read[i][t] + f64::from(pending[i][t]);
                 }
