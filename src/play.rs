@@ -267,6 +267,9 @@ pub enum PianoError {
     Preset(#[from] crate::config::preset::PresetError),
     #[error(transparent)]
     Build(#[from] crate::engine::BuildError),
+    /// The build was called off before it ended ([`PreparedKeys::prepare`]).
+    #[error("the piano's build was called off")]
+    Cancelled,
 }
 
 /// A keyboard to build pianos from: its keys' parameters, and where prepared keys are kept.
@@ -283,6 +286,84 @@ pub struct Piano<E: VoicePool> {
     pub player: Player,
     /// Piano key (1–88) of each bank index.
     pub keys: Vec<usize>,
+}
+
+/// A keyboard's keys prepared for engine `E` (tuned, diagonalised or read back from the cache):
+/// the costly part of building a piano, from which pianos of any pool size are made, sharing
+/// the keys' coefficients.
+#[derive(Debug, Clone)]
+pub struct PreparedKeys<E: VoicePool> {
+    /// Each key's spec at the engine's rate, in order with `prepared`.
+    specs: Vec<UnisonSpec>,
+    prepared: std::sync::Arc<[E::Key]>,
+    /// Piano key (1–88) of each bank index.
+    keys: Vec<usize>,
+}
+
+impl<E: VoicePool> PreparedKeys<E> {
+    /// The `keys` (1–88) of `scaling` prepared on all cores, read from and kept in `cache` where
+    /// the engine's keys are worth keeping. `cancelled` is asked before each key: once it says
+    /// yes the preparation stops with [`PianoError::Cancelled`] (a build that a newer choice
+    /// supersedes).
+    pub fn prepare(
+        scaling: &crate::config::scaling::LoadedScaling,
+        keys: &[usize],
+        cache: Option<&crate::keycache::KeyCache>,
+        cancelled: &(dyn Fn() -> bool + Sync),
+    ) -> Result<PreparedKeys<E>, PianoError> {
+        let rate_hz = scaling.base.output_rate_hz();
+        let go_on = || {
+            if cancelled() {
+                Err(PianoError::Cancelled)
+            } else {
+                Ok(())
+            }
+        };
+        let specs = crate::cores::map_on_cores(keys, |&k| {
+            go_on()?;
+            Ok::<_, PianoError>(scaling.key_preset(k)?.unison_spec())
+        })?;
+        // The keys of one instrument step together, at the keyboard's rate whichever keys are
+        // built ([`LoadedScaling::internal_rate_hz`]: RK4 runs the concert keyboard at 240 kHz,
+        // where Bb7-C8 keep their modes to 20 kHz), or at the output rate (the exact engine).
+        //
+        // [`LoadedScaling::internal_rate_hz`]: crate::config::scaling::LoadedScaling::internal_rate_hz
+        let common_hz = specs
+            .iter()
+            .map(|s| s.sample_rate_hz)
+            .fold(scaling.internal_rate_hz(), f64::max);
+        let specs: Vec<_> = specs
+            .into_iter()
+            .map(|spec| {
+                let spec = UnisonSpec {
+                    sample_rate_hz: common_hz,
+                    ..spec
+                };
+                E::at_engine_rate(spec, rate_hz)
+            })
+            .collect();
+        let prepared = crate::cores::map_on_cores(&specs, |spec| {
+            go_on()?;
+            Ok::<_, PianoError>(match cache {
+                Some(cache) => cache.key(spec, E::prepare_key)?,
+                None => E::prepare_key(spec)?,
+            })
+        })?;
+        Ok(PreparedKeys {
+            specs,
+            prepared: prepared.into(),
+            keys: keys.to_vec(),
+        })
+    }
+
+    /// A piano of these keys with a pool of `voices` voices.
+    pub fn piano(&self, voices: usize) -> Result<Piano<E>, PianoError> {
+        Ok(Piano {
+            instrument: E::from_keys(&self.specs, self.prepared.clone(), voices)?,
+            player: Player::new(&self.keys),
+            keys: self.keys.clone(),
+        })
+    }
 }
 
 /// Default size of the voice pool.
@@ -314,44 +395,54 @@ impl<E: VoicePool> Piano<E> {
         voices: usize,
         cache: Option<&crate::keycache::KeyCache>,
     ) -> Result<Piano<E>, PianoError> {
-        let rate_hz = scaling.base.output_rate_hz();
-        let specs = crate::cores::map_on_cores(keys, |&k| {
-            Ok::<_, PianoError>(scaling.key_preset(k)?.unison_spec())
-        })?;
-        // The keys of one instrument step together, at the keyboard's rate whichever keys are
-        // built ([`LoadedScaling::internal_rate_hz`]: RK4 runs the concert keyboard at 240 kHz,
-        // where Bb7-C8 keep their modes to 20 kHz), or at the output rate (the exact engine).
-        //
-        // [`LoadedScaling::internal_rate_hz`]: crate::config::scaling::LoadedScaling::internal_rate_hz
-        let common_hz = specs
-            .iter()
-            .map(|s| s.sample_rate_hz)
-            .fold(scaling.internal_rate_hz(), f64::max);
-        let specs: Vec<_> = specs
-            .into_iter()
-            .map(|spec| {
-                let spec = UnisonSpec {
-                    sample_rate_hz: common_hz,
-                    ..spec
-                };
-                E::at_engine_rate(spec, rate_hz)
-            })
-            .collect();
-        let prepared = crate::cores::map_on_cores(&specs, |spec| {
-            Ok::<_, PianoError>(match cache {
-                Some(cache) => cache.key(spec, E::prepare_key)?,
-                None => E::prepare_key(spec)?,
-            })
-        })?;
-        Ok(Piano {
-            instrument: E::from_keys(&specs, prepared, voices)?,
-            player: Player::new(keys),
-            keys: keys.to_vec(),
-        })
+        PreparedKeys::prepare(scaling, keys, cache, &|| false)?.piano(voices)
     }
 
-    /// Apply one event.
+    /// Apply one event.    /// Apply one event.
     pub fn apply(&mut self, event: Event) {
         self.player.apply(event, &mut self.instrument);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::exact::ExactPool;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    /// A preparation called off stops between two keys: asked before each key, the question
+    /// answered yes once stops it within one key per thread, with [`PianoError::Cancelled`];
+    /// never asked yes, it prepares every key.
+    #[test]
+    fn a_preparation_called_off_stops_between_two_keys() {
+        let scaling = crate::config::scaling::Scaling::resolve("paper").unwrap();
+        let keys: Vec<usize> = (60..=66).collect();
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let asked = AtomicUsize::new(0);
+        // Yes from the fifth question on.
+        let cancelled = || asked.fetch_add(1, Ordering::Relaxed) >= 4;
+        let result = PreparedKeys::<ExactPool>::prepare(&scaling, &keys, None, &cancelled);
+        let questions = asked.load(Ordering::Relaxed);
+        println!(
+            "called off at the fifth question: {} after {questions} questions ({} keys, {threads} threads; unbroken, {} questions)",
+            match &result {
+                Err(e) => e.to_string(),
+                Ok(_) => "prepared".into(),
+            },
+            keys.len(),
+            2 * keys.len()
+        );
+        assert!(matches!(result, Err(PianoError::Cancelled)));
+        // Each thread stops at its first yes.
+        assert!(questions <= 4 + threads, "{questions} questions");
+
+        let asked = AtomicUsize::new(0);
+        let never = || {
+            asked.fetch_add(1, Ordering::Relaxed);
+            false
+        };
+        let prepared = PreparedKeys::<ExactPool>::prepare(&scaling, &keys, None, &never).unwrap();
+        assert_eq!(asked.load(Ordering::Relaxed), 2 * keys.len());
+        assert_eq!(prepared.piano(3).unwrap().keys, keys);
     }
 }

@@ -416,7 +416,7 @@ fn keys_prepared_on_several_threads_land_in_order() {
     );
     // Prepared keys and their specs must pair up.
     let one = vec![Rk4Pool::prepare_key(&specs[0]).unwrap()];
-    let err = Rk4Pool::<f64>::from_keys(&specs[..2], one, 1).unwrap_err();
+    let err = Rk4Pool::<f64>::from_keys(&specs[..2], one.into(), 1).unwrap_err();
     println!("{err}");
     assert_eq!(err, BuildError::PreparedKeys { specs: 2, keys: 1 });
 }

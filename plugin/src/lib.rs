@@ -27,6 +27,7 @@ use clack_extensions::params::{
     HostParams, ParamDisplayWriter, ParamInfo, ParamInfoFlags, ParamInfoWriter, ParamRescanFlags,
     PluginAudioProcessorParams, PluginMainThreadParams, PluginParams,
 };
+use clack_extensions::render::{PluginRender, PluginRenderImpl, RenderMode};
 use clack_extensions::state::{PluginState, PluginStateImpl};
 use clack_extensions::tail::PluginTail;
 use clack_extensions::thread_pool::{PluginThreadPool, PluginThreadPoolImpl};
@@ -37,7 +38,7 @@ use std::cell::Cell;
 use std::ffi::CStr;
 use std::fmt::Write as _;
 use std::io::{Read, Write as _};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Mutex;
 use unacorda::audio::host_pool::Rendezvous;
 use unacorda::config::scaling::Scaling;
@@ -49,7 +50,8 @@ pub mod processor;
 pub mod rebuild;
 pub mod state;
 
-use params::{Values, PARAMS, REBUILDS};
+use params::{Values, INTEGRATOR, PARAMS, REBUILDS};
+use unacorda::engine::Integrator;
 
 /// The plugin's id in hosts.
 pub const PLUGIN_ID: &str = "org.unacorda.piano";
@@ -72,9 +74,36 @@ pub struct Shared {
     /// The engine's two halves handed to the host's thread pool (the audio thread posts them,
     /// the host's workers run them: [`unacorda::audio::host_pool`]).
     pub pool: Rendezvous,
+    /// The host renders offline (CLAP's render extension: written by the main thread, read by
+    /// both).
+    pub offline: AtomicBool,
 }
 
 impl PluginShared<'_> for Shared {}
+
+impl Shared {
+    /// The integrator played: the one chosen in an offline render, the exact engine live (RK4
+    /// takes longer than real time for a single voice).
+    pub fn integrator(&self) -> Integrator {
+        match self.offline.load(Ordering::Relaxed) {
+            true => self.values.integrator(),
+            false => Integrator::Exact,
+        }
+    }
+
+    /// The values whose change rebuilds the piano ([`REBUILDS`]), the integrator as played
+    /// ([`Shared::integrator`]).
+    pub fn played(&self) -> [f64; REBUILDS.len()] {
+        let rk4 = f64::from(u8::from(self.integrator() == Integrator::Rk4));
+        let mut values = self.values.rebuilds();
+        for (v, &i) in values.iter_mut().zip(&REBUILDS) {
+            if i == INTEGRATOR {
+                *v = rk4;
+            }
+        }
+        values
+    }
+}
 
 impl PluginThreadPoolImpl for Shared {
     /// A task of the host's pool, asked for by the audio thread inside `process`.
@@ -95,11 +124,9 @@ impl<'a> PluginMainThread<'a, Shared> for MainThread<'a> {
     /// The audio thread asked for a piano to be built: start it in the background.
     fn on_main_thread(&self) {
         let values = &self.shared.values;
-        self.shared.rebuild.start_if_wanted(
-            values.keyboard(),
-            values.voices(),
-            values.integrator(),
-        );
+        self.shared
+            .rebuild
+            .start_if_wanted(values.keyboard(), self.shared.integrator());
         self.follow_ports();
     }
 }
@@ -124,7 +151,8 @@ impl Plugin for Unacorda {
             .register::<PluginState>()
             .register::<PluginLatency>()
             .register::<PluginTail>()
-            .register::<PluginThreadPool>();
+            .register::<PluginThreadPool>()
+            .register::<PluginRender>();
     }
 }
 
@@ -147,6 +175,7 @@ impl DefaultPluginFactory for Unacorda {
             silent_because: Mutex::new(None),
             rebuild: rebuild::Rebuild::default(),
             pool: Rendezvous::default(),
+            offline: AtomicBool::new(false),
         })
     }
 
@@ -372,6 +401,23 @@ impl PluginAudioProcessorParams for processor::Processor<'_> {
             self.handle(event);
         }
         self.follow_rebuild();
+    }
+}
+
+impl PluginRenderImpl for MainThread<'_> {
+    fn has_hard_realtime_requirement(&self) -> bool {
+        false
+    }
+
+    /// Offline, the integrator chosen plays (RK4 among them); live, the exact engine. An active
+    /// processor follows a change by a background build and a restart, as for a parameter.
+    fn set(&self, mode: RenderMode) -> Result<(), PluginError> {
+        let offline = mode == RenderMode::Offline;
+        let before = self.shared.offline.swap(offline, Ordering::Relaxed);
+        if before != offline && self.shared.rebuild.active() {
+            self.host.shared().request_process();
+        }
+        Ok(())
     }
 }
 

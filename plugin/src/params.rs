@@ -39,7 +39,8 @@ pub const HALO: usize = 8;
 /// The built-in keyboards the `keyboard` parameter chooses from (its values 0, 1).
 pub const KEYBOARDS: [&str; 2] = ["concert", "paper"];
 /// The integrators the `integrator` parameter chooses from (its values 0, 1): the exact engine
-/// (`play`'s and `render --midi`'s) or the paper's RK4 (the reference; a few voices in real time).
+/// (`play`'s and `render --midi`'s) or the paper's RK4 (the reference, slower than real time: it
+/// plays in offline renders, [`crate::Shared::integrator`]).
 pub const INTEGRATORS: [&str; 2] = ["exact", "rk4"];
 
 const fn switch(id: u32, name: &'static str, key: &'static str) -> Spec {
@@ -122,7 +123,7 @@ pub const PARAMS: [Spec; 9] = [
     },
     Spec {
         id: 8,
-        name: "Integrator",
+        name: "Integrator (RK4 in offline renders only)",
         key: "integrator",
         min: 0.0,
         max: (INTEGRATORS.len() - 1) as f64,

@@ -23,6 +23,9 @@ use unacorda::midi::{curved_velocity, Decoder, Event, Pedal};
 /// fortissimo's level to below the 24-bit floor.
 pub const TAIL_FALL_DB: f64 = 120.0;
 
+/// What the host is told when RK4 is chosen and it plays live.
+const RK4_LIVE: &str = "unacorda: the RK4 integrator (the paper's reference) plays in offline renders only: it takes longer than real time for a single voice. Live, the exact engine plays.";
+
 /// Frames rendered at a time into the interleaved scratch buffer.
 const SCRATCH_FRAMES: usize = 256;
 
@@ -100,13 +103,15 @@ impl Engine {
     }
 }
 
-/// A change of keyboard, pool size, integrator or halo while active ([`crate::rebuild`]).
+/// A change of keyboard, pool size, integrator, halo or render mode while active
+/// ([`crate::rebuild`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Rebuilding {
     /// Playing what was built.
     No,
-    /// The main thread builds these values ([`REBUILDS`]) in the background.
-    Building([f64; REBUILDS.len()]),
+    /// The main thread builds these values ([`REBUILDS`], as [`Shared::played`]) in the
+    /// background, for the request of this number.
+    Building([f64; REBUILDS.len()], u64),
     /// Built; the host was asked to restart the plugin.
     Restarting,
 }
@@ -125,13 +130,16 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         config: PluginAudioConfiguration,
     ) -> Result<Self, PluginError> {
         let values = &shared.values;
-        let built = values.rebuilds();
+        let built = shared.played();
+        if values.integrator() != shared.integrator() {
+            main_thread.warn(RK4_LIVE);
+        }
         // Activation never fails: what cannot be built plays silence and says why, once.
         let prepared = crate::prepare::prepare(
             values.keyboard(),
             config.sample_rate,
             values.voices(),
-            values.integrator(),
+            shared.integrator(),
         )
         .map(|prepared| prepared.with_halo(values.halo()));
         for warning in crate::prepare::take_warnings() {
@@ -219,7 +227,7 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         let silent = self.engine.as_ref().is_none_or(|e| e.is_silent());
         // While a piano is built the host keeps calling, so that the restart is asked for when
         // it is ready.
-        let building = matches!(self.rebuild, Rebuilding::Building(_));
+        let building = matches!(self.rebuild, Rebuilding::Building(..));
         Ok(if silent && !building {
             ProcessStatus::Sleep
         } else {
@@ -354,32 +362,34 @@ impl Processor<'_> {
         self.settle_pedals();
     }
 
-    /// Follow a change of keyboard, pool size or integrator (by automation or a state load): ask the main
-    /// thread to build it in the background, and once it is built ask the host to restart the
-    /// plugin (whose activation then finds it built). A change during the build is built after
-    /// it. Never allocates.
+    /// Follow a change of keyboard, pool size, integrator, halo or render mode (by automation, a
+    /// state load or the host): ask the main thread to build it in the background, and once it
+    /// is built ask the host to restart the plugin (whose activation then finds it built). A
+    /// change during the build supersedes it: the build is called off and the newer one asked
+    /// for. Never allocates.
     pub(crate) fn follow_rebuild(&mut self) {
-        let wanted = self.shared.values.rebuilds();
+        let wanted = self.shared.played();
         match self.rebuild {
             Rebuilding::No if wanted != self.built => self.ask_build(wanted),
-            Rebuilding::Building(asked) if self.shared.rebuild.take_done() => {
+            Rebuilding::Building(asked, _) if wanted != asked => {
                 if wanted == self.built {
                     // Changed back while it was built.
+                    self.shared.rebuild.call_off();
                     self.rebuild = Rebuilding::No;
-                } else if wanted == asked {
-                    self.rebuild = Rebuilding::Restarting;
-                    self.host.request_restart();
                 } else {
                     self.ask_build(wanted);
                 }
+            }
+            Rebuilding::Building(_, request) if self.shared.rebuild.finished(request) => {
+                self.rebuild = Rebuilding::Restarting;
+                self.host.request_restart();
             }
             _ => {}
         }
     }
 
     fn ask_build(&mut self, values: [f64; REBUILDS.len()]) {
-        self.rebuild = Rebuilding::Building(values);
-        self.shared.rebuild.ask();
+        self.rebuild = Rebuilding::Building(values, self.shared.rebuild.ask());
         self.host.request_callback();
     }
 

@@ -26,6 +26,7 @@ const SOFT: u32 = 3;
 const GAIN_DB: u32 = 4;
 const VELOCITY_CURVE: u32 = 5;
 const KEYBOARD: u32 = 6;
+const VOICES: u32 = 7;
 
 /// The entry point the built library exports (`clap_entry`), as hosts load it.
 fn entry() -> PluginEntry {
@@ -357,9 +358,10 @@ fn a_transport_with_an_empty_header_is_passed_over() {
     );
 }
 
-/// The integrator parameter (set by a state, before activation) plays the paper's RK4: the same
-/// events equal `render --offline --integrator rk4 --midi`'s, sample for sample, one grid cell
-/// late, without allocating; the latency reported adds the decimation filter's delay (RK4 runs
+/// The integrator parameter (set by a state, before activation) plays the paper's RK4 in an
+/// offline render (CLAP's render extension): the same events equal
+/// `render --offline --integrator rk4 --midi`'s, sample for sample, one grid cell late, without
+/// allocating; the latency reported adds the decimation filter's delay (RK4 runs
 /// above the output rate, and both renders carry that delay), and the tail is infinite (RK4 has
 /// no modes to say it).
 #[test]
@@ -370,6 +372,7 @@ fn the_rk4_integrator_plays_like_its_offline_render() {
         .unwrap()
         .replace("integrator = \"exact\"", "integrator = \"rk4\"");
     host::load(&mut plugin, state.as_bytes()).unwrap();
+    host::render_offline(&mut plugin, true);
     let mut active = host::activate(&mut plugin, RATE_HZ);
     let reported = host::latency(&mut plugin) as usize;
     let latency = unacorda::audio::aligned::LATENCY_FRAMES as usize;
@@ -657,4 +660,95 @@ fn gain_curve_and_rebuild_parameters() {
         2,
         "concert's port: stereo again"
     );
+}
+
+/// RK4 takes longer than real time for one voice: chosen while the host plays live, the exact
+/// engine plays (the same samples as the exact offline render); the host's switch to an offline
+/// render is followed like a parameter, by a background build and one restart.
+#[test]
+fn the_rk4_choice_plays_the_exact_engine_live() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut plugin = instance();
+    let state = String::from_utf8(host::save(&mut plugin))
+        .unwrap()
+        .replace("integrator = \"exact\"", "integrator = \"rk4\"");
+    host::load(&mut plugin, state.as_bytes()).unwrap();
+    let mut active = host::activate(&mut plugin, RATE_HZ);
+    let latency = unacorda::audio::aligned::LATENCY_FRAMES as usize;
+    assert_eq!(host::latency(&mut plugin) as usize, latency, "no decimator");
+    let script: Vec<_> = script().into_iter().take(6).collect();
+    let (left, right) = offline::<ExactPool>(&as_piano_events(&script), 0.1, false);
+    let heard = active.run(left.len() + latency, &[512], &script, checked);
+    assert_eq!(heard.allocations, 0, "process() allocated");
+    equals_offline("RK4 chosen, live", &heard, latency, [&left, &right]);
+
+    let (restarts, callbacks) = (host::restarts(&mut plugin), host::callbacks(&mut plugin));
+    host::render_offline(&mut plugin, true);
+    let started = std::time::Instant::now();
+    while host::restarts(&mut plugin) == restarts {
+        // A hang guard, not a timing.
+        assert!(
+            started.elapsed().as_secs() < 1200,
+            "the background build never ended"
+        );
+        let h = active.run(256, &[256], &[], checked);
+        assert_eq!(h.allocations, 0, "process() allocated");
+        if host::callbacks(&mut plugin) > callbacks {
+            host::on_main_thread(&mut plugin);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    active.run(2048, &[512], &[], checked);
+    println!(
+        "offline render asked: {} restart(s), {} callback(s)",
+        host::restarts(&mut plugin) - restarts,
+        host::callbacks(&mut plugin) - callbacks
+    );
+    assert_eq!(host::restarts(&mut plugin), restarts + 1, "one restart");
+    host::deactivate(&mut plugin, active);
+    host::activate(&mut plugin, RATE_HZ);
+    assert!(
+        host::latency(&mut plugin) as usize > latency,
+        "RK4 plays, with its decimator's delay"
+    );
+}
+
+/// A change of pool size prepares no keys: the restart it asks for comes as soon as the main
+/// thread's build finds the keyboard's keys kept, and the activation after it makes its piano
+/// from them.
+#[test]
+fn a_change_of_pool_size_prepares_no_keys() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut plugin = instance();
+    let mut active = host::activate(&mut plugin, RATE_HZ);
+    let kept = unacorda_clap::prepare::keyboards_kept();
+    for voices in [17.0, 200.0] {
+        let (restarts, callbacks) = (host::restarts(&mut plugin), host::callbacks(&mut plugin));
+        let t0 = active.frame;
+        let h = active.run(256, &[64], &[(t0, Play::Param(VOICES, voices))], checked);
+        assert_eq!(h.allocations, 0, "process() allocated");
+        assert_eq!(host::callbacks(&mut plugin), callbacks + 1);
+        host::on_main_thread(&mut plugin);
+        let started = std::time::Instant::now();
+        while host::restarts(&mut plugin) == restarts {
+            assert!(started.elapsed().as_secs() < 600, "the restart never came");
+            active.run(256, &[256], &[], checked);
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        host::deactivate(&mut plugin, active);
+        active = host::activate(&mut plugin, RATE_HZ);
+        let t0 = active.frame;
+        let h = active.run(4800, &[512], &[(t0, Play::On(60, 0.6))], checked);
+        println!(
+            "{voices} voices: restarted; keyboards' keys kept {} (before {kept})",
+            unacorda_clap::prepare::keyboards_kept()
+        );
+        assert!(host::rms(&h.left) > 0.0, "the new pool plays");
+        assert_eq!(
+            unacorda_clap::prepare::keyboards_kept(),
+            kept,
+            "no keys prepared for a pool size"
+        );
+    }
+    host::deactivate(&mut plugin, active);
 }

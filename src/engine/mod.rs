@@ -36,7 +36,7 @@ pub use spec::{
 /// dampers, retire, reset) is [`Policy`], written once for both; this is the rest.
 pub trait VoicePool: Policy + Clone + Send + std::fmt::Debug + 'static {
     /// One key's coefficients, prepared before the pool is built.
-    type Key: Send + StoredKey;
+    type Key: Send + Sync + StoredKey;
     /// `spec` at the rate this engine steps at: unchanged (the internal rate), or `output_rate_hz`
     /// for an engine that steps at the output rate.
     fn at_engine_rate(spec: UnisonSpec, output_rate_hz: f64) -> UnisonSpec;
@@ -47,7 +47,7 @@ pub trait VoicePool: Policy + Clone + Send + std::fmt::Debug + 'static {
     /// `voices` voices.
     fn from_keys(
         specs: &[UnisonSpec],
-        keys: Vec<Self::Key>,
+        keys: std::sync::Arc<[Self::Key]>,
         voices: usize,
     ) -> Result<Self, BuildError>;
     /// Prepare every key in turn, then build the pool.
@@ -63,8 +63,8 @@ pub trait VoicePool: Policy + Clone + Send + std::fmt::Debug + 'static {
         let keys = specs
             .iter()
             .map(Self::prepare_key)
-            .collect::<Result<_, _>>()?;
-        Self::from_keys(&specs, keys, voices)
+            .collect::<Result<Vec<_>, _>>()?;
+        Self::from_keys(&specs, keys.into(), voices)
     }
     fn step_s(&self) -> f64;
     fn step(&mut self);
@@ -181,7 +181,7 @@ macro_rules! voice_pool {
             }
             fn from_keys(
                 specs: &[UnisonSpec],
-                keys: Vec<Self::Key>,
+                keys: std::sync::Arc<[Self::Key]>,
                 voices: usize,
             ) -> Result<Self, BuildError> {
                 <$t>::from_keys(specs, keys, voices)

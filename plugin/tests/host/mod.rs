@@ -396,6 +396,18 @@ pub fn on_main_thread(instance: &mut Instance) {
     instance.instance.call_on_main_thread_callback();
 }
 
+/// Tell the plugin the host renders offline (a bounce), or live.
+pub fn render_offline(instance: &mut Instance, offline: bool) {
+    use clack_extensions::render::{PluginRender, RenderMode};
+    let handle = instance.instance.plugin_handle();
+    let render = handle.get_extension::<PluginRender>().unwrap();
+    let mode = match offline {
+        true => RenderMode::Offline,
+        false => RenderMode::Realtime,
+    };
+    render.set(&handle, mode).unwrap();
+}
+
 /// The latency the plugin reports.
 pub fn latency(instance: &mut Instance) -> u32 {
     let handle = instance.instance.plugin_handle();

@@ -62,7 +62,7 @@ impl ExactUnison {
     pub fn new(spec: &UnisonSpec) -> Result<ExactUnison, BuildError> {
         let key = ExactKey::new(spec)?;
         let modes = key.n_modes();
-        let mut pool = ExactPool::from_keys(std::slice::from_ref(spec), vec![key], 1)?;
+        let mut pool = ExactPool::from_keys(std::slice::from_ref(spec), [key].into(), 1)?;
         // Every mode stepped: the key's forces are read string by string.
         pool.set_voice_modes(crate::engine::VoiceModes::All);
         pool.assign(0, 0);

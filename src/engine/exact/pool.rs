@@ -21,7 +21,8 @@ use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
 /// ([`super::interface`]). Stepped by the thread that owns it.
 #[derive(Debug, Clone)]
 pub struct ExactPool {
-    keys: Vec<ExactKey>,
+    /// The keys' coefficients, shared by every pool made from the same prepared keys.
+    keys: std::sync::Arc<[ExactKey]>,
     /// Each key's mode shapes at its bridge point, on the shared modes.
     points: Vec<BridgePoint>,
     voices: Vec<Voice>,
@@ -68,7 +69,7 @@ impl ExactPool {
     /// The pool for `specs` (one per key, in order with `keys`) with `voices` voices.
     pub fn from_keys(
         specs: &[UnisonSpec],
-        keys: Vec<ExactKey>,
+        keys: std::sync::Arc<[ExactKey]>,
         voices: usize,
     ) -> Result<ExactPool, BuildError> {
         let first = crate::engine::pool::check_keys(specs, keys.len(), voices)?;

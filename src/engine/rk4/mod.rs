@@ -42,7 +42,7 @@ struct Voice {
 /// Coefficients of the system: the key bank, where each voice sits and what it plays, the board.
 #[derive(Debug, Clone)]
 struct Model<T> {
-    keys: Vec<Rk4Key<T>>,
+    keys: std::sync::Arc<[Rk4Key<T>]>,
     voices: Vec<Voice>,
     board: Range<usize>,
     /// The board's dropped modes (`UnisonSpec::dropped`), right after `board`: driven by every
@@ -158,8 +158,8 @@ impl<T: Real> Rk4Pool<T> {
         let keys = specs
             .iter()
             .map(Self::prepare_key)
-            .collect::<Result<_, _>>()?;
-        Self::from_keys(specs, keys, voices)
+            .collect::<Result<Vec<_>, _>>()?;
+        Self::from_keys(specs, keys.into(), voices)
     }
 
     /// One key's coefficients (modes, duplex factor, hammer, damper, stability check), independent
@@ -172,7 +172,7 @@ impl<T: Real> Rk4Pool<T> {
     /// The pool of [`Rk4Pool::pool`] from keys already prepared, one per spec.
     pub fn from_keys(
         specs: &[UnisonSpec],
-        keys: Vec<Rk4Key<T>>,
+        keys: std::sync::Arc<[Rk4Key<T>]>,
         voices: usize,
     ) -> Result<Self, BuildError> {
         let first = crate::engine::pool::check_keys(specs, keys.len(), voices)?;
