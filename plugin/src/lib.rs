@@ -41,7 +41,6 @@ use std::io::{Read, Write as _};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Mutex;
 use unacorda::audio::host_pool::Rendezvous;
-use unacorda::config::scaling::Scaling;
 
 pub mod entry;
 pub mod params;
@@ -195,8 +194,7 @@ impl MainThread<'_> {
     /// The channels of the keyboard chosen: 2 for a stereo pair of listeners, 1 for one (a
     /// keyboard that cannot be read plays silence: 2).
     fn keyboard_channels(&self) -> u32 {
-        Scaling::resolve(self.shared.values.keyboard())
-            .map_or(2, |s| u32::from(s.output_settings().channels))
+        crate::prepare::channels(self.shared.values.keyboard())
     }
 
     /// Where the keyboard chosen has another number of channels than the port the host read,

@@ -74,6 +74,21 @@ pub fn take_warnings() -> Vec<String> {
     std::mem::take(&mut *WARNINGS.lock().unwrap_or_else(|e| e.into_inner()))
 }
 
+/// The channels of built-in keyboard `keyboard`'s output: 2 for a stereo pair of listeners, 1
+/// for one (2 for a keyboard that cannot be read: it plays silence). Read once per process: the
+/// port asks at every deactivation, and reading a keyboard parses its files.
+pub fn channels(keyboard: &'static str) -> u32 {
+    static READ: Mutex<Vec<(&str, u32)>> = Mutex::new(Vec::new());
+    let mut read = READ.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(&(_, channels)) = read.iter().find(|(k, _)| *k == keyboard) {
+        return channels;
+    }
+    let channels =
+        Scaling::resolve(keyboard).map_or(2, |s| u32::from(s.output_settings().channels));
+    read.push((keyboard, channels));
+    channels
+}
+
 /// How many keyboards' prepared keys this process holds (each engine rate and integrator
 /// counted apart): the memory the plugin keeps beside its instances' pianos.
 pub fn keyboards_kept() -> usize {

@@ -140,6 +140,16 @@ fn offline<E: VoicePool>(events: &[TimedEvent], tail_s: f64, halo: bool) -> (Vec
     )
 }
 
+/// The state's line choosing the exact integrator, and the one choosing RK4.
+const RK4_CHOSEN: (&str, &str) = ("integrator = \"exact\"", "integrator = \"rk4\"");
+
+/// The plugin's own state with `from` changed to `to`, loaded back.
+fn load_changed(plugin: &mut Instance, from: &str, to: &str) {
+    let state = String::from_utf8(host::save(plugin)).unwrap();
+    assert!(state.contains(from), "{from} in the state");
+    host::load(plugin, state.replace(from, to).as_bytes()).unwrap();
+}
+
 fn first_sound(x: &[f32]) -> Option<usize> {
     x.iter().position(|&s| s != 0.0)
 }
@@ -368,10 +378,8 @@ fn a_transport_with_an_empty_header_is_passed_over() {
 fn the_rk4_integrator_plays_like_its_offline_render() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let mut plugin = instance();
-    let state = String::from_utf8(host::save(&mut plugin))
-        .unwrap()
-        .replace("integrator = \"exact\"", "integrator = \"rk4\"");
-    host::load(&mut plugin, state.as_bytes()).unwrap();
+    let (exact, rk4) = RK4_CHOSEN;
+    load_changed(&mut plugin, exact, rk4);
     host::render_offline(&mut plugin, true);
     let mut active = host::activate(&mut plugin, RATE_HZ);
     let reported = host::latency(&mut plugin) as usize;
@@ -404,10 +412,7 @@ fn the_rk4_integrator_plays_like_its_offline_render() {
 fn the_pedal_halo_plays_like_its_offline_render() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let mut plugin = instance();
-    let state = String::from_utf8(host::save(&mut plugin))
-        .unwrap()
-        .replace("halo = 0", "halo = 1");
-    host::load(&mut plugin, state.as_bytes()).unwrap();
+    load_changed(&mut plugin, "halo = 0", "halo = 1");
     let mut active = host::activate(&mut plugin, RATE_HZ);
     let latency = host::latency(&mut plugin) as usize;
     let script = script();
@@ -650,10 +655,11 @@ fn gain_curve_and_rebuild_parameters() {
     assert_eq!(host::callbacks(&mut plugin), callbacks + 2);
 
     // A state choosing concert again, loaded while inactive: the port is read again at once.
-    let state = String::from_utf8(host::save(&mut plugin))
-        .unwrap()
-        .replace("keyboard = \"paper\"", "keyboard = \"concert\"");
-    host::load(&mut plugin, state.as_bytes()).unwrap();
+    load_changed(
+        &mut plugin,
+        "keyboard = \"paper\"",
+        "keyboard = \"concert\"",
+    );
     assert_eq!(host::port_rescans(&mut plugin), 2);
     assert_eq!(
         host::ports(&mut plugin).1,
@@ -669,10 +675,8 @@ fn gain_curve_and_rebuild_parameters() {
 fn the_rk4_choice_plays_the_exact_engine_live() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let mut plugin = instance();
-    let state = String::from_utf8(host::save(&mut plugin))
-        .unwrap()
-        .replace("integrator = \"exact\"", "integrator = \"rk4\"");
-    host::load(&mut plugin, state.as_bytes()).unwrap();
+    let (exact, rk4) = RK4_CHOSEN;
+    load_changed(&mut plugin, exact, rk4);
     let mut active = host::activate(&mut plugin, RATE_HZ);
     let latency = unacorda::audio::aligned::LATENCY_FRAMES as usize;
     assert_eq!(host::latency(&mut plugin) as usize, latency, "no decimator");
