@@ -291,7 +291,7 @@ pub struct Piano<E: VoicePool> {
 /// A keyboard's keys prepared for engine `E` (tuned, diagonalised or read back from the cache):
 /// the costly part of building a piano, from which pianos of any pool size are made, sharing
 /// the keys' coefficients.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct PreparedKeys<E: VoicePool> {
     /// Each key's spec at the engine's rate, in order with `prepared`.
     specs: Vec<UnisonSpec>,
@@ -398,7 +398,7 @@ impl<E: VoicePool> Piano<E> {
         PreparedKeys::prepare(scaling, keys, cache, &|| false)?.piano(voices)
     }
 
-    /// Apply one event.    /// Apply one event.
+    /// Apply one event.
     pub fn apply(&mut self, event: Event) {
         self.player.apply(event, &mut self.instrument);
     }

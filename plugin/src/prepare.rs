@@ -1,8 +1,8 @@
 //! The 88 keys prepared once per process and shared by every instance and every activation: a
 //! keyboard's keys are prepared (read back from the command line's key cache where they are
 //! kept, `$UNACORDA_CACHE`) the first time a keyboard, engine rate and integrator are asked for;
-//! every activation then makes its piano from them with the pool size it wants, at the cost of a
-//! copy (a change of pool size builds nothing). One keyboard is prepared at a time: an activation
+//! every activation then makes its piano from them with the pool size it wants, sharing their
+//! coefficients (a change of pool size prepares nothing). One keyboard is prepared at a time: an activation
 //! that asks for the keys a background build ([`crate::rebuild`]) is preparing waits for them.
 //! Hosts run one engine per host rate: from 44.1 to 192 kHz the engine runs at the host's rate;
 //! below, at the smallest multiple of it from 44.1 kHz, decimated by the synth. Kept keys the
@@ -21,7 +21,7 @@ use unacorda::play::{Piano, PianoError, PreparedKeys};
 pub const HOST_RATES_HZ: std::ops::RangeInclusive<f64> = 8_000.0..=192_000.0;
 /// The lowest rate the engine runs at (Hz).
 pub const MIN_ENGINE_RATE_HZ: f64 = 44_100.0;
-/// Keyboards' prepared keys kept (each ~12 MB for the 88 keys).
+/// Keyboards' prepared keys kept (the oldest let go first).
 const KEPT: usize = 4;
 
 /// A piano on either engine (boxed: the two differ in size).

@@ -673,13 +673,7 @@ mod tests {
         // against the inverse formed afresh.
         let spec = Preset::resolve("c2").unwrap().unison_spec();
         let mut board = SharedBoard::new(&spec.board, 1.0 / 48_000.0);
-        let mut seed = 7u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = crate::engine::exact::test_numbers(7);
         let points: Vec<[Vec<f64>; 3]> = spec
             .board
             .points

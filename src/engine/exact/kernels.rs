@@ -1109,13 +1109,8 @@ mod tests {
     /// A block's convolution of three inputs with five reads' Markov parameters, summed step by
     /// step by `scatter` on `simd`, against the same sums taken directly in double precision.
     fn convolved(simd: Simd) -> Pending<READS> {
-        let mut seed = 11u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-        };
+        let mut numbers = crate::engine::exact::test_numbers(11);
+        let mut next = || numbers() as f32;
         let mut taps = Box::new(Taps([[[0f32; BLOCK]; DIRECTIONS]; READS]));
         taps.0
             .iter_mut()

@@ -140,6 +140,18 @@ impl ExactUnison {
     }
 }
 
+/// A repeatable stream of numbers in [-0.5, 0.5) for the engine's tests, from `seed`: a 64-bit
+/// linear congruential generator (Knuth's MMIX constants), its top 53 bits.
+#[cfg(test)]
+pub(crate) fn test_numbers(mut seed: u64) -> impl FnMut() -> f64 {
+    move || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

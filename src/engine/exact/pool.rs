@@ -791,6 +791,15 @@ mod tests {
         (specs, scaling.base.output_rate_hz())
     }
 
+    /// Voice `k` assigned key `k`, activated and struck with `strike`, for every voice.
+    fn strike_every_voice(pool: &mut ExactPool, strike: Strike) {
+        for k in 0..pool.voices.len() {
+            pool.assign(k, k);
+            pool.set_active(k, true);
+            pool.strike_voice(k, strike);
+        }
+    }
+
     #[test]
     fn the_energies_kept_from_a_blocks_end_are_those_of_the_voices_as_they_are() {
         // Strikes, a damper lowered, a steal with its fade, blocks of uneven lengths, single
@@ -810,11 +819,7 @@ mod tests {
             checks += 1;
         };
         let mut out = vec![[0.0; CHANNELS]; 300];
-        for k in 0..3 {
-            pool.assign(k, k);
-            pool.set_active(k, true);
-            pool.strike_voice(k, strike);
-        }
+        strike_every_voice(&mut pool, strike);
         pool.run(&mut out[..100], None);
         check(&pool, "strikes and 100 steps");
         for _ in 0..16 {
@@ -862,17 +867,13 @@ mod tests {
         // worked out on demand.
         let (specs, rate) = grand_keys(&["C2", "C4"]);
         let mut pool = ExactPool::build_pool(&specs, 2, rate).unwrap();
-        for k in 0..2 {
-            pool.assign(k, k);
-            pool.set_active(k, true);
-            pool.strike_voice(
-                k,
-                Strike {
-                    velocity_m_s: 3.0,
-                    shift: 0.0,
-                },
-            );
-        }
+        strike_every_voice(
+            &mut pool,
+            Strike {
+                velocity_m_s: 3.0,
+                shift: 0.0,
+            },
+        );
         let mut out = vec![[0.0; CHANNELS]; 64];
         for _ in 0..40 {
             pool.run(&mut out, None);
