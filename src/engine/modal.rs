@@ -1,31 +1,37 @@
-//! A second-order block `x' = A x + B u` diagonalised into complex modes (conjugate pairs
-//! stored once), with its output rows, input vectors and modal energies; the weights of an exact
-//! step with a linear input and of ETDRK4 (the hammer's stages, [`crate::engine::exact`]).
+//! A second-order block `qdd = -K q - C qdot + b u` (symmetric `K` and `C`) in its complex modes
+//! (conjugate pairs stored once), with its output rows, input vectors and modal energies; the
+//! weights of an exact step with a linear input and of ETDRK4 (the hammer's stages,
+//! [`crate::engine::exact`]).
+//!
+//! A mode `lambda` with shape `q` (`(lambda^2 + lambda C + K) q = 0`) is the state
+//! `x = [q; lambda q]`. As `K` and `C` are symmetric its left vector is `y = [(lambda + C) q; q]`,
+//! so with `q` scaled to `q^T (2 lambda + C) q = 1` (`y^T x = 1`) the force `b` drives the mode by
+//! `q^T b`: no inverse of the eigenvector matrix is needed.
 
 use crate::engine::kernels::LANES;
 use crate::engine::spec::BuildError;
-use faer::linalg::solvers::{PartialPivLu, Solve};
 use faer::{c64, Mat};
 
-/// A block `x' = A x + B u` in its complex modes: its eigen-decomposition.
+/// A block `qdd = -K q - C qdot + b u` in its complex modes.
 ///
 /// Of each complex-conjugate pair of modes only one is stored (its partner is its conjugate: the
 /// block is real), with weight 2 folded into the output rows; real (overdamped) modes have weight 1.
 pub(crate) struct Modal {
     pub(crate) n: usize,
-    /// Kept eigenpairs `(column, weight)`, in order of `|lambda|`.
-    pub(crate) keep: Vec<(usize, f64)>,
-    /// Each kept mode's eigenvalue `lambda` (1/s).
+    /// Each kept mode's eigenvalue `lambda` (1/s), in order of `|lambda|`.
     pub(crate) lambda: Vec<c64>,
-    pub(crate) u: Mat<c64>,
-    pub(crate) lu: PartialPivLu<c64>,
+    /// Each kept mode's weight: 2 for one of a conjugate pair, 1 for a real mode.
+    pub(crate) weight: Vec<f64>,
+    /// Each kept mode's shape `q` (a column, `n` rows), scaled to `q^T (2 lambda + C) q = 1`.
+    pub(crate) shape: Mat<c64>,
     /// Kept modes rounded up to whole SIMD lanes.
     pub(crate) padded: usize,
 }
 
 impl Modal {
-    /// Diagonalise `qdd = -K q - C qdot + ...` (dense `n × n`, row-major).
-    pub(crate) fn new(k: &[f64], c: &[f64], n: usize) -> Result<Modal, BuildError> {
+    /// Diagonalise `qdd = -K q - C qdot + ...` (dense `n × n`, row-major) as one dense
+    /// eigenproblem of order `2n`.
+    pub(crate) fn dense(k: &[f64], c: &[f64], n: usize) -> Result<Modal, BuildError> {
         // Balanced: velocities in units of `omega_s` (the highest undamped frequency), so that
         // both blocks of the matrix are of one size (`x = (q, qdot / omega_s)`). Unbalanced, the
         // entries span 1 to omega^2 ~ 1e10, and the QR iteration can fail to converge (it did
@@ -39,10 +45,6 @@ impl Modal {
         });
         let eig = a.eigen().map_err(|_| BuildError::Modes)?;
         let s = eig.S().column_vector().to_owned();
-        // Back to `x = (q, qdot)`.
-        let u = Mat::<c64>::from_fn(2 * n, 2 * n, |i, j| {
-            eig.U()[(i, j)] * if i < n { 1.0 } else { omega_s }
-        });
         // Representatives: Im > 0 of each pair (weight 2), real eigenvalues (weight 1).
         let scale = (0..2 * n).map(|i| s[i].norm()).fold(0.0, f64::max).max(1.0);
         let keep: Vec<(usize, f64)> = (0..2 * n)
@@ -57,73 +59,134 @@ impl Modal {
                 }
             })
             .collect();
-        // In order of |lambda| (the natural frequency of a pair, the decay rate of a real mode):
-        // a voice keeps its modes as a prefix of this order and lets the rest follow the bridge
-        // quasi-statically ([`crate::engine::exact`]), which holds for the modes far above what
-        // drives them.
-        let mut keep = keep;
-        keep.sort_by(|a, b| s[a.0].norm().total_cmp(&s[b.0].norm()));
         let pairs = keep.iter().filter(|(_, w)| *w == 2.0).count();
         if 2 * pairs + (keep.len() - pairs) != 2 * n || !s.iter().all(|x| x.re.is_finite()) {
             return Err(BuildError::Modes);
         }
+        // The shape is the displacement half of each eigenvector (the balanced state holds
+        // `q` at full size for every mode up to `omega_s`).
+        let shape = Mat::<c64>::from_fn(n, keep.len(), |i, j| eig.U()[(i, keep[j].0)]);
         let lambda: Vec<c64> = keep.iter().map(|&(i, _)| s[i]).collect();
+        let weight = keep.iter().map(|&(_, w)| w).collect();
+        Modal::scaled(lambda, weight, shape, c)
+    }
+
+    /// The modes `lambda` with shapes `shape` (of any scale) of the block with damping `c`
+    /// (dense `n × n`, row-major), each shape scaled to `q^T (2 lambda + C) q = 1` and the modes
+    /// put in order of `|lambda|` (the natural frequency of a pair, the decay rate of a real
+    /// mode): a voice keeps its modes as a prefix of this order and lets the rest follow the
+    /// bridge quasi-statically ([`crate::engine::exact`]), which holds for the modes far above
+    /// what drives them.
+    pub(crate) fn scaled(
+        lambda: Vec<c64>,
+        weight: Vec<f64>,
+        shape: Mat<c64>,
+        c: &[f64],
+    ) -> Result<Modal, BuildError> {
+        let n = shape.nrows();
+        let damping = Mat::<f64>::from_fn(n, n, |i, j| c[i * n + j]);
+        let (re, im) = real_parts(&shape);
+        let (cre, cim) = (&damping * &re, &damping * &im);
+        let mut order: Vec<usize> = (0..lambda.len()).collect();
+        order.sort_by(|&a, &b| lambda[a].norm().total_cmp(&lambda[b].norm()));
+        // Modes of one eigenvalue (alike strings, or a direction's pair the bridge treats
+        // alike) are made orthogonal in `x^T (2 lambda + C) y`, which distinct modes are by
+        // symmetry: within each, a Gram-Schmidt sweep in that form.
+        let column = |m: usize| -> (Vec<c64>, Vec<c64>) {
+            (
+                (0..n).map(|i| shape[(i, m)]).collect(),
+                (0..n).map(|i| c64::new(cre[(i, m)], cim[(i, m)])).collect(),
+            )
+        };
+        let form = |l: c64, x: &[c64], y: &[c64], cy: &[c64]| -> c64 {
+            (0..n).map(|i| x[i] * (y[i] * l * 2.0 + cy[i])).sum()
+        };
+        let mut scaled = Mat::<c64>::zeros(n, order.len());
+        let mut group: Vec<(Vec<c64>, Vec<c64>)> = vec![];
+        for (to, &m) in order.iter().enumerate() {
+            let l = lambda[m];
+            let first = to - group.len();
+            if group.is_empty() || (lambda[order[first]] - l).norm() > 1e-8 * l.norm() {
+                group.clear();
+            }
+            let (mut x, mut cx) = column(m);
+            for (y, cy) in &group {
+                let by = form(l, y, &x, &cx);
+                for i in 0..n {
+                    x[i] -= y[i] * by;
+                    cx[i] -= cy[i] * by;
+                }
+            }
+            let by = form(l, &x, &x, &cx).sqrt().inv();
+            if !(by.re.is_finite() && by.im.is_finite()) {
+                return Err(BuildError::Modes);
+            }
+            x.iter_mut().for_each(|v| *v *= by);
+            cx.iter_mut().for_each(|v| *v *= by);
+            for i in 0..n {
+                scaled[(i, to)] = x[i];
+            }
+            group.push((x, cx));
+        }
+        let kept = order.len();
         Ok(Modal {
             n,
-            padded: keep.len().div_ceil(LANES) * LANES,
-            lu: u.partial_piv_lu(),
-            u,
-            keep,
-            lambda,
+            lambda: order.iter().map(|&m| lambda[m]).collect(),
+            weight: order.iter().map(|&m| weight[m]).collect(),
+            shape: scaled,
+            padded: kept.div_ceil(LANES) * LANES,
         })
     }
 
     /// The output row `r = c^T V` (weighted) reading `c^T q`, or `c^T qdot` if `velocity`.
     pub(crate) fn row(&self, c: &[f64], velocity: bool) -> Vec<c64> {
-        let off = if velocity { self.n } else { 0 };
-        self.keep
-            .iter()
-            .map(|&(m, w)| {
+        (0..self.lambda.len())
+            .map(|m| {
                 let mut acc = c64::new(0.0, 0.0);
                 for (i, &ci) in c.iter().enumerate() {
-                    acc += self.u[(off + i, m)] * ci;
+                    acc += self.shape[(i, m)] * ci;
                 }
-                acc * w
+                let v = if velocity {
+                    self.lambda[m]
+                } else {
+                    c64::new(1.0, 0.0)
+                };
+                acc * v * self.weight[m]
             })
             .collect()
     }
 
-    /// The input vector `g = V^-1 [0; b]` of a force distribution `b` on the accelerations.
+    /// The input vector `g = V^-1 [0; b]` of a force distribution `b` on the accelerations:
+    /// `q^T b` for each mode.
     pub(crate) fn input(&self, b: &[f64]) -> Vec<c64> {
-        let n = self.n;
-        let rhs = Mat::<c64>::from_fn(2 * n, 1, |i, _| {
-            c64::new(if i >= n { b[i - n] } else { 0.0 }, 0.0)
-        });
-        let g = self.lu.solve(&rhs);
-        self.keep.iter().map(|&(m, _)| g[(m, 0)]).collect()
+        (0..self.lambda.len())
+            .map(|m| {
+                let mut acc = c64::new(0.0, 0.0);
+                for (i, &bi) in b.iter().enumerate() {
+                    acc += self.shape[(i, m)] * bi;
+                }
+                acc
+            })
+            .collect()
     }
 
     /// Per stored mode, the mechanical energy per `|z|²` (J): the cycle-averaged
     /// `1/2 (qdot^T qdot + q^T K q)` of `w Re(v z)` for the mode's eigenvector `v`.
     pub(crate) fn energy(&self, k: &[f64]) -> Vec<f64> {
         let n = self.n;
-        let kept = self.keep.len();
         // `K` is symmetric, so `v^H K v = a^T K a + b^T K b` for `v = a + i b`: two real products
-        // over every kept mode at once (a mode at a time in scalar loops this was a sixth of a
-        // key's preparation).
-        let part =
-            |f: fn(c64) -> f64| Mat::<f64>::from_fn(n, kept, |i, c| f(self.u[(i, self.keep[c].0)]));
-        let (a, b) = (part(|x| x.re), part(|x| x.im));
+        // over every kept mode at once.
+        let (a, b) = real_parts(&self.shape);
         let stiffness = Mat::<f64>::from_fn(n, n, |i, j| k[i * n + j]);
         let (ka, kb) = (&stiffness * &a, &stiffness * &b);
-        let mut e: Vec<f64> = self
-            .keep
-            .iter()
-            .enumerate()
-            .map(|(c, &(m, w))| {
-                let kinetic: f64 = (0..n).map(|i| self.u[(n + i, m)].norm_sqr()).sum();
+        let mut e: Vec<f64> = (0..self.lambda.len())
+            .map(|m| {
+                let w = self.weight[m];
+                let speed = self.lambda[m].norm_sqr();
+                let kinetic: f64 =
+                    (0..n).map(|i| self.shape[(i, m)].norm_sqr()).sum::<f64>() * speed;
                 let potential: f64 = (0..n)
-                    .map(|i| a[(i, c)] * ka[(i, c)] + b[(i, c)] * kb[(i, c)])
+                    .map(|i| a[(i, m)] * ka[(i, m)] + b[(i, m)] * kb[(i, m)])
                     .sum();
                 0.25 * w * w * (kinetic + potential)
             })
@@ -131,6 +194,48 @@ impl Modal {
         e.resize(self.padded, 0.0);
         e
     }
+}
+
+/// The real and imaginary parts of a complex matrix.
+fn real_parts(m: &Mat<c64>) -> (Mat<f64>, Mat<f64>) {
+    (
+        Mat::<f64>::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)].re),
+        Mat::<f64>::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)].im),
+    )
+}
+
+#[cfg(test)]
+impl Modal {
+    /// `c^T (K - omega^2 + i omega C)^-1 b` from the modes: each pair's two poles.
+    pub(crate) fn response(&self, c: &[f64], b: &[f64], omega: f64) -> c64 {
+        let (row, input) = (self.row(c, false), self.input(b));
+        let s = c64::new(0.0, omega);
+        (0..row.len())
+            .map(|m| {
+                let (l, w) = (self.lambda[m], self.weight[m]);
+                let r = row[m] / w * input[m];
+                if w == 2.0 {
+                    r / (s - l) + r.conj() / (s - l.conj())
+                } else {
+                    r / (s - l)
+                }
+            })
+            .sum()
+    }
+}
+
+/// The same by a direct solve of the dense system (`k`, `damping` row-major `n × n`).
+#[cfg(test)]
+pub(crate) fn solved_response(k: &[f64], damping: &[f64], c: &[f64], b: &[f64], omega: f64) -> c64 {
+    use faer::linalg::solvers::Solve;
+    let n = c.len();
+    let p = Mat::<c64>::from_fn(n, n, |i, j| {
+        let mass = if i == j { omega * omega } else { 0.0 };
+        c64::new(k[i * n + j] - mass, omega * damping[i * n + j])
+    });
+    let rhs = Mat::<c64>::from_fn(n, 1, |i, _| c64::new(b[i], 0.0));
+    let x = p.partial_piv_lu().solve(&rhs);
+    (0..n).map(|i| x[(i, 0)] * c[i]).sum()
 }
 
 /// ETDRK4 coefficients of one mode `lambda` for step `h`: `Q = (e^{lambda h/2} - 1)/lambda`,
@@ -204,7 +309,7 @@ mod tests {
     /// closed form (weights 2 for a conjugate pair, 1 for a real mode).
     fn kick_response(k: f64, c: f64, exact: impl Fn(f64) -> f64) -> f64 {
         let h = 1e-4;
-        let modal = Modal::new(&[k], &[c], 1).unwrap();
+        let modal = Modal::dense(&[k], &[c], 1).unwrap();
         let (row, g) = (modal.row(&[1.0], false), modal.input(&[1.0]));
         let mut worst: f64 = 0.0;
         let mut peak: f64 = 0.0;
@@ -228,10 +333,18 @@ mod tests {
             4.0e6, -1.0e6, 0.0, -1.0e6, 5.0e6, -2.0e6, 0.0, -2.0e6, 9.0e6,
         ];
         let c = [20.0, 1.0, 0.0, 1.0, 15.0, 2.0, 0.0, 2.0, 30.0];
-        let modal = Modal::new(&k, &c, n).unwrap();
+        let modal = Modal::dense(&k, &c, n).unwrap();
         let fast = modal.energy(&k);
-        for (slot, &(m, w)) in modal.keep.iter().enumerate() {
-            let v = |i: usize| modal.u[(i, m)];
+        for (slot, &w) in modal.weight.iter().enumerate() {
+            // The state `[q; lambda q]`.
+            let v = |i: usize| {
+                let q = modal.shape[(i % n, slot)];
+                if i < n {
+                    q
+                } else {
+                    q * modal.lambda[slot]
+                }
+            };
             let kinetic: f64 = (0..n).map(|i| v(n + i).norm_sqr()).sum();
             let potential: f64 = (0..n)
                 .map(|i| {

@@ -28,12 +28,14 @@
 //! ```
 //! with `D` the shared board's displacement at the bridge point.
 //!
-//! Parts: [`key`] (one key's coefficients), [`voice`] (a voice's state and step), [`interface`]
+//! Parts: [`key`] (one key's coefficients), [`bridge_modes`] (its modes, solved through its
+//! bridge point), [`voice`] (a voice's state and step), [`interface`]
 //! (the shared board and the keys' interface with it), [`pool`] (the voice pool), [`block`] (a
 //! block of the pool: its passes, on one core or two, and its steps), [`kernels`] (the loops over modes),
 //! [`bytes`] (a key's modes as bytes and back, to be kept between runs).
 
 mod block;
+mod bridge_modes;
 mod bytes;
 mod interface;
 mod kernels;
