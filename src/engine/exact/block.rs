@@ -298,7 +298,11 @@ fn finish(
         half.known.iter_mut().for_each(|f| *f = 0.0);
     }
     let (mut total, mut watched) = ([0.0; CHANNELS], [0.0; 3]);
-    for v in voices.iter_mut() {
+    for i in 0..voices.len() {
+        if let Some(n) = voices.get(i + 1) {
+            prefetch_prefix(cx, n);
+        }
+        let v = &mut voices[i];
         let (true, Some(k)) = (v.state.active, v.state.key) else {
             continue;
         };
@@ -315,6 +319,28 @@ fn finish(
         }
     }
     (half.volume[t], half.watched_n[t]) = (total, watched);
+}
+
+/// Ask for the next voice's live prefix (its reads' coefficients, read every sample) to be
+/// brought into the cache while this voice steps.
+#[inline(always)]
+fn prefetch_prefix(cx: &Context<'_>, v: &Voice) {
+    #[cfg(target_arch = "x86_64")]
+    if let (true, Some(k)) = (v.state.active, v.state.key) {
+        let key = v.face(&cx.keys[k]);
+        if let Some(p) = key.prefixes.get(v.live) {
+            let at = (p as *const super::key::Prefix).cast::<i8>();
+            for line in 0..std::mem::size_of::<super::key::Prefix>().div_ceil(64) {
+                // SAFETY: a prefetch never faults; the address lies within `p`.
+                unsafe {
+                    std::arch::x86_64::_mm_prefetch(
+                        at.add(line * 64),
+                        std::arch::x86_64::_MM_HINT_T0,
+                    )
+                };
+            }
+        }
+    }
 }
 
 /// The shared modes' known force: half 0's plus half 1's, in that order on either core (so that
