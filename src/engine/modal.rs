@@ -140,18 +140,16 @@ impl Modal {
 
     /// The output row `r = c^T V` (weighted) reading `c^T q`, or `c^T qdot` if `velocity`.
     pub(crate) fn row(&self, c: &[f64], velocity: bool) -> Vec<c64> {
-        (0..self.lambda.len())
-            .map(|m| {
-                let mut acc = c64::new(0.0, 0.0);
-                for (i, &ci) in c.iter().enumerate() {
-                    acc += self.shape[(i, m)] * ci;
-                }
+        self.input(c)
+            .into_iter()
+            .enumerate()
+            .map(|(m, cq)| {
                 let v = if velocity {
                     self.lambda[m]
                 } else {
                     c64::new(1.0, 0.0)
                 };
-                acc * v * self.weight[m]
+                cq * v * self.weight[m]
             })
             .collect()
     }
@@ -197,7 +195,7 @@ impl Modal {
 }
 
 /// The real and imaginary parts of a complex matrix.
-fn real_parts(m: &Mat<c64>) -> (Mat<f64>, Mat<f64>) {
+pub(crate) fn real_parts(m: &Mat<c64>) -> (Mat<f64>, Mat<f64>) {
     (
         Mat::<f64>::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)].re),
         Mat::<f64>::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)].im),

@@ -21,11 +21,11 @@
 //!
 //! Every solve is checked: each mode's residual in `(s^2 + s C + K) q`, and the modes' completeness
 //! (a force and a displacement rebuilt from their modal parts). Where a check fails, or the split
-//! does not hold (identical strings share held modes that do not move the bridge; a direction the
-//! board does not move in leaves its strings' held modes as they are), [`BridgeSystem::modes`]
-//! gives none and the key is diagonalised densely ([`Modal::dense`]).
+//! does not hold (a direction the board does not move in leaves its strings' held modes as they
+//! are), [`BridgeSystem::modes`] gives none and the key is diagonalised densely
+//! ([`Modal::dense`]).
 
-use crate::engine::modal::Modal;
+use crate::engine::modal::{real_parts, Modal};
 use faer::{c64, Mat};
 
 /// One string's modes in one direction: a diagonal block of the key's `K` and a dense one of `C`.
@@ -574,8 +574,7 @@ fn checked(modal: Modal, k: &[f64], c: &[f64]) -> Option<Modal> {
         Mat::<f64>::from_fn(n, n, |i, j| k[i * n + j]),
         Mat::<f64>::from_fn(n, n, |i, j| c[i * n + j]),
     );
-    let re = Mat::<f64>::from_fn(n, kept, |i, j| modal.shape[(i, j)].re);
-    let im = Mat::<f64>::from_fn(n, kept, |i, j| modal.shape[(i, j)].im);
+    let (re, im) = real_parts(&modal.shape);
     let (kre, kim, cre, cim) = (
         &stiffness * &re,
         &stiffness * &im,
@@ -605,7 +604,7 @@ fn checked(modal: Modal, k: &[f64], c: &[f64]) -> Option<Modal> {
     }
     // A force `[0; b]` and a displacement `[b; 0]` rebuilt from the modes (`x = [q; s q]`, the
     // left vector `[(s + C) q; q]`), each mode with its conjugate partner: each of the four
-    // halves against the sum of its terms' sizes, the scale of its rounding.
+    // halves against the largest of its terms, the scale of its rounding.
     let b: Vec<f64> = (0..n)
         .map(|i| ((i * 7919 % 113) as f64 / 56.0) - 1.0)
         .collect();

@@ -1161,14 +1161,14 @@ mod tests {
     /// left vector `[(lambda + C) q; q]` on `x` (`c` dense, row-major).
     fn amplitudes(modal: &Modal, c: &[f64], x: &[f64]) -> Vec<c64> {
         let n = modal.n;
+        let cx: Vec<f64> = (0..n)
+            .map(|i| (0..n).map(|j| c[i * n + j] * x[j]).sum())
+            .collect();
         (0..modal.lambda.len())
             .map(|m| {
                 let l = modal.lambda[m];
                 (0..n)
-                    .map(|i| {
-                        let cx: f64 = (0..n).map(|j| c[i * n + j] * x[j]).sum();
-                        modal.shape[(i, m)] * (l * x[i] + cx + x[n + i])
-                    })
+                    .map(|i| modal.shape[(i, m)] * (l * x[i] + cx[i] + x[n + i]))
                     .sum()
             })
             .collect()
