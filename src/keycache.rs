@@ -12,6 +12,7 @@
 //! any other is refused, counted by why ([`Refusal`]), prepared again and replaced. A directory
 //! that cannot be written costs only the time.
 
+use crate::engine::physics::soundboard::{BridgePoint, Listener, SoundboardModes};
 use crate::engine::{StoredKey, StoredKeyError, UnisonSpec};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -83,6 +84,61 @@ fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
     bytes.iter().fold(hash, |h, &b| {
         (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
     })
+}
+
+/// FNV-1a's step over 64-bit words: a stable hash of numbers by their bits, a word a step.
+fn fnv1a_words(hash: u64, words: impl IntoIterator<Item = u64>) -> u64 {
+    words
+        .into_iter()
+        .fold(hash, |h, w| (h ^ w).wrapping_mul(0x0000_0100_0000_01b3))
+}
+
+/// `hash` followed by `x`'s length and its values' bits.
+fn floats_hash(hash: u64, x: &[f64]) -> u64 {
+    let h = fnv1a_words(hash, [x.len() as u64]);
+    fnv1a_words(h, x.iter().map(|x| x.to_bits()))
+}
+
+/// `hash` followed by `text`'s length and its bytes.
+fn text_hash(hash: u64, text: &str) -> u64 {
+    fnv1a(fnv1a_words(hash, [text.len() as u64]), text.as_bytes())
+}
+
+/// `hash` followed by every number and name of `board` (and its dropped modes'): what its
+/// `Debug` text says, without writing a few hundred thousand numbers out as text for every key.
+fn board_hash(hash: u64, board: &SoundboardModes) -> u64 {
+    let SoundboardModes {
+        freq_hz,
+        damping_ratio,
+        volume_m2_per_sqrt_kg,
+        points,
+        listeners,
+        heard,
+        residual,
+    } = board;
+    let mut h = [freq_hz, damping_ratio, volume_m2_per_sqrt_kg]
+        .into_iter()
+        .fold(hash, |h, x| floats_hash(h, x));
+    h = fnv1a_words(h, [points.len() as u64]);
+    for BridgePoint { name, shape } in points {
+        h = text_hash(h, name);
+        h = shape.iter().fold(h, |h, x| floats_hash(h, x));
+    }
+    h = fnv1a_words(h, [listeners.len() as u64]);
+    for Listener {
+        name,
+        rayleigh_re,
+        rayleigh_im,
+    } in listeners
+    {
+        h = text_hash(h, name);
+        h = floats_hash(floats_hash(h, rayleigh_re), rayleigh_im);
+    }
+    h = text_hash(h, &format!("{heard:?}"));
+    match residual {
+        Some(residual) => board_hash(fnv1a_words(h, [1]), residual),
+        None => fnv1a_words(h, [0]),
+    }
 }
 
 /// The checksum of a file: CRC-32 (IEEE) of the identity and the engine's bytes. It guards
@@ -216,8 +272,30 @@ impl KeyCache {
         for source in K::SOURCE {
             h = fnv1a(h, source.as_bytes());
         }
-        h = fnv1a(h, format!("{spec:?}").as_bytes());
-        Some((store, h))
+        // Every field: a new one that is left out does not compile. The board (every bridge
+        // point's and listener's modes, shared by the keyboard's keys) by its numbers' bits,
+        // the rest as text.
+        let UnisonSpec {
+            strings,
+            modes,
+            duplex_damping_n_s_m2,
+            hammer,
+            damper,
+            contact,
+            board,
+            bridge_point,
+            dropped,
+            sample_rate_hz,
+        } = spec;
+        h = fnv1a(
+            h,
+            format!(
+                "{strings:?}{modes:?}{duplex_damping_n_s_m2:?}{hammer:?}{damper:?}{contact:?}\
+                 {bridge_point:?}{dropped:?}{sample_rate_hz:?}"
+            )
+            .as_bytes(),
+        );
+        Some((store, board_hash(h, board)))
     }
 
     /// The file of the key `identity` on the engine named `store`.
@@ -338,6 +416,105 @@ mod tests {
         assert_eq!(
             counts[Refusal::Checksum as usize],
             8 * (file.len() - MAGIC.len()) + file.len() - HEADER_BYTES
+        );
+    }
+
+    /// A key's identity follows every number of its description and of its board, the other
+    /// keys' bridge points, the listeners and the dropped modes included: each changed alone by
+    /// one unit in its last place changes it, and an equal description keeps it.
+    #[test]
+    fn every_number_of_a_key_and_its_board_is_in_its_identity() {
+        use crate::engine::exact::ExactKey;
+        use std::sync::Arc;
+        let scaling = crate::config::scaling::Scaling::resolve("concert").unwrap();
+        let spec = scaling.key_preset(40).unwrap().unison_spec();
+        let id = |s: &UnisonSpec| KeyCache::identity::<ExactKey>(s).unwrap().1;
+        let base = id(&spec);
+        assert_eq!(id(&spec.clone()), base, "an equal description");
+        let next = |x: &mut f64| *x = f64::from_bits(x.to_bits() + 1);
+        let board = |change: &dyn Fn(&mut SoundboardModes)| {
+            let mut s = spec.clone();
+            change(&mut s.board);
+            id(&s)
+        };
+        // A board with dropped modes of its own (here a copy of itself), and one of them moved.
+        let with_residual = |change: &dyn Fn(&mut SoundboardModes)| {
+            board(&|b| {
+                let mut r = b.clone();
+                change(&mut r);
+                b.residual = Some(Arc::new(r));
+            })
+        };
+        let residual_base = with_residual(&|_| {});
+        let last = spec.board.points.len() - 1;
+        let changed = [
+            ("a string's tension", {
+                let mut s = spec.clone();
+                next(&mut s.strings[0].tension_n);
+                id(&s)
+            }),
+            ("the rate", {
+                let mut s = spec.clone();
+                next(&mut s.sample_rate_hz);
+                id(&s)
+            }),
+            (
+                "a board mode's frequency",
+                board(&|b| next(&mut b.freq_hz[7])),
+            ),
+            (
+                "a board mode's damping",
+                board(&|b| next(&mut b.damping_ratio[7])),
+            ),
+            (
+                "a board mode's volume",
+                board(&|b| next(&mut b.volume_m2_per_sqrt_kg[7])),
+            ),
+            (
+                "another key's point, P",
+                board(&|b| next(&mut b.points[last].shape[2][5])),
+            ),
+            ("a point's name", board(&|b| b.points[last].name.push('x'))),
+            (
+                "a listener's integral",
+                board(&|b| next(&mut b.listeners[0].rayleigh_im[3])),
+            ),
+            ("the channels' listeners", board(&|b| b.heard.swap(0, 1))),
+            ("the key's dropped modes", {
+                let mut s = spec.clone();
+                next(
+                    &mut s
+                        .dropped
+                        .as_mut()
+                        .expect("concert keys hear theirs")
+                        .freq_hz[0],
+                );
+                id(&s)
+            }),
+            ("dropped modes given to the board", residual_base),
+        ];
+        for (what, changed) in &changed {
+            assert_ne!(*changed, base, "{what} changed, the identity did not");
+        }
+        let in_residual = [
+            (
+                "a dropped mode's frequency",
+                with_residual(&|r| next(&mut r.freq_hz[0])),
+            ),
+            (
+                "a dropped mode at a point",
+                with_residual(&|r| next(&mut r.points[0].shape[1][2])),
+            ),
+        ];
+        for (what, changed) in &in_residual {
+            assert_ne!(
+                *changed, residual_base,
+                "{what} changed, the identity did not"
+            );
+        }
+        println!(
+            "{} single changes, as many identities changed",
+            changed.len() + in_residual.len()
         );
     }
 }
