@@ -501,18 +501,15 @@ fn halves(voices: &[Voice], work: impl Fn(&Voice) -> usize) -> (usize, usize) {
 }
 
 /// The least [`step_work`] for which the steps are split over two cores: 16 voices in the block,
-/// their damper lifted. The two cores then meet every sample, 0.2–2.5 us each on a 2-core Zen 5
-/// VM (the exchange's unit test): 2 voices split took 0.146 ms a 64-frame block, on one core
-/// 0.058 ms. From 16 voices the split pays offline (the chorale 4.9 × real time against 4.4–4.7 ×
-/// from 32 voices, helper never late); live, 16 voices take 0.2–0.3 ms a block either way.
+/// their damper lifted. Below it the two cores' meeting every sample costs more than the split
+/// saves (docs/log/2026-12-02-two-cores-and-the-bench.md).
 const MEET_FROM: usize = 16 * 16;
 
 /// A voice's share of the steps of a block, in a voice in the block with its damper lifted (its
 /// free reads and Markov sums, its force on the shared modes and their displacement at its
 /// bridge): one with its damper down reads and remembers the felt's channels too (10 reads of 9
-/// inputs' sums instead of 4 of 3: weighed 2 ×, the chorale's callback waited 14 times as long as
-/// the helper at each meeting; 4 ×, about as long); one stepped sample by sample (a hammer
-/// touching, a fade) advances every mode each step.
+/// inputs' sums instead of 4 of 3), weighed 4 ×, where the halves' waits at the meetings come out
+/// even; one stepped sample by sample (a hammer touching, a fade) advances every mode each step.
 fn step_work(keys: &[ExactKey], v: &Voice) -> usize {
     let (true, Some(key)) = (v.state.active, v.state.key) else {
         return 0;
