@@ -7,11 +7,11 @@
 # (https://github.com/free-audio/clap-validator, `cargo build --release`) and put it on PATH or
 # name it in CLAP_VALIDATOR. About 30 s.
 #
-#   bash scripts/install-clap.sh && bash scripts/validate-clap.sh [PLUGIN.clap]
+#   bash scripts/install-plugins.sh && bash scripts/validate-clap.sh [PLUGIN.clap]
 set -euo pipefail
 plugin=$(realpath "${1:-$HOME/.clap/unacorda.clap}")
 validator=${CLAP_VALIDATOR:-clap-validator}
-[ -f "$plugin" ] || { echo "no plugin at $plugin (bash scripts/install-clap.sh builds it)"; exit 2; }
+[ -f "$plugin" ] || { echo "no plugin at $plugin (bash scripts/install-plugins.sh builds it)"; exit 2; }
 command -v "$validator" > /dev/null || { echo "no clap-validator (CLAP_VALIDATOR or PATH): see the top of $0"; exit 2; }
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT

@@ -11,7 +11,9 @@
 //! - [`state`]: the saved state (versioned text, refused when foreign or newer),
 //! - [`prepare`]: the 88 keys prepared once per process, shared by instances and activations,
 //! - [`rebuild`]: a new keyboard or pool size built in the background while the old one plays,
-//! - [`processor`]: the audio thread's side.
+//! - [`processor`]: the audio thread's side,
+//! - [`sound`]: what both formats play (the synth, the pedals followed, the output stage),
+//! - [`vst3`]: the same instrument as a VST3 plugin.
 
 use clack_extensions::audio_ports::{
     AudioPortFlags, AudioPortInfo, AudioPortInfoWriter, AudioPortRescanFlags, AudioPortType,
@@ -36,7 +38,6 @@ use clack_plugin::prelude::*;
 use clack_plugin::stream::{InputStream, OutputStream};
 use std::cell::Cell;
 use std::ffi::CStr;
-use std::fmt::Write as _;
 use std::io::{Read, Write as _};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Mutex;
@@ -47,9 +48,11 @@ pub mod params;
 pub mod prepare;
 pub mod processor;
 pub mod rebuild;
+pub mod sound;
 pub mod state;
+pub mod vst3;
 
-use params::{Values, INTEGRATOR, PARAMS, REBUILDS};
+use params::{Values, PARAMS, REBUILDS};
 use unacorda::engine::Integrator;
 
 /// The plugin's id in hosts.
@@ -81,26 +84,15 @@ pub struct Shared {
 impl PluginShared<'_> for Shared {}
 
 impl Shared {
-    /// The integrator played: the one chosen in an offline render, the exact engine live (RK4
-    /// takes longer than real time for a single voice).
+    /// The integrator played ([`Values::integrator_played`]).
     pub fn integrator(&self) -> Integrator {
-        match self.offline.load(Ordering::Relaxed) {
-            true => self.values.integrator(),
-            false => Integrator::Exact,
-        }
+        self.values
+            .integrator_played(self.offline.load(Ordering::Relaxed))
     }
 
-    /// The values whose change rebuilds the piano ([`REBUILDS`]), the integrator as played
-    /// ([`Shared::integrator`]).
+    /// The values whose change rebuilds the piano, the integrator as played ([`Values::played`]).
     pub fn played(&self) -> [f64; REBUILDS.len()] {
-        let rk4 = f64::from(u8::from(self.integrator() == Integrator::Rk4));
-        let mut values = self.values.rebuilds();
-        for (v, &i) in values.iter_mut().zip(&REBUILDS) {
-            if i == INTEGRATOR {
-                *v = rk4;
-            }
-        }
-        values
+        self.values.played(self.offline.load(Ordering::Relaxed))
     }
 }
 
@@ -339,44 +331,12 @@ impl PluginMainThreadParams for MainThread<'_> {
         writer: &mut ParamDisplayWriter,
     ) -> std::fmt::Result {
         let i = params::index_of(param_id.get()).ok_or(std::fmt::Error)?;
-        let p = PARAMS[i];
-        if let Some(name) = p.choice(value) {
-            return write!(writer, "{name}");
-        }
-        match i {
-            params::GAIN_DB => write!(writer, "{value:.1} dB"),
-            params::VELOCITY_CURVE => write!(writer, "{value:.2}"),
-            params::SUSTAIN | params::SOFT if value <= 0.0 => write!(writer, "up"),
-            params::SUSTAIN | params::SOFT if value >= 1.0 => write!(writer, "down"),
-            params::SUSTAIN | params::SOFT => write!(writer, "{:.0} %", 100.0 * value),
-            _ if p.max == 1.0 && p.stepped => {
-                write!(writer, "{}", if value >= 0.5 { "down" } else { "up" })
-            }
-            _ => write!(writer, "{}", value.round()),
-        }
+        params::write_text(i, value, writer)
     }
 
     fn text_to_value(&self, param_id: ClapId, text: &CStr) -> Option<f64> {
         let i = params::index_of(param_id.get())?;
-        let text = text.to_str().ok()?.trim();
-        let value = match PARAMS[i].choices {
-            Some(names) => names.iter().position(|k| *k == text)? as f64,
-            None if PARAMS[i].max == 1.0 && PARAMS[i].stepped => match text {
-                "down" | "on" | "1" => 1.0,
-                "up" | "off" | "0" => 0.0,
-                _ => return None,
-            },
-            None if i == params::SUSTAIN || i == params::SOFT => match text {
-                "down" | "on" => 1.0,
-                "up" | "off" => 0.0,
-                _ => match text.strip_suffix('%') {
-                    Some(percent) => percent.trim().parse::<f64>().ok()? / 100.0,
-                    None => text.parse().ok()?,
-                },
-            },
-            _ => text.trim_end_matches("dB").trim().parse().ok()?,
-        };
-        Some(PARAMS[i].clamp(value))
+        params::parse_text(i, text.to_str().ok()?)
     }
 
     fn flush(&self, input: &InputEvents, _output: &mut OutputEvents) {

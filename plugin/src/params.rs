@@ -225,6 +225,28 @@ impl Values {
         REBUILDS.map(|i| self.get(i))
     }
 
+    /// The integrator played: the one chosen when the host renders `offline`, the exact engine
+    /// live (RK4 takes longer than real time for a single voice).
+    pub fn integrator_played(&self, offline: bool) -> unacorda::engine::Integrator {
+        match offline {
+            true => self.integrator(),
+            false => unacorda::engine::Integrator::Exact,
+        }
+    }
+
+    /// The values whose change rebuilds the piano ([`REBUILDS`]), the integrator as played
+    /// ([`Values::integrator_played`]).
+    pub fn played(&self, offline: bool) -> [f64; REBUILDS.len()] {
+        let rk4 = self.integrator_played(offline) == unacorda::engine::Integrator::Rk4;
+        let mut values = self.rebuilds();
+        for (v, &i) in values.iter_mut().zip(&REBUILDS) {
+            if i == INTEGRATOR {
+                *v = f64::from(u8::from(rk4));
+            }
+        }
+        values
+    }
+
     /// The voice pool's size: as chosen, and with the halo room for every key
     /// ([`unacorda::play::HALO_VOICES`]).
     pub fn voices(&self) -> usize {
@@ -240,6 +262,48 @@ impl Values {
     pub fn halo(&self) -> bool {
         self.on(HALO)
     }
+}
+
+/// Parameter `i`'s `value` as hosts and editors show it.
+pub fn write_text(i: usize, value: f64, w: &mut impl std::fmt::Write) -> std::fmt::Result {
+    let p = PARAMS[i];
+    if let Some(name) = p.choice(value) {
+        return write!(w, "{name}");
+    }
+    match i {
+        GAIN_DB => write!(w, "{value:.1} dB"),
+        VELOCITY_CURVE => write!(w, "{value:.2}"),
+        SUSTAIN | SOFT if value <= 0.0 => write!(w, "up"),
+        SUSTAIN | SOFT if value >= 1.0 => write!(w, "down"),
+        SUSTAIN | SOFT => write!(w, "{:.0} %", 100.0 * value),
+        _ if p.max == 1.0 && p.stepped => {
+            write!(w, "{}", if value >= 0.5 { "down" } else { "up" })
+        }
+        _ => write!(w, "{}", value.round()),
+    }
+}
+
+/// Parameter `i`'s value from text as [`write_text`] writes it (or a bare number), in range.
+pub fn parse_text(i: usize, text: &str) -> Option<f64> {
+    let text = text.trim();
+    let value = match PARAMS[i].choices {
+        Some(names) => names.iter().position(|k| *k == text)? as f64,
+        None if PARAMS[i].max == 1.0 && PARAMS[i].stepped => match text {
+            "down" | "on" | "1" => 1.0,
+            "up" | "off" | "0" => 0.0,
+            _ => return None,
+        },
+        None if i == SUSTAIN || i == SOFT => match text {
+            "down" | "on" => 1.0,
+            "up" | "off" => 0.0,
+            _ => match text.strip_suffix('%') {
+                Some(percent) => percent.trim().parse::<f64>().ok()? / 100.0,
+                None => text.parse().ok()?,
+            },
+        },
+        _ => text.trim_end_matches("dB").trim().parse().ok()?,
+    };
+    Some(PARAMS[i].clamp(value))
 }
 
 #[cfg(test)]

@@ -1,9 +1,10 @@
-//! The audio thread's side: notes, MIDI and parameter changes applied at their frame, the synth
-//! realigned to its grid ([`Aligned`]), the output gain, and sleep when nothing sounds. Never
-//! allocates, locks or prints in `process` (the plugin's tests run it under `assert_no_alloc`).
+//! The CLAP audio thread's side: notes, MIDI and parameter changes applied at their frame to the
+//! synth ([`crate::sound`]), sleep when nothing sounds, and a change of keyboard or pool size
+//! built in the background. Never allocates, locks or prints in `process` (the plugin's tests
+//! run it under `assert_no_alloc`).
 
-use crate::params::{GAIN_DB, REBUILDS, SOFT, SOSTENUTO, SUSTAIN, VELOCITY_CURVE};
-use crate::prepare::Pianos;
+use crate::params::{REBUILDS, VELOCITY_CURVE};
+use crate::sound::{Engine, Output, Pedals, SCRATCH_FRAMES};
 use crate::{MainThread, Shared};
 use clack_extensions::tail::TailLength;
 use clack_extensions::thread_pool::HostThreadPool;
@@ -11,27 +12,9 @@ use clack_plugin::events::spaces::CoreEventSpace;
 use clack_plugin::events::Match;
 use clack_plugin::prelude::*;
 use std::sync::atomic::Ordering;
-use unacorda::audio::aligned::LATENCY_FRAMES;
 use unacorda::audio::host_pool::HostPool;
-use unacorda::audio::synth::EVENT_QUEUE;
-use unacorda::audio::{Aligned, Synth};
-use unacorda::engine::exact::ExactPool;
-use unacorda::engine::{Pair, Rk4Pool, VoicePool};
-use unacorda::midi::{curved_velocity, Decoder, Event, Pedal};
-
-/// The ring-out the tail reports: how long the slowest mode takes to fall this far (dB), from a
-/// fortissimo's level to below the 24-bit floor.
-pub const TAIL_FALL_DB: f64 = 120.0;
-
-/// What the host is told when RK4 is chosen and it plays live.
-const RK4_LIVE: &str = "unacorda: the RK4 integrator (the paper's reference) plays in offline renders only: it takes longer than real time for a single voice. Live, the exact engine plays.";
-
-/// Frames rendered at a time into the interleaved scratch buffer.
-const SCRATCH_FRAMES: usize = 256;
-
-/// The output gain's smoothing: the gain moves this fraction of the way to its target each
-/// frame (a time constant of ~5 ms at 48 kHz), so automating it never clicks.
-const GAIN_SMOOTHING: f32 = 0.004;
+use unacorda::engine::Pair;
+use unacorda::midi::{curved_velocity, Decoder, Event};
 
 /// An active instance's audio side (audio thread).
 pub struct Processor<'a> {
@@ -39,13 +22,10 @@ pub struct Processor<'a> {
     host: HostAudioProcessorHandle<'a>,
     /// The synth, or none when the activation could not build one (it plays silence).
     engine: Option<Engine>,
-    /// Channels the engine renders (1 or 2) and the interleaved buffer it renders them into.
-    channels: usize,
-    scratch: Vec<f32>,
+    /// The output stage: the gain, the engine's channels to the port's.
+    output: Output,
     /// The pedal parameters as last played (a state load changes them behind the processor).
-    pedals: [f64; 3],
-    /// The gain applied to the last frame (linear).
-    gain: f32,
+    pedals: Pedals,
     /// The ring-out reported as the tail (host frames; infinite on RK4).
     tail: TailLength,
     /// The keyboard, pool size and integrator this activation built ([`REBUILDS`]).
@@ -56,51 +36,6 @@ pub struct Processor<'a> {
     thread_pool: Option<HostThreadPool>,
     /// The host's MIDI messages to piano events (its CC88 prefixes kept between them).
     midi: Decoder,
-}
-
-/// The synth on either engine, realigned to the host's blocks.
-enum Engine {
-    Exact(Aligned<ExactPool>),
-    Rk4(Aligned<Rk4Pool>),
-}
-
-/// `engine.$method(args)` on whichever engine it is.
-macro_rules! on_engine {
-    ($engine:expr, $e:ident => $body:expr) => {
-        match $engine {
-            Engine::Exact($e) => $body,
-            Engine::Rk4($e) => $body,
-        }
-    };
-}
-
-impl Engine {
-    fn channels(&self) -> usize {
-        on_engine!(self, e => e.channels())
-    }
-    fn schedule(&mut self, event: Event) {
-        on_engine!(self, e => {
-            e.schedule(event);
-        })
-    }
-    fn process(&mut self, out: &mut [f32], pair: Option<&dyn Pair>) {
-        on_engine!(self, e => e.process_on(out, pair))
-    }
-    fn is_silent(&self) -> bool {
-        on_engine!(self, e => e.is_silent())
-    }
-    fn silence(&mut self) {
-        on_engine!(self, e => e.silence())
-    }
-    /// How long the slowest mode takes to fall [`TAIL_FALL_DB`] (s): the exact engine's modes
-    /// say; RK4 has none to ask, and its tail is reported infinite (the plugin sleeps when
-    /// silent).
-    fn ring_out_s(&self) -> f64 {
-        match self {
-            Engine::Exact(e) => e.synth().piano().instrument.ring_out_s(TAIL_FALL_DB),
-            Engine::Rk4(_) => f64::INFINITY,
-        }
-    }
 }
 
 /// A change of keyboard, pool size, integrator, halo or render mode while active
@@ -116,12 +51,6 @@ enum Rebuilding {
     Restarting,
 }
 
-const PEDALS: [(usize, Pedal); 3] = [
-    (SUSTAIN, Pedal::Sustain),
-    (SOSTENUTO, Pedal::Sostenuto),
-    (SOFT, Pedal::Soft),
-];
-
 impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
     fn activate(
         host: HostAudioProcessorHandle<'a>,
@@ -131,59 +60,29 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
     ) -> Result<Self, PluginError> {
         let values = &shared.values;
         let built = shared.played();
-        if values.integrator() != shared.integrator() {
-            main_thread.warn(RK4_LIVE);
-        }
-        // Activation never fails: what cannot be built plays silence and says why, once.
-        let prepared = crate::prepare::prepare(
-            values.keyboard(),
+        let activation = crate::sound::activate(
+            values,
             config.sample_rate,
-            values.voices(),
             shared.integrator(),
-        )
-        .map(|prepared| prepared.with_halo(values.halo()));
-        for warning in crate::prepare::take_warnings() {
-            main_thread.warn(&warning);
-        }
-        let (engine, latency) = match prepared.and_then(start) {
-            Ok((engine, latency)) => {
-                *shared
-                    .silent_because
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner()) = None;
-                (Some(engine), latency)
-            }
-            Err(why) => {
-                let mut last = shared
-                    .silent_because
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner());
-                if last.as_deref() != Some(why.as_str()) {
-                    main_thread.warn(&why);
-                    *last = Some(why);
-                }
-                (None, 0)
-            }
-        };
-        shared.latency_frames.store(latency, Ordering::Relaxed);
+            &shared.silent_because,
+            &|message| main_thread.warn(message),
+        );
+        shared
+            .latency_frames
+            .store(activation.latency_frames, Ordering::Relaxed);
         shared.rebuild.activated(config.sample_rate);
-        let tail = match engine.as_ref().map(|e| e.ring_out_s() * config.sample_rate) {
-            None => TailLength::Finite(0),
-            Some(frames) if frames < f64::from(i32::MAX) => TailLength::Finite(frames as u32),
-            Some(_) => TailLength::Infinite,
-        };
-        // Silence is written to both channels of the port.
-        let channels = engine.as_ref().map_or(2, Engine::channels);
+        let tail = activation
+            .tail_frames
+            .map_or(TailLength::Infinite, TailLength::Finite);
+        let engine = activation.engine;
         shared.pool.start_over();
         let thread_pool = host.get_extension::<HostThreadPool>();
         Ok(Processor {
             shared,
             host,
+            output: Output::new(engine.as_ref(), values),
             engine,
-            channels,
-            scratch: vec![0.0; SCRATCH_FRAMES * channels],
-            pedals: [0.0; 3],
-            gain: db_to_gain(values.get(GAIN_DB)),
+            pedals: Pedals::default(),
             tail,
             built,
             rebuild: Rebuilding::No,
@@ -239,60 +138,16 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         if let Some(engine) = &mut self.engine {
             engine.silence();
         }
-        self.pedals = [0.0; 3];
+        self.pedals.lift();
     }
-}
-
-/// The engine of a prepared piano: its synth realigned to the host's blocks, and the latency to
-/// report (host frames).
-fn start(prepared: crate::prepare::Prepared) -> Result<(Engine, u32), String> {
-    let (settings, channels) = (prepared.settings, usize::from(prepared.settings.channels));
-    Ok(match prepared.piano {
-        Pianos::Exact(piano) => {
-            let (aligned, latency) = aligned(*piano, settings, channels)?;
-            (Engine::Exact(aligned), latency)
-        }
-        Pianos::Rk4(piano) => {
-            let (aligned, latency) = aligned(*piano, settings, channels)?;
-            (Engine::Rk4(aligned), latency)
-        }
-    })
-}
-
-fn aligned<E: VoicePool>(
-    piano: unacorda::play::Piano<E>,
-    settings: unacorda::config::output::OutputSettings,
-    channels: usize,
-) -> Result<(Aligned<E>, u32), String> {
-    let (mut synth, handle) =
-        Synth::new(piano, settings, EVENT_QUEUE).map_err(|e| format!("unacorda: {e}"))?;
-    if std::thread::available_parallelism().is_ok_and(|n| n.get() >= 2) {
-        // The helper thread lends the engine a second core; without it, one core.
-        let _ = synth.use_second_core();
-        synth.ask_real_time_priority();
-    }
-    let latency = LATENCY_FRAMES as f64 + synth.decimation_delay_frames();
-    Ok((
-        Aligned::new(synth, handle, channels),
-        latency.round() as u32,
-    ))
-}
-
-fn db_to_gain(db: f64) -> f32 {
-    10f64.powf(db / 20.0) as f32
 }
 
 impl Processor<'_> {
     /// Play the pedal parameters that changed since they were last played (an automation event,
     /// or a state load on the main thread).
     fn settle_pedals(&mut self) {
-        for (i, &(index, pedal)) in PEDALS.iter().enumerate() {
-            let depth = self.shared.values.get(index);
-            if depth != self.pedals[i] {
-                self.pedals[i] = depth;
-                self.play(Event::Pedal { pedal, depth });
-            }
-        }
+        self.pedals
+            .settle(&self.shared.values, self.engine.as_mut());
     }
 
     fn play(&mut self, event: Event) {
@@ -399,9 +254,7 @@ impl Processor<'_> {
         out: &mut clack_plugin::process::audio::OutputChannels<f32>,
         range: std::ops::Range<usize>,
     ) {
-        let target = db_to_gain(self.shared.values.get(GAIN_DB));
-        let ch = self.channels;
-        let host_channels = out.channel_count();
+        let host_channels = out.channel_count() as usize;
         // The host's pool lends the second core while it runs the two halves at once; from a
         // host that runs its tasks one after another the helper thread takes over.
         let host = std::cell::RefCell::new(&mut self.host);
@@ -416,32 +269,16 @@ impl Processor<'_> {
         let mut start = range.start;
         while start < range.end {
             let n = (range.end - start).min(SCRATCH_FRAMES);
-            let scratch = &mut self.scratch[..n * ch];
-            match &mut self.engine {
-                Some(engine) => engine.process(scratch, pair),
-                None => scratch.fill(0.0),
-            }
-            let mut gain = self.gain;
-            for frame in scratch.chunks_exact_mut(ch) {
-                gain += (target - gain) * GAIN_SMOOTHING;
-                frame.iter_mut().for_each(|s| *s *= gain);
-            }
-            self.gain = gain;
+            let ch = self.output.channels();
+            let frames = self
+                .output
+                .render(self.engine.as_mut(), &self.shared.values, n, pair);
             for c in 0..host_channels {
-                let Some(dest) = out.channel_mut(c) else {
-                    continue;
-                };
-                let Some(dest) = dest.get_mut(start..start + n) else {
-                    continue;
-                };
-                let source = c as usize;
-                for (d, frame) in dest.iter_mut().zip(scratch.chunks_exact(ch)) {
-                    *d = match (host_channels, ch) {
-                        // A mono host port hears both channels.
-                        (1, 2) => 0.5 * (frame[0] + frame[1]),
-                        _ if source < 2 => frame[source.min(ch - 1)],
-                        _ => 0.0,
-                    };
+                if let Some(dest) = out
+                    .channel_mut(c as u32)
+                    .and_then(|d| d.get_mut(start..start + n))
+                {
+                    crate::sound::write(frames, ch, c, host_channels, dest);
                 }
             }
             start += n;

@@ -22,7 +22,7 @@ fn deps_dir() -> PathBuf {
 }
 
 /// The plugin built with this test, or the file `UNACORDA_CLAP` names (an installed
-/// `unacorda.clap`, stripped by scripts/install-clap.sh).
+/// `unacorda.clap`, stripped by scripts/install-plugins.sh).
 fn load() -> PluginEntry {
     let path = std::env::var_os("UNACORDA_CLAP").map_or_else(
         || {

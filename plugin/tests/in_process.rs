@@ -4,12 +4,14 @@
 //! to the offline render of the same events once the reported latency is taken off.
 
 mod host;
+mod render;
 
 use assert_no_alloc::{assert_no_alloc, violation_count, AllocDisabler};
 use clack_host::prelude::PluginEntry;
 use host::{Instance, Play, Threads};
+use render::offline;
 use unacorda::engine::exact::ExactPool;
-use unacorda::engine::{Rk4Pool, VoicePool};
+use unacorda::engine::Rk4Pool;
 use unacorda::midi::file::TimedEvent;
 use unacorda::midi::{Decoder, Event, Pedal};
 
@@ -116,30 +118,6 @@ fn as_piano_events(script: &[(u64, Play)]) -> Vec<TimedEvent> {
         .collect()
 }
 
-/// The offline render of `events` on the concert keyboard on the engine `E` (`render --offline
-/// --midi`'s path, one core), with the pedal's halo or not: both channels.
-fn offline<E: VoicePool>(events: &[TimedEvent], tail_s: f64, halo: bool) -> (Vec<f32>, Vec<f32>) {
-    let scaling = unacorda::config::scaling::Scaling::resolve("concert").unwrap();
-    let cache = unacorda::keycache::KeyCache::from_env();
-    let keyboard = unacorda::play::Keyboard {
-        scaling: &scaling,
-        cache: cache.as_ref(),
-    };
-    let offline = unacorda::render::Offline {
-        tail_s,
-        voices: unacorda::play::DEFAULT_VOICES,
-        cores: 1,
-        halo,
-    };
-    let r =
-        unacorda::render::render_midi_kept::<E>(keyboard, events, offline, |_| {}, None).unwrap();
-    assert_eq!(r.channels, 2);
-    (
-        r.samples.iter().step_by(2).copied().collect(),
-        r.samples.iter().skip(1).step_by(2).copied().collect(),
-    )
-}
-
 /// The state's line choosing the exact integrator, and the one choosing RK4.
 const RK4_CHOSEN: (&str, &str) = ("integrator = \"exact\"", "integrator = \"rk4\"");
 
@@ -227,7 +205,7 @@ fn plays_exactly_like_the_offline_render_in_any_blocks_without_allocating() {
     let script = script();
     let tail_s = 0.2;
     let events = as_piano_events(&script);
-    let (left, right) = offline::<ExactPool>(&events, tail_s, false);
+    let [left, right] = offline::<ExactPool>(&events, tail_s, false);
     let frames = left.len();
     let blocks = [1, 4096, 17, 333, 2, 1000, 95, 31, 64, 3, 512, 777];
     let heard = active.run(frames + latency, &blocks, &script, checked);
@@ -261,26 +239,10 @@ fn plays_exactly_like_the_offline_render_in_any_blocks_without_allocating() {
     host::deactivate(&mut plugin, active);
 }
 
-/// Both channels of what the plugin played, `latency` frames late, equal to the offline
-/// render's bit for bit, and not silent.
+/// Both channels of what the plugin played equal to the offline render's, `latency` frames
+/// late ([`render::equals_offline`]).
 fn equals_offline(engine: &str, heard: &host::Heard, latency: usize, render: [&[f32]; 2]) {
-    for (name, plugin_side, render_side) in [
-        ("left", &heard.left, render[0]),
-        ("right", &heard.right, render[1]),
-    ] {
-        let differ = plugin_side[latency..]
-            .iter()
-            .zip(render_side.iter())
-            .filter(|(a, b)| a.to_bits() != b.to_bits())
-            .count();
-        let peak = render_side.iter().fold(0f32, |m, s| m.max(s.abs()));
-        println!(
-            "{engine} {name}: {} frames, peak {peak:.3}, {differ} differ from the offline render",
-            render_side.len()
-        );
-        assert!(peak > 0.01);
-        assert_eq!(differ, 0, "{engine} {name} differs from the offline render");
-    }
+    render::equals_offline(engine, [&heard.left, &heard.right], latency, render);
 }
 
 /// CLAP's thread pool: a host that runs the plugin's two tasks at once lends the engine its second
@@ -293,7 +255,7 @@ fn a_hosts_thread_pool_lends_a_core_and_a_serial_one_gets_its_tasks_back() {
     let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let script = script();
     let events = as_piano_events(&script);
-    let (left, right) = offline::<ExactPool>(&events, 0.1, false);
+    let [left, right] = offline::<ExactPool>(&events, 0.1, false);
     for threads in [Threads::Parallel, Threads::Serial] {
         let mut plugin = host::instantiate_with(&entry(), threads, checked);
         let mut active = host::activate(&mut plugin, RATE_HZ);
@@ -386,7 +348,7 @@ fn the_rk4_integrator_plays_like_its_offline_render() {
     let latency = unacorda::audio::aligned::LATENCY_FRAMES as usize;
     let script: Vec<_> = script().into_iter().take(6).collect();
     let events = as_piano_events(&script);
-    let (left, right) = offline::<Rk4Pool>(&events, 0.1, false);
+    let [left, right] = offline::<Rk4Pool>(&events, 0.1, false);
     let heard = active.run(left.len() + latency, &[1, 333, 64, 4096], &script, checked);
     assert_eq!(heard.allocations, 0, "process() allocated");
     let tail = host::tail(&mut active).unwrap();
@@ -417,11 +379,11 @@ fn the_pedal_halo_plays_like_its_offline_render() {
     let latency = host::latency(&mut plugin) as usize;
     let script = script();
     let events = as_piano_events(&script);
-    let (left, right) = offline::<ExactPool>(&events, 0.1, true);
+    let [left, right] = offline::<ExactPool>(&events, 0.1, true);
     let heard = active.run(left.len() + latency, &[64, 333, 1, 4096], &script, checked);
     assert_eq!(heard.allocations, 0, "process() allocated");
     equals_offline("exact with the halo", &heard, latency, [&left, &right]);
-    let (without, _) = offline::<ExactPool>(&events, 0.1, false);
+    let [without, _] = offline::<ExactPool>(&events, 0.1, false);
     let energy =
         |x: &mut dyn Iterator<Item = f32>| x.map(|v| f64::from(v) * f64::from(v)).sum::<f64>();
     let halo_db = 10.0
@@ -681,7 +643,7 @@ fn the_rk4_choice_plays_the_exact_engine_live() {
     let latency = unacorda::audio::aligned::LATENCY_FRAMES as usize;
     assert_eq!(host::latency(&mut plugin) as usize, latency, "no decimator");
     let script: Vec<_> = script().into_iter().take(6).collect();
-    let (left, right) = offline::<ExactPool>(&as_piano_events(&script), 0.1, false);
+    let [left, right] = offline::<ExactPool>(&as_piano_events(&script), 0.1, false);
     let heard = active.run(left.len() + latency, &[512], &script, checked);
     assert_eq!(heard.allocations, 0, "process() allocated");
     equals_offline("RK4 chosen, live", &heard, latency, [&left, &right]);

@@ -5,7 +5,7 @@
 # qtractor, jackd2, xvfb, jack-capture and libasound2-dev (for the sequencer stand-in below),
 # and about 30 s.
 #
-#   bash scripts/install-clap.sh && bash scripts/qtractor/play.sh [PLUGIN.clap]
+#   bash scripts/install-plugins.sh && bash scripts/qtractor/play.sh [PLUGIN.clap]
 #
 # Qtractor will not start its engine without an ALSA sequencer (/dev/snd/seq), which containers
 # lack; fakeseq.c, preloaded, answers its sequencer calls as a sequencer with no other client
@@ -16,7 +16,7 @@ set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 plugin=$(realpath "${1:-$HOME/.clap/unacorda.clap}")
 work=${UNACORDA_QTRACTOR_DIR:-/tmp/unacorda-qtractor}
-[ -f "$plugin" ] || { echo "no plugin at $plugin (bash scripts/install-clap.sh builds it)"; exit 2; }
+[ -f "$plugin" ] || { echo "no plugin at $plugin (bash scripts/install-plugins.sh builds it)"; exit 2; }
 for tool in qtractor jackd jack_capture jack_transport jack_lsp Xvfb gcc; do
   command -v "$tool" > /dev/null || { echo "$tool is missing: apt-get install qtractor jackd2 xvfb jack-capture libasound2-dev gcc"; exit 2; }
 done

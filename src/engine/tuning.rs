@@ -66,12 +66,11 @@ pub fn bridged_partials_hz(
         }
     };
     (1..=count)
-        .zip(&windows)
         .zip(&found)
-        .filter_map(|((p, &(centre, width)), modes)| {
+        .filter_map(|(p, modes)| {
             let (weight, sum) = modes
                 .iter()
-                .filter(|(f, share)| (f - centre).abs() <= width && *share >= STRING_SHARE)
+                .filter(|(_, share)| *share >= STRING_SHARE)
                 .fold((0.0, 0.0), |(w, s), (f, share)| (w + share, s + share * f));
             (weight > 0.0).then(|| (p, sum / weight))
         })
@@ -87,6 +86,19 @@ struct RankOne {
     k: f64,
     /// How many of the modes are the string's.
     strings: usize,
+    /// The secular equation's poles: each `d_i` of nonzero `g_i`, rising, with `g_i^2` and `i`.
+    poles: Vec<Pole>,
+    /// Whether no two poles (nearly) coincide, so that the secular equation separates every
+    /// mode ([`RankOne::modes_within`]).
+    separable: bool,
+}
+
+/// A pole of the secular equation: `d_i`, `g_i^2` and the mode `i` it stands for.
+#[derive(Clone, Copy)]
+struct Pole {
+    d: f64,
+    g2: f64,
+    i: usize,
 }
 
 impl RankOne {
@@ -106,11 +118,25 @@ impl RankOne {
             d.extend(b.freq_hz.iter().map(|f| (2.0 * PI * f).powi(2)));
             g.extend(p.shape[0].iter().map(|x| -x));
         }
+        let mut poles: Vec<Pole> = (0..d.len())
+            .filter(|&i| g[i] != 0.0)
+            .map(|i| Pole {
+                d: d[i],
+                g2: g[i].powi(2),
+                i,
+            })
+            .collect();
+        poles.sort_by(|a, b| a.d.total_cmp(&b.d));
+        let separable = poles
+            .windows(2)
+            .all(|w| w[1].d - w[0].d > 1e-12 * w[1].d.abs());
         RankOne {
             d,
             g,
             k: contact_n_m,
             strings: modes,
+            poles,
+            separable,
         }
     }
 
@@ -142,6 +168,9 @@ impl RankOne {
     /// `e_i`. `None` where two `d_i` of nonzero `g_i` (nearly) coincide: the equation does not
     /// separate them.
     fn modes_within(&self, lo_hz: f64, hi_hz: f64) -> Option<Vec<(f64, f64)>> {
+        if !self.separable {
+            return None;
+        }
         let lambda = |hz: f64| (2.0 * PI * hz.max(0.0)).powi(2);
         let (lo, hi) = (lambda(lo_hz), lambda(hi_hz));
         let hz = |l: f64| l.max(0.0).sqrt() / (2.0 * PI);
@@ -150,22 +179,12 @@ impl RankOne {
             .filter(|&i| self.g[i] == 0.0 && (lo..=hi).contains(&self.d[i]))
             .map(|i| (hz(self.d[i]), is_string(i)))
             .collect();
-        let mut poles: Vec<usize> = (0..self.d.len()).filter(|&i| self.g[i] != 0.0).collect();
-        poles.sort_by(|&a, &b| self.d[a].total_cmp(&self.d[b]));
-        if poles
-            .windows(2)
-            .any(|w| self.d[w[1]] - self.d[w[0]] <= 1e-12 * self.d[w[1]].abs())
-        {
-            return None;
-        }
-        let g2: Vec<(f64, f64)> = poles
-            .iter()
-            .map(|&i| (self.d[i], self.g[i].powi(2)))
-            .collect();
-        let reach = self.k * g2.iter().map(|p| p.1).sum::<f64>();
-        let secular = |l: f64| 1.0 + self.k * g2.iter().map(|&(d, g2)| g2 / (d - l)).sum::<f64>();
-        for (j, &(a, _)) in g2.iter().enumerate() {
-            let b = g2.get(j + 1).map_or(a + reach, |p| p.0);
+        let poles = &self.poles;
+        let reach = self.k * poles.iter().map(|p| p.g2).sum::<f64>();
+        let secular = |l: f64| 1.0 + self.k * poles.iter().map(|p| p.g2 / (p.d - l)).sum::<f64>();
+        for (j, pole) in poles.iter().enumerate() {
+            let a = pole.d;
+            let b = poles.get(j + 1).map_or(a + reach, |p| p.d);
             if b < lo || a > hi {
                 continue;
             }
@@ -187,10 +206,10 @@ impl RankOne {
                 continue;
             }
             let (mut string, mut all) = (0.0, 0.0);
-            for (&i, &(d, _)) in poles.iter().zip(&g2) {
-                let v2 = (self.g[i] / (d - l)).powi(2);
+            for p in poles {
+                let v2 = p.g2 / (p.d - l).powi(2);
                 all += v2;
-                string += is_string(i) * v2;
+                string += is_string(p.i) * v2;
             }
             found.push((hz(l), string / all));
         }
