@@ -60,6 +60,21 @@ impl Player {
         self.soft_shift
     }
 
+    /// How far the sustain pedal lifts the dampers of released keys (0 resting, 1 clear).
+    pub fn sustain_lift(&self) -> f64 {
+        self.sustain_lift
+    }
+
+    /// Whether the sostenuto pedal is down.
+    pub fn sostenuto(&self) -> bool {
+        self.sostenuto
+    }
+
+    /// Whether piano key `key` (1–88) is held down.
+    pub fn is_down(&self, key: usize) -> bool {
+        self.key_down.get(key).copied().unwrap_or(false)
+    }
+
     /// Apply one event to the instrument. Events for keys the instrument lacks are ignored.
     /// Never allocates.
     pub fn apply(&mut self, event: Event, instrument: &mut impl VoicePool) {

@@ -19,6 +19,7 @@ use clack_extensions::audio_ports::{
     AudioPortFlags, AudioPortInfo, AudioPortInfoWriter, AudioPortRescanFlags, AudioPortType,
     HostAudioPorts, PluginAudioPorts, PluginAudioPortsImpl,
 };
+use clack_extensions::gui::PluginGui;
 use clack_extensions::latency::{PluginLatency, PluginLatencyImpl};
 use clack_extensions::log::{HostLog, LogSeverity};
 use clack_extensions::note_ports::{
@@ -36,13 +37,16 @@ use clack_extensions::thread_pool::{PluginThreadPool, PluginThreadPoolImpl};
 use clack_plugin::events::spaces::CoreEventSpace;
 use clack_plugin::prelude::*;
 use clack_plugin::stream::{InputStream, OutputStream};
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 use std::ffi::CStr;
 use std::io::{Read, Write as _};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
+use unacorda::audio::activity::Activity;
 use unacorda::audio::host_pool::Rendezvous;
 
+pub mod clap_gui;
+pub mod editor;
 pub mod entry;
 pub mod params;
 pub mod prepare;
@@ -63,8 +67,12 @@ pub struct Unacorda;
 
 /// What the main thread and the audio thread share.
 pub struct Shared {
-    /// The parameters' values (both threads).
-    pub values: Values,
+    /// The parameters' values (both threads, and the editor's).
+    pub values: Arc<Values>,
+    /// What the piano is doing, published by the audio thread for the editor.
+    pub activity: Arc<Activity>,
+    /// The parameters the editor changed, for the audio thread to tell the host.
+    pub edits: Arc<editor::Edits>,
     /// The latency the active processor reports, in host frames (written by the main thread at
     /// activation, read by the host through the main thread).
     pub latency_frames: AtomicU32,
@@ -109,6 +117,8 @@ pub struct MainThread<'a> {
     host: HostMainThreadHandle<'a>,
     /// The output port's channels as the host last read them (0: not yet read).
     announced_channels: Cell<u32>,
+    /// The editor, when the host shows it.
+    gui: RefCell<clap_gui::Gui>,
 }
 
 impl<'a> PluginMainThread<'a, Shared> for MainThread<'a> {
@@ -143,7 +153,8 @@ impl Plugin for Unacorda {
             .register::<PluginLatency>()
             .register::<PluginTail>()
             .register::<PluginThreadPool>()
-            .register::<PluginRender>();
+            .register::<PluginRender>()
+            .register::<PluginGui>();
     }
 }
 
@@ -161,7 +172,9 @@ impl DefaultPluginFactory for Unacorda {
 
     fn new_shared(_host: HostSharedHandle) -> Result<Shared, PluginError> {
         Ok(Shared {
-            values: Values::default(),
+            values: Arc::default(),
+            activity: Arc::default(),
+            edits: Arc::default(),
             latency_frames: AtomicU32::new(0),
             silent_because: Mutex::new(None),
             rebuild: rebuild::Rebuild::default(),
@@ -178,11 +191,21 @@ impl DefaultPluginFactory for Unacorda {
             shared,
             host,
             announced_channels: Cell::new(0),
+            gui: RefCell::default(),
         })
     }
 }
 
 impl MainThread<'_> {
+    /// What the editor shows and changes.
+    fn shown(&self) -> editor::Shown {
+        editor::Shown {
+            values: self.shared.values.clone(),
+            activity: self.shared.activity.clone(),
+            edits: self.shared.edits.clone(),
+        }
+    }
+
     /// The channels of the keyboard chosen: 2 for a stereo pair of listeners, 1 for one (a
     /// keyboard that cannot be read plays silence: 2).
     fn keyboard_channels(&self) -> u32 {
@@ -354,10 +377,11 @@ impl PluginMainThreadParams for MainThread<'_> {
 }
 
 impl PluginAudioProcessorParams for processor::Processor<'_> {
-    fn flush(&mut self, input: &InputEvents, _output: &mut OutputEvents) {
+    fn flush(&mut self, input: &InputEvents, output: &mut OutputEvents) {
         for event in input {
             self.handle(event);
         }
+        self.tell_edits(output);
         self.follow_rebuild();
     }
 }

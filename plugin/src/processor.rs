@@ -3,13 +3,14 @@
 //! built in the background. Never allocates, locks or prints in `process` (the plugin's tests
 //! run it under `assert_no_alloc`).
 
-use crate::params::{REBUILDS, VELOCITY_CURVE};
+use crate::params::{PARAMS, REBUILDS, VELOCITY_CURVE};
 use crate::sound::{Engine, Output, Pedals, SCRATCH_FRAMES};
 use crate::{MainThread, Shared};
 use clack_extensions::tail::TailLength;
 use clack_extensions::thread_pool::HostThreadPool;
+use clack_plugin::events::event_types::ParamValueEvent;
 use clack_plugin::events::spaces::CoreEventSpace;
-use clack_plugin::events::Match;
+use clack_plugin::events::{Match, Pckn};
 use clack_plugin::prelude::*;
 use std::sync::atomic::Ordering;
 use unacorda::audio::host_pool::HostPool;
@@ -36,6 +37,8 @@ pub struct Processor<'a> {
     thread_pool: Option<HostThreadPool>,
     /// The host's MIDI messages to piano events (its CC88 prefixes kept between them).
     midi: Decoder,
+    /// The host's rate (Hz), for the callback's load.
+    rate_hz: f64,
 }
 
 /// A change of keyboard, pool size, integrator, halo or render mode while active
@@ -88,6 +91,7 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             rebuild: Rebuilding::No,
             thread_pool,
             midi: Decoder::default(),
+            rate_hz: config.sample_rate,
         })
     }
 
@@ -104,6 +108,7 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         mut audio: Audio,
         events: Events,
     ) -> Result<ProcessStatus, PluginError> {
+        let started = std::time::Instant::now();
         let frames = audio.frames_count() as usize;
         // Without an output port or with one of 64-bit samples there is nothing to write into
         // (an error here would have clack format a message on the audio thread).
@@ -122,7 +127,15 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
             self.handle(event);
         }
         self.render(&mut out, at..frames);
+        self.tell_edits(events.output);
         self.follow_rebuild();
+        if let Some(engine) = &self.engine {
+            engine.publish(&self.shared.activity);
+        }
+        self.shared.activity.publish_load(
+            started.elapsed().as_secs_f64(),
+            frames as f64 / self.rate_hz,
+        );
         let silent = self.engine.as_ref().is_none_or(|e| e.is_silent());
         // While a piano is built the host keeps calling, so that the restart is asked for when
         // it is ready.
@@ -207,6 +220,18 @@ impl Processor<'_> {
         };
         if let Some(event) = event {
             self.play(event);
+        }
+    }
+
+    /// Tell the host of the parameters the editor changed (as the host's own changes, they are
+    /// already played: a pedal at the next block, a rebuild followed). Never allocates.
+    pub(crate) fn tell_edits(&mut self, output: &mut OutputEvents) {
+        for (i, p) in PARAMS.iter().enumerate() {
+            if self.shared.edits.take(i) {
+                let value = self.shared.values.get(i);
+                let event = ParamValueEvent::new(0, ClapId::new(p.id), Pckn::match_all(), value);
+                let _ = output.try_push(event);
+            }
         }
     }
 

@@ -7,6 +7,7 @@
 use crate::params::{Values, GAIN_DB, SOFT, SOSTENUTO, SUSTAIN};
 use crate::prepare::{Pianos, Prepared};
 use std::sync::Mutex;
+use unacorda::audio::activity::Activity;
 use unacorda::audio::aligned::LATENCY_FRAMES;
 use unacorda::audio::synth::EVENT_QUEUE;
 use unacorda::audio::{Aligned, Synth};
@@ -61,6 +62,10 @@ impl Engine {
     }
     pub fn silence(&mut self) {
         on_engine!(self, e => e.silence())
+    }
+    /// Publish what the piano is doing for the editor (audio thread).
+    pub fn publish(&self, activity: &Activity) {
+        on_engine!(self, e => activity.publish(e.synth().piano()))
     }
     /// How long the slowest mode takes to fall [`TAIL_FALL_DB`] (s): the exact engine's modes
     /// say; RK4 has none to ask, and its tail is reported infinite (the plugin sleeps when

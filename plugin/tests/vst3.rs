@@ -5,15 +5,18 @@
 //! block that finds RK4 chosen waits for the piano rebuilt on it.
 
 mod render;
+mod screen;
 mod vst3_host;
 
 use assert_no_alloc::{assert_no_alloc, violation_count, AllocDisabler};
 use render::offline;
 use std::ffi::c_char;
+use std::time::{Duration, Instant};
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::Rk4Pool;
 use unacorda::midi::file::TimedEvent;
 use unacorda::midi::{Event as PianoEvent, Pedal};
+use vst3::Steinberg::Linux::ITimerHandlerTrait;
 use vst3::Steinberg::Vst::*;
 use vst3::Steinberg::*;
 use vst3::{ComPtr, ComWrapper, Interface};
@@ -448,5 +451,241 @@ fn an_offline_block_plays_the_rk4_integrator_chosen() {
     assert!(reported as usize > latency, "RK4's decimation filter");
     assert_eq!(tail, kInfiniteTail);
     equals_offline("RK4", &heard, latency, &render);
+    stop(&component, &processor);
+}
+
+/// The host's side of an editor: its frame and run loop (timers fired by the test), and a
+/// component handler recording the edits it hears of.
+#[derive(Default)]
+struct HostUi {
+    timers: std::cell::RefCell<Vec<ComPtr<vst3::Steinberg::Linux::ITimerHandler>>>,
+    edits: std::cell::RefCell<Vec<(u32, f64)>>,
+}
+
+impl vst3::Class for HostUi {
+    type Interfaces = (
+        IPlugFrame,
+        vst3::Steinberg::Linux::IRunLoop,
+        IComponentHandler,
+    );
+}
+
+impl IPlugFrameTrait for HostUi {
+    unsafe fn resizeView(&self, _view: *mut IPlugView, _size: *mut ViewRect) -> tresult {
+        kResultOk
+    }
+}
+
+impl vst3::Steinberg::Linux::IRunLoopTrait for HostUi {
+    unsafe fn registerEventHandler(
+        &self,
+        _handler: *mut vst3::Steinberg::Linux::IEventHandler,
+        _fd: vst3::Steinberg::Linux::FileDescriptor,
+    ) -> tresult {
+        kResultOk
+    }
+    unsafe fn unregisterEventHandler(
+        &self,
+        _handler: *mut vst3::Steinberg::Linux::IEventHandler,
+    ) -> tresult {
+        kResultOk
+    }
+    unsafe fn registerTimer(
+        &self,
+        handler: *mut vst3::Steinberg::Linux::ITimerHandler,
+        _ms: vst3::Steinberg::Linux::TimerInterval,
+    ) -> tresult {
+        let handler = unsafe { vst3::ComRef::from_raw(handler) }
+            .unwrap()
+            .to_com_ptr();
+        self.timers.borrow_mut().push(handler);
+        kResultOk
+    }
+    unsafe fn unregisterTimer(
+        &self,
+        handler: *mut vst3::Steinberg::Linux::ITimerHandler,
+    ) -> tresult {
+        self.timers.borrow_mut().retain(|t| t.as_ptr() != handler);
+        kResultOk
+    }
+}
+
+impl IComponentHandlerTrait for HostUi {
+    unsafe fn beginEdit(&self, _id: ParamID) -> tresult {
+        kResultOk
+    }
+    unsafe fn performEdit(&self, id: ParamID, value: ParamValue) -> tresult {
+        self.edits.borrow_mut().push((id, value));
+        kResultOk
+    }
+    unsafe fn endEdit(&self, _id: ParamID) -> tresult {
+        kResultOk
+    }
+    unsafe fn restartComponent(&self, _flags: int32) -> tresult {
+        kResultOk
+    }
+}
+
+/// An X11 window of the host's at the screen's top left, `w` × `h`, and a click at (x, y)
+/// (XTest, as a person's mouse).
+struct X11 {
+    xlib: x11_dl::xlib::Xlib,
+    xtest: x11_dl::xtest::Xf86vmode,
+    display: *mut x11_dl::xlib::Display,
+}
+
+impl X11 {
+    fn open() -> X11 {
+        let xlib = x11_dl::xlib::Xlib::open().expect("libX11");
+        let xtest = x11_dl::xtest::Xf86vmode::open().expect("libXtst");
+        let display = unsafe { (xlib.XOpenDisplay)(std::ptr::null()) };
+        assert!(!display.is_null(), "no X display");
+        X11 {
+            xlib,
+            xtest,
+            display,
+        }
+    }
+
+    /// A window at the screen's top left, shown.
+    fn window(&self, w: u32, h: u32) -> u64 {
+        unsafe {
+            let root = (self.xlib.XDefaultRootWindow)(self.display);
+            let window = (self.xlib.XCreateSimpleWindow)(self.display, root, 0, 0, w, h, 0, 0, 0);
+            (self.xlib.XMapWindow)(self.display, window);
+            (self.xlib.XSync)(self.display, 0);
+            window
+        }
+    }
+
+    /// A left click at (x, y) on the screen.
+    fn click(&self, x: i32, y: i32) {
+        unsafe {
+            (self.xtest.XTestFakeMotionEvent)(self.display, -1, x, y, 0);
+            (self.xlib.XSync)(self.display, 0);
+            std::thread::sleep(Duration::from_millis(100));
+            (self.xtest.XTestFakeButtonEvent)(self.display, 1, 1, 0);
+            (self.xlib.XSync)(self.display, 0);
+            std::thread::sleep(Duration::from_millis(50));
+            (self.xtest.XTestFakeButtonEvent)(self.display, 1, 0, 0);
+            (self.xlib.XSync)(self.display, 0);
+        }
+    }
+}
+
+impl Drop for X11 {
+    fn drop(&mut self) {
+        unsafe { (self.xlib.XCloseDisplay)(self.display) };
+    }
+}
+
+/// The editor embedded in a host's X11 window as a VST3 host embeds it, on Xvfb, while the host
+/// plays a chord held and a key ringing under the pedal: the screen shows them; a click on the
+/// sostenuto pedal's box (XTest, as a mouse) reaches the host through its component handler on
+/// its run loop's timer; removed, the window is gone.
+#[test]
+fn the_editor_embeds_in_the_hosts_window_and_tells_it_of_a_click() {
+    let _serial = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let x = screen::Xvfb::start(80);
+    // SAFETY: set before the plugin's window threads start.
+    std::env::set_var("DISPLAY", &x.1);
+    let component = instance();
+    let controller = component.cast::<IEditController>().unwrap();
+    let ui = ComWrapper::new(HostUi::default());
+    let handler = ui.to_com_ptr::<IComponentHandler>().unwrap();
+    unsafe { controller.setComponentHandler(handler.as_ptr()) };
+    let processor = start(&component, ProcessModes_::kRealtime);
+    let ms = |t: f64| (t * RATE_HZ / 1000.0).round() as usize;
+    let script = [
+        (ms(1.0), Play::Param(SUSTAIN, 1.0)),
+        (ms(2.0), Play::On(21, 0.7)),
+        (ms(80.0), Play::Off(21, 0.5)),
+        (ms(100.0), Play::On(60, 0.7)),
+        (ms(100.0), Play::On(64, 0.7)),
+        (ms(100.0), Play::On(67, 0.7)),
+    ];
+    let (_, mut allocations) = run(
+        &processor,
+        ms(200.0),
+        &[256],
+        &script,
+        ProcessModes_::kRealtime,
+    );
+
+    let view = unsafe { controller.createView(c"editor".as_ptr()) };
+    let view = unsafe { ComPtr::from_raw(view) }.expect("an editor view");
+    let scale = view.cast::<IPlugViewContentScaleSupport>().unwrap();
+    assert_eq!(unsafe { scale.setContentScaleFactor(1.0) }, kResultOk);
+    let frame = ui.to_com_ptr::<IPlugFrame>().unwrap();
+    assert_eq!(unsafe { view.setFrame(frame.as_ptr()) }, kResultOk);
+    let x11 = X11::open();
+    let mut rect: ViewRect = unsafe { std::mem::zeroed() };
+    assert_eq!(unsafe { view.getSize(&mut rect) }, kResultOk);
+    let (w, h) = (
+        (rect.right - rect.left) as u32,
+        (rect.bottom - rect.top) as u32,
+    );
+    let parent = x11.window(w, h);
+    let x11_type = c"X11EmbedWindowID";
+    assert_eq!(
+        unsafe { view.isPlatformTypeSupported(x11_type.as_ptr()) },
+        kResultTrue
+    );
+    assert_eq!(
+        unsafe { view.attached(parent as *mut std::ffi::c_void, x11_type.as_ptr()) },
+        kResultOk
+    );
+    assert_eq!(
+        ui.timers.borrow().len(),
+        1,
+        "a timer on the host's run loop"
+    );
+
+    // Drawn: keys held and ringing, while the host plays.
+    let key = (w as f64 / 52.0) * (w as f64 / 7.0).min(140.0) * 0.5;
+    let started = Instant::now();
+    let (held, ringing, panel) = loop {
+        let playing = Instant::now();
+        while playing.elapsed() < Duration::from_millis(300) {
+            allocations += run(&processor, 256, &[256], &[], ProcessModes_::kRealtime).1;
+        }
+        let shot = x.screenshot();
+        let (held, _) = screen::find(&shot, screen::HELD);
+        let (ringing, _) = screen::find(&shot, screen::RINGING);
+        let (panel, _) = screen::find(&shot, screen::PANEL);
+        if held as f64 > 3.0 * key || started.elapsed() > Duration::from_secs(30) {
+            break (held, ringing, panel);
+        }
+    };
+    println!(
+        "VST3 editor {w} x {h}, drawn after {:.1} s: held keys {held} pixels, ringing {ringing}, panel {panel}",
+        started.elapsed().as_secs_f64()
+    );
+    assert!(held as f64 > 3.0 * key && ringing as f64 > key);
+
+    // A click on the sostenuto pedal's box, told to the host at its run loop's next timer.
+    x11.click(120, 103);
+    let started = Instant::now();
+    while ui.edits.borrow().is_empty() && started.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(30));
+        let timers = ui.timers.borrow().clone();
+        for t in &timers {
+            unsafe { t.onTimer() };
+        }
+    }
+    let edits = ui.edits.borrow().clone();
+    println!("the host heard {edits:?} after the click");
+    assert_eq!(edits, [(2, 1.0)], "the sostenuto pedal down");
+    assert_eq!(unsafe { controller.getParamNormalized(2) }, 1.0);
+
+    assert_eq!(unsafe { view.removed() }, kResultOk);
+    assert!(ui.timers.borrow().is_empty(), "the timer unregistered");
+    std::thread::sleep(Duration::from_millis(300));
+    let (after, _) = screen::find(&x.screenshot(), screen::PANEL);
+    println!("removed: {after} panel pixels left");
+    assert!(after < panel / 10, "the window goes");
+    println!("process() allocations while the editor was open: {allocations}");
+    assert_eq!(allocations, 0);
+    drop(view);
     stop(&component, &processor);
 }

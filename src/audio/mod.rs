@@ -3,8 +3,9 @@
 //! host's blocks of any length realigned to the synth's grid ([`aligned`]), the audio device
 //! (`device`, feature `device`), the helper thread that lends the callback a second core
 //! ([`helper`]) or a host's thread pool that does ([`host_pool`]), real-time priority
-//! ([`priority`]) and WAV files.
+//! ([`priority`]), WAV files, and what the piano is doing for a front end to show ([`activity`]).
 
+pub mod activity;
 pub mod aligned;
 pub mod backlog;
 pub mod clock;

@@ -5,22 +5,31 @@
 //! parameters, and activation. The audio thread's side is [`super::audio`].
 
 use super::audio::{Audio, Builder, Slot};
+use super::view::View;
 use super::{copy_wide, read_wide};
+use crate::editor::Edits;
 use crate::params::{self, Values, PARAMS, REBUILDS, SOFT, SOSTENUTO, SUSTAIN};
 use crate::state;
 use std::ffi::c_void;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
+use unacorda::audio::activity::Activity;
 use unacorda::engine::Integrator;
 use vst3::Steinberg::Vst::*;
 use vst3::Steinberg::*;
-use vst3::{Class, ComRef};
+use vst3::{Class, ComPtr, ComRef, ComWrapper};
 
 /// What the host's threads share: the main thread's calls, the audio thread's and the
 /// background builder's ([`Builder`]).
 pub struct Inner {
-    /// The parameters' values (every thread).
-    pub values: Values,
+    /// The parameters' values (every thread, and the editor's).
+    pub values: Arc<Values>,
+    /// What the piano is doing, published by the audio thread for the editor.
+    pub activity: Arc<Activity>,
+    /// The parameters the editor changed, for the host to hear of ([`super::view`]).
+    pub edits: Arc<Edits>,
+    /// The host's component handler, told of those changes (the host's UI thread).
+    handler: Mutex<Option<ComPtr<IComponentHandler>>>,
     /// The host renders offline: from `setupProcessing` (main thread) and each block's
     /// `processMode` (audio thread); read by both and the builder.
     pub offline: AtomicBool,
@@ -58,6 +67,11 @@ impl Inner {
     /// The values whose change rebuilds the piano, the integrator as played ([`Values::played`]).
     pub fn played(&self) -> [f64; REBUILDS.len()] {
         self.values.played(self.offline.load(Ordering::Relaxed))
+    }
+
+    /// The host's component handler, if it gave one.
+    pub fn handler(&self) -> Option<ComPtr<IComponentHandler>> {
+        lock(&self.handler).clone()
     }
 
     /// The host's rate (Hz).
@@ -100,7 +114,10 @@ impl Component {
     pub fn new() -> Component {
         Component {
             inner: Arc::new(Inner {
-                values: Values::default(),
+                values: Arc::default(),
+                activity: Arc::default(),
+                edits: Arc::default(),
+                handler: Mutex::new(None),
                 offline: AtomicBool::new(false),
                 rate_bits: AtomicU64::new(48_000f64.to_bits()),
                 out_channels: AtomicU32::new(2),
@@ -196,6 +213,7 @@ impl IPluginBaseTrait for Component {
 
     unsafe fn terminate(&self) -> tresult {
         self.deactivate();
+        lock(&self.inner.handler).take();
         kResultOk
     }
 }
@@ -553,13 +571,20 @@ impl IEditControllerTrait for Component {
         }
     }
 
-    unsafe fn setComponentHandler(&self, _handler: *mut IComponentHandler) -> tresult {
-        // Nothing is changed from the plugin's side: the host's automation is all there is.
+    unsafe fn setComponentHandler(&self, handler: *mut IComponentHandler) -> tresult {
+        // SAFETY: the host's handler, or null; kept with a reference of our own.
+        *lock(&self.inner.handler) = unsafe { ComRef::from_raw(handler) }.map(|h| h.to_com_ptr());
         kResultOk
     }
 
-    unsafe fn createView(&self, _name: FIDString) -> *mut IPlugView {
-        std::ptr::null_mut()
+    unsafe fn createView(&self, name: FIDString) -> *mut IPlugView {
+        // SAFETY: the host's zero-ended view name, or null.
+        if name.is_null() || unsafe { std::ffi::CStr::from_ptr(name) }.to_bytes() != b"editor" {
+            return std::ptr::null_mut();
+        }
+        ComWrapper::new(View::new(self.inner.clone()))
+            .to_com_ptr::<IPlugView>()
+            .map_or(std::ptr::null_mut(), |v| v.into_raw())
     }
 }
 

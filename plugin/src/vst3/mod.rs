@@ -7,12 +7,14 @@
 //!   pedals, activation;
 //! - [`audio`]: the audio thread's side: events and parameter changes at their frame, the render
 //!   mode read every block, a piano rebuilt in the background swapped in at a block's start;
+//! - [`view`]: the editor embedded in the host's window;
 //! - [`factory`]: the factory and the library's exports (`GetPluginFactory`, `ModuleEntry`,
 //!   `ModuleExit`).
 
 pub mod audio;
 pub mod component;
 pub mod factory;
+pub mod view;
 
 use vst3::Steinberg::char16;
 

@@ -408,6 +408,30 @@ pub fn render_offline(instance: &mut Instance, offline: bool) {
     render.set(&handle, mode).unwrap();
 }
 
+/// The plugin's editor as a host drives it: `Some(scale)` creates a floating window at that
+/// scale and shows it (returning its size in pixels), `None` destroys it.
+pub fn editor(instance: &mut Instance, open: Option<f64>) -> Option<(u32, u32)> {
+    use clack_extensions::gui::{GuiApiType, GuiConfiguration, PluginGui};
+    let handle = instance.instance.plugin_handle();
+    let gui = handle
+        .get_extension::<PluginGui>()
+        .expect("the gui extension");
+    let Some(scale) = open else {
+        gui.destroy(&handle);
+        return None;
+    };
+    let floating = GuiConfiguration {
+        api_type: GuiApiType::X11,
+        is_floating: true,
+    };
+    assert!(gui.is_api_supported(&handle, floating));
+    gui.create(&handle, floating).unwrap();
+    gui.set_scale(&handle, scale).unwrap();
+    let size = gui.get_size(&handle).unwrap();
+    gui.show(&handle).unwrap();
+    Some((size.width, size.height))
+}
+
 /// The latency the plugin reports.
 pub fn latency(instance: &mut Instance) -> u32 {
     let handle = instance.instance.plugin_handle();
