@@ -2,8 +2,10 @@
 //! the host (floating) on an X server with no screen (Xvfb), while the host plays a chord held
 //! down and a key let go under the sustain pedal; a screenshot of the screen (`xwd`) read back
 //! and checked: the window's size at the host's scale, the held keys drawn blue and the key
-//! ringing under the pedal amber; then closed and opened again at another scale, and closed;
-//! `process` never allocating meanwhile. Needs Xvfb, xwd and xwdtopnm (scripts/deps.sh installs
+//! ringing under the pedal amber; a click on the sostenuto pedal's box (XTest, as a mouse) told to
+//! the host as the plugin's parameter event; then closed and opened again at another scale, and closed;
+//! opened and closed a dozen times more without the memory growing; `process` never allocating
+//! meanwhile. Needs Xvfb, xwd and xwdtopnm (scripts/deps.sh installs
 //! them).
 
 mod host;
@@ -20,6 +22,26 @@ static ALLOCATOR: AllocDisabler = AllocDisabler;
 
 const RATE_HZ: f64 = 48_000.0;
 const SUSTAIN: u32 = 1;
+const SOSTENUTO: u32 = 2;
+/// glibc's allocation statistics (`mallinfo2`, glibc 2.33 on).
+#[repr(C)]
+struct Mallinfo2 {
+    arena: usize,
+    ordblks: usize,
+    smblks: usize,
+    hblks: usize,
+    hblkhd: usize,
+    usmblks: usize,
+    fsmblks: usize,
+    uordblks: usize,
+    fordblks: usize,
+    keepcost: usize,
+}
+
+extern "C" {
+    fn mallinfo2() -> Mallinfo2;
+}
+
 fn checked(f: &mut dyn FnMut()) -> u32 {
     let before = violation_count();
     assert_no_alloc(f);
@@ -106,12 +128,54 @@ fn the_editor_draws_the_keys_held_and_ringing_and_opens_again() {
             (ringing as f64) < 2.0 * key,
             "one key rings: {ringing} pixels"
         );
+        if round == 0 {
+            // A click on the sostenuto pedal's box, as a mouse: the plugin tells the host.
+            screen::X11::open().click(120, 103);
+            let clicked = Instant::now();
+            let mut told = Vec::new();
+            while told.is_empty() && clicked.elapsed() < Duration::from_secs(10) {
+                let heard = active.run(256, &[256], &[], checked);
+                allocations += heard.allocations;
+                told = heard.params;
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            println!("after a click on the sostenuto box the host heard {told:?}");
+            assert_eq!(told, [(SOSTENUTO, 1.0)], "the sostenuto pedal down");
+        }
         host::editor(&mut plugin, None);
         std::thread::sleep(Duration::from_millis(300));
         let (after, _) = find(&x.screenshot(), PANEL);
         println!("closed: {after} panel pixels left");
         assert!(after < panel / 10, "the window closes");
     }
+    // Opened and closed again and again: the memory in use settles (a window's worth kept would
+    // grow it by megabytes each time). Counted as the allocator's bytes in use over every arena
+    // (glibc's `mallinfo2`), not the resident size: each window thread's freed memory stays in
+    // its own arena, so the resident size grows until the arenas are all made, leak or not.
+    let resident_mb = || {
+        // SAFETY: glibc's statistics, read.
+        let m = unsafe { mallinfo2() };
+        (m.uordblks + m.hblkhd) as f64 / 1e6
+    };
+    let mut resident = Vec::new();
+    for _ in 0..12 {
+        host::editor(&mut plugin, Some(1.0));
+        let shown = Instant::now();
+        while shown.elapsed() < Duration::from_millis(250) {
+            allocations += active.run(256, &[256], &[], checked).allocations;
+        }
+        host::editor(&mut plugin, None);
+        resident.push(resident_mb());
+    }
+    // The floor of the last four against that of the first four (a window's thread may still be
+    // finishing as the count is read: a leak raises the floor).
+    let floor = |r: &[f64]| r.iter().copied().fold(f64::MAX, f64::min);
+    let growth = (floor(&resident[8..]) - floor(&resident[..4])) / 8.0;
+    println!(
+        "in use after each of 12 openings: {:?} MB; the floor rising {growth:.2} MB an opening",
+        resident.iter().map(|r| r.round()).collect::<Vec<_>>()
+    );
+    assert!(growth < 1.0, "the editor leaks {growth:.2} MB an opening");
     println!("process() allocations while the editor was open: {allocations}");
     assert_eq!(allocations, 0);
     host::deactivate(&mut plugin, active);

@@ -526,59 +526,6 @@ impl IComponentHandlerTrait for HostUi {
     }
 }
 
-/// An X11 window of the host's at the screen's top left, `w` × `h`, and a click at (x, y)
-/// (XTest, as a person's mouse).
-struct X11 {
-    xlib: x11_dl::xlib::Xlib,
-    xtest: x11_dl::xtest::Xf86vmode,
-    display: *mut x11_dl::xlib::Display,
-}
-
-impl X11 {
-    fn open() -> X11 {
-        let xlib = x11_dl::xlib::Xlib::open().expect("libX11");
-        let xtest = x11_dl::xtest::Xf86vmode::open().expect("libXtst");
-        let display = unsafe { (xlib.XOpenDisplay)(std::ptr::null()) };
-        assert!(!display.is_null(), "no X display");
-        X11 {
-            xlib,
-            xtest,
-            display,
-        }
-    }
-
-    /// A window at the screen's top left, shown.
-    fn window(&self, w: u32, h: u32) -> u64 {
-        unsafe {
-            let root = (self.xlib.XDefaultRootWindow)(self.display);
-            let window = (self.xlib.XCreateSimpleWindow)(self.display, root, 0, 0, w, h, 0, 0, 0);
-            (self.xlib.XMapWindow)(self.display, window);
-            (self.xlib.XSync)(self.display, 0);
-            window
-        }
-    }
-
-    /// A left click at (x, y) on the screen.
-    fn click(&self, x: i32, y: i32) {
-        unsafe {
-            (self.xtest.XTestFakeMotionEvent)(self.display, -1, x, y, 0);
-            (self.xlib.XSync)(self.display, 0);
-            std::thread::sleep(Duration::from_millis(100));
-            (self.xtest.XTestFakeButtonEvent)(self.display, 1, 1, 0);
-            (self.xlib.XSync)(self.display, 0);
-            std::thread::sleep(Duration::from_millis(50));
-            (self.xtest.XTestFakeButtonEvent)(self.display, 1, 0, 0);
-            (self.xlib.XSync)(self.display, 0);
-        }
-    }
-}
-
-impl Drop for X11 {
-    fn drop(&mut self) {
-        unsafe { (self.xlib.XCloseDisplay)(self.display) };
-    }
-}
-
 /// The editor embedded in a host's X11 window as a VST3 host embeds it, on Xvfb, while the host
 /// plays a chord held and a key ringing under the pedal: the screen shows them; a click on the
 /// sostenuto pedal's box (XTest, as a mouse) reaches the host through its component handler on
@@ -618,7 +565,7 @@ fn the_editor_embeds_in_the_hosts_window_and_tells_it_of_a_click() {
     assert_eq!(unsafe { scale.setContentScaleFactor(1.0) }, kResultOk);
     let frame = ui.to_com_ptr::<IPlugFrame>().unwrap();
     assert_eq!(unsafe { view.setFrame(frame.as_ptr()) }, kResultOk);
-    let x11 = X11::open();
+    let x11 = screen::X11::open();
     let mut rect: ViewRect = unsafe { std::mem::zeroed() };
     assert_eq!(unsafe { view.getSize(&mut rect) }, kResultOk);
     let (w, h) = (

@@ -18,6 +18,7 @@ use clack_extensions::thread_pool::{HostThreadPool, HostThreadPoolImpl, PluginTh
 use clack_host::events::event_types::{
     MidiEvent, NoteChokeEvent, NoteOffEvent, NoteOnEvent, ParamValueEvent, TransportEvent,
 };
+use clack_host::events::spaces::CoreEventSpace;
 use clack_host::events::{Match, Pckn};
 use clack_host::factory::plugin::PluginFactory;
 use clack_host::prelude::*;
@@ -454,6 +455,8 @@ pub struct Heard {
     pub sleeps: usize,
     /// Allocations counted inside `process` (when the caller's allocator counts them).
     pub allocations: u32,
+    /// The parameter changes the plugin told the host of (id, value).
+    pub params: Vec<(u32, f64)>,
 }
 
 /// For [`Active::run`]: run `process` as it is, counting nothing.
@@ -527,6 +530,7 @@ impl Active {
             right: vec![0.0; frames],
             sleeps: 0,
             allocations: 0,
+            params: Vec::new(),
         };
         let mut events = EventBuffer::with_capacity(1024);
         let mut out_events = EventBuffer::with_capacity(1024);
@@ -565,6 +569,14 @@ impl Active {
             if let Some(Ok(ProcessStatus::Sleep)) = status {
                 heard.sleeps += 1;
             }
+            for event in out_events.iter() {
+                if let Some(CoreEventSpace::ParamValue(e)) = event.as_core_event() {
+                    heard
+                        .params
+                        .push((e.param_id().map_or(0, |id| id.get()), e.value()));
+                }
+            }
+            out_events.clear();
             status.unwrap().unwrap();
             self.frame += n as u64;
             at += n;

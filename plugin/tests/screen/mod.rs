@@ -1,5 +1,6 @@
 //! A screen for the editors' tests: an X server with no screen (Xvfb) on a display of its own,
-//! read back with `xwd` and `xwdtopnm`, and the pixels of a colour found on it.
+//! read back with `xwd` and `xwdtopnm`, the pixels of a colour found on it; a window of a host's
+//! and a mouse click (Xlib, XTest).
 
 #![allow(dead_code)]
 
@@ -111,4 +112,57 @@ pub fn find(shot: &(usize, usize, Vec<u8>), colour: [u8; 3]) -> (usize, [usize; 
         }
     }
     (count, bound)
+}
+
+/// An X11 window of the host's at the screen's top left, `w` × `h`, and a click at (x, y)
+/// (XTest, as a person's mouse).
+pub struct X11 {
+    xlib: x11_dl::xlib::Xlib,
+    xtest: x11_dl::xtest::Xf86vmode,
+    display: *mut x11_dl::xlib::Display,
+}
+
+impl X11 {
+    pub fn open() -> X11 {
+        let xlib = x11_dl::xlib::Xlib::open().expect("libX11");
+        let xtest = x11_dl::xtest::Xf86vmode::open().expect("libXtst");
+        let display = unsafe { (xlib.XOpenDisplay)(std::ptr::null()) };
+        assert!(!display.is_null(), "no X display");
+        X11 {
+            xlib,
+            xtest,
+            display,
+        }
+    }
+
+    /// A window at the screen's top left, shown.
+    pub fn window(&self, w: u32, h: u32) -> u64 {
+        unsafe {
+            let root = (self.xlib.XDefaultRootWindow)(self.display);
+            let window = (self.xlib.XCreateSimpleWindow)(self.display, root, 0, 0, w, h, 0, 0, 0);
+            (self.xlib.XMapWindow)(self.display, window);
+            (self.xlib.XSync)(self.display, 0);
+            window
+        }
+    }
+
+    /// A left click at (x, y) on the screen.
+    pub fn click(&self, x: i32, y: i32) {
+        unsafe {
+            (self.xtest.XTestFakeMotionEvent)(self.display, -1, x, y, 0);
+            (self.xlib.XSync)(self.display, 0);
+            std::thread::sleep(Duration::from_millis(100));
+            (self.xtest.XTestFakeButtonEvent)(self.display, 1, 1, 0);
+            (self.xlib.XSync)(self.display, 0);
+            std::thread::sleep(Duration::from_millis(50));
+            (self.xtest.XTestFakeButtonEvent)(self.display, 1, 0, 0);
+            (self.xlib.XSync)(self.display, 0);
+        }
+    }
+}
+
+impl Drop for X11 {
+    fn drop(&mut self) {
+        unsafe { (self.xlib.XCloseDisplay)(self.display) };
+    }
 }
