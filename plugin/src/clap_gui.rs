@@ -25,11 +25,8 @@ pub struct Gui {
 
 impl Gui {
     fn physical(&self) -> GuiSize {
-        let scale = self.scale.max(1.0);
-        GuiSize {
-            width: (self.size.0 * scale).round() as u32,
-            height: (self.size.1 * scale).round() as u32,
-        }
+        let (width, height) = editor::physical(self.size, self.scale);
+        GuiSize { width, height }
     }
 
     fn open(
@@ -46,9 +43,6 @@ impl Gui {
         Ok(())
     }
 }
-
-/// The editor's smallest size (logical pixels).
-const MIN: (f64, f64) = (editor::WIDTH * 0.6, editor::HEIGHT * 0.6);
 
 impl PluginGuiImpl for MainThread<'_> {
     fn is_api_supported(&self, configuration: GuiConfiguration) -> bool {
@@ -107,20 +101,16 @@ impl PluginGuiImpl for MainThread<'_> {
     }
 
     fn adjust_size(&self, size: GuiSize) -> Option<GuiSize> {
-        let scale = self.gui.borrow().scale.max(1.0);
+        let (width, height) = editor::smallest(self.gui.borrow().scale);
         Some(GuiSize {
-            width: size.width.max((MIN.0 * scale).ceil() as u32),
-            height: size.height.max((MIN.1 * scale).ceil() as u32),
+            width: size.width.max(width),
+            height: size.height.max(height),
         })
     }
 
     fn set_size(&self, size: GuiSize) -> Result<(), PluginError> {
         let mut gui = self.gui.borrow_mut();
-        let scale = gui.scale.max(1.0);
-        gui.size = (
-            (f64::from(size.width) / scale).max(MIN.0),
-            (f64::from(size.height) / scale).max(MIN.1),
-        );
+        gui.size = editor::logical(size.width, size.height, gui.scale);
         match &gui.window {
             Some(w) => w
                 .resize(gui.size.0, gui.size.1)
@@ -145,10 +135,7 @@ impl PluginGuiImpl for MainThread<'_> {
     fn show(&self) -> Result<(), PluginError> {
         let mut gui = self.gui.borrow_mut();
         match (&gui.window, gui.created) {
-            (Some(w), _) => {
-                w.show();
-                Ok(())
-            }
+            (Some(w), _) => w.show().map_err(|e| PluginError::Error(e.into())),
             // A floating editor opens its own window when first shown.
             (None, Some(true)) => gui.open(self, None),
             (None, _) => Err(PluginError::Message(
@@ -158,9 +145,9 @@ impl PluginGuiImpl for MainThread<'_> {
     }
 
     fn hide(&self) -> Result<(), PluginError> {
-        if let Some(w) = &self.gui.borrow().window {
-            w.hide();
+        match &self.gui.borrow().window {
+            Some(w) => w.hide().map_err(|e| PluginError::Error(e.into())),
+            None => Ok(()),
         }
-        Ok(())
     }
 }

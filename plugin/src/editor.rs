@@ -18,11 +18,36 @@ use raw_window_handle::{
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
-use unacorda::audio::activity::{Activity, Snapshot, KEYS};
+use unacorda::audio::activity::{Activity, Snapshot, Watch};
+use unacorda::config::scaling::KEYS;
 
-/// The window's size in logical pixels (the host's scale factor multiplies it).
+/// The window's size in logical pixels (the host's scale factor multiplies it), and its
+/// smallest.
 pub const WIDTH: f64 = 780.0;
 pub const HEIGHT: f64 = 330.0;
+const MIN: (f64, f64) = (WIDTH * 0.6, HEIGHT * 0.6);
+
+/// A size in logical pixels as the host's physical pixels at `scale` (hosts on X11 count
+/// physical ones).
+pub fn physical(size: (f64, f64), scale: f64) -> (u32, u32) {
+    let s = scale.max(1.0);
+    ((size.0 * s).round() as u32, (size.1 * s).round() as u32)
+}
+
+/// A host's physical size at `scale` as logical pixels, no smaller than the window's smallest.
+pub fn logical(width: u32, height: u32, scale: f64) -> (f64, f64) {
+    let s = scale.max(1.0);
+    (
+        (f64::from(width) / s).max(MIN.0),
+        (f64::from(height) / s).max(MIN.1),
+    )
+}
+
+/// The smallest size at `scale` (physical pixels), rounded up.
+pub fn smallest(scale: f64) -> (u32, u32) {
+    let s = scale.max(1.0);
+    ((MIN.0 * s).ceil() as u32, (MIN.1 * s).ceil() as u32)
+}
 
 /// How often the window redraws to follow the piano.
 const REDRAW: Duration = Duration::from_millis(33);
@@ -64,8 +89,13 @@ impl HasWindowHandle for X11Parent {
     }
 }
 
-/// An open editor window; closed when dropped (its thread joined by baseview).
-pub struct Window(egui_baseview::baseview::Window);
+/// An open editor window; closed when dropped (its thread joined by baseview). While it is open
+/// the audio thread publishes what the piano does.
+pub struct Window {
+    window: egui_baseview::baseview::Window,
+    /// Held for the window's life, dropped with it.
+    _watch: Watch,
+}
 
 impl Window {
     /// Open the editor in `parent` (none: a floating window of its own) at `scale`.
@@ -78,12 +108,13 @@ impl Window {
             })
             .with_resizable(true)
             .with_min_size(Some(LogicalSize {
-                width: WIDTH * 0.6,
-                height: HEIGHT * 0.6,
+                width: MIN.0,
+                height: MIN.1,
             }))
             .with_parent(parent)
             .with_fallback_scale_factor(scale)
             .with_repaint_poll_interval(REDRAW);
+        let watch = Activity::watch(&shown.activity);
         let window = EguiWindow::create(
             settings,
             Editor {
@@ -96,22 +127,25 @@ impl Window {
         window
             .show()
             .map_err(|e| format!("unacorda: the editor's window: {e}"))?;
-        Ok(Window(window))
+        Ok(Window {
+            window,
+            _watch: watch,
+        })
     }
 
     /// Resize it (logical pixels).
     pub fn resize(&self, width: f64, height: f64) -> Result<(), String> {
-        self.0
+        self.window
             .resize(LogicalSize { width, height })
             .map_err(|e| e.to_string())
     }
 
-    pub fn show(&self) -> bool {
-        self.0.show().is_ok()
+    pub fn show(&self) -> Result<(), String> {
+        self.window.show().map_err(|e| e.to_string())
     }
 
-    pub fn hide(&self) -> bool {
-        self.0.hide().is_ok()
+    pub fn hide(&self) -> Result<(), String> {
+        self.window.hide().map_err(|e| e.to_string())
     }
 }
 
@@ -124,7 +158,7 @@ struct Editor {
 }
 
 impl egui_baseview::App for Editor {
-    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut egui_baseview::Frame) {
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut egui_baseview::Frame) {
         self.last = self.shown.activity.take();
         // The peak falls slowly, so that a pianist sees the worst block of the last second.
         self.peak = (self.peak * 0.97).max(self.last.peak_load);
@@ -137,7 +171,6 @@ impl egui_baseview::App for Editor {
             ui.add_space(6.0);
             self.meters(ui);
         });
-        let _ = frame;
         ui.ctx().request_repaint_after(REDRAW);
     }
 }

@@ -108,7 +108,12 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         mut audio: Audio,
         events: Events,
     ) -> Result<ProcessStatus, PluginError> {
-        let started = std::time::Instant::now();
+        // The editor's figures are worked out only while an editor shows them.
+        let started = self
+            .shared
+            .activity
+            .is_watched()
+            .then(std::time::Instant::now);
         let frames = audio.frames_count() as usize;
         // Without an output port or with one of 64-bit samples there is nothing to write into
         // (an error here would have clack format a message on the audio thread).
@@ -129,13 +134,15 @@ impl<'a> PluginAudioProcessor<'a, Shared, MainThread<'a>> for Processor<'a> {
         self.render(&mut out, at..frames);
         self.tell_edits(events.output);
         self.follow_rebuild();
-        if let Some(engine) = &self.engine {
-            engine.publish(&self.shared.activity);
+        if let Some(started) = started {
+            if let Some(engine) = &self.engine {
+                engine.publish(&self.shared.activity);
+            }
+            self.shared.activity.publish_load(
+                started.elapsed().as_secs_f64(),
+                frames as f64 / self.rate_hz,
+            );
         }
-        self.shared.activity.publish_load(
-            started.elapsed().as_secs_f64(),
-            frames as f64 / self.rate_hz,
-        );
         let silent = self.engine.as_ref().is_none_or(|e| e.is_silent());
         // While a piano is built the host keeps calling, so that the restart is asked for when
         // it is ready.

@@ -13,7 +13,7 @@ use render::offline;
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::Rk4Pool;
 use unacorda::midi::file::TimedEvent;
-use unacorda::midi::{Decoder, Event, Pedal};
+use unacorda::midi::{Decoder, Event};
 
 #[global_allocator]
 static ALLOCATOR: AllocDisabler = AllocDisabler;
@@ -100,15 +100,7 @@ fn as_piano_events(script: &[(u64, Play)]) -> Vec<TimedEvent> {
                 Play::Off(None, _) => Event::AllNotesOff,
                 Play::Choke(_) => return None,
                 Play::Midi([s, d1, d2]) => midi.decode(s, d1, d2)?,
-                Play::Param(SOFT, depth) => Event::Pedal {
-                    pedal: Pedal::Soft,
-                    depth,
-                },
-                Play::Param(SUSTAIN, depth) => Event::Pedal {
-                    pedal: Pedal::Sustain,
-                    depth,
-                },
-                Play::Param(..) => return None,
+                Play::Param(id, value) => render::pedal_of_param(id, value)?,
             };
             Some(TimedEvent {
                 time_s: frame as f64 / RATE_HZ,

@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use unacorda::engine::exact::ExactPool;
 use unacorda::engine::Rk4Pool;
 use unacorda::midi::file::TimedEvent;
-use unacorda::midi::{Event as PianoEvent, Pedal};
+use unacorda::midi::Event as PianoEvent;
 use vst3::Steinberg::Linux::ITimerHandlerTrait;
 use vst3::Steinberg::Vst::*;
 use vst3::Steinberg::*;
@@ -236,15 +236,7 @@ fn as_piano_events(script: &[(usize, Play)]) -> Vec<TimedEvent> {
                     note: note as u8,
                     velocity: f64::from(v) * 127.0,
                 },
-                Play::Param(SUSTAIN, depth) => PianoEvent::Pedal {
-                    pedal: Pedal::Sustain,
-                    depth,
-                },
-                Play::Param(SOFT, depth) => PianoEvent::Pedal {
-                    pedal: Pedal::Soft,
-                    depth,
-                },
-                Play::Param(..) => return None,
+                Play::Param(id, value) => render::pedal_of_param(id, value)?,
             };
             Some(TimedEvent {
                 time_s: frame as f64 / RATE_HZ,

@@ -1,14 +1,14 @@
 //! What the piano is doing, for a front end to show (an editor, a standalone window): which keys
 //! are down and which sound, how far each pedal is down, the voices in use, and how long the
-//! audio callback takes against its deadline. The audio thread publishes it after each callback
-//! (relaxed atomics: no allocation, no lock, never waiting); any thread reads a [`Snapshot`].
+//! audio callback takes against its deadline. While something watches it ([`Activity::watch`]),
+//! the audio thread publishes it after each callback (relaxed atomics: no allocation, no lock,
+//! never waiting); any thread reads a [`Snapshot`].
 
+use crate::config::scaling::KEYS;
 use crate::engine::VoicePool;
 use crate::play::Piano;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
-
-/// Keys on the keyboard (piano keys 1–88, bits 0–87 of a [`KeySet`]).
-pub const KEYS: usize = 88;
+use std::sync::Arc;
 
 /// A set of piano keys 1–88.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -63,6 +63,8 @@ pub struct Snapshot {
 /// [`Snapshot`]'s values, published by the audio thread, read by any other.
 #[derive(Debug, Default)]
 pub struct Activity {
+    /// How many watch it ([`Watch`]: any thread); nothing is published while none does.
+    watchers: AtomicU32,
     down: [AtomicU64; 2],
     sounding: [AtomicU64; 2],
     /// `f32` bits.
@@ -78,7 +80,29 @@ pub struct Activity {
     peak_load: AtomicU32,
 }
 
+/// Something watching an [`Activity`] (an open editor); it stops watching when dropped.
+#[derive(Debug)]
+pub struct Watch(Arc<Activity>);
+
+impl Drop for Watch {
+    fn drop(&mut self) {
+        self.0.watchers.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
 impl Activity {
+    /// Have the audio thread publish from now on, until the [`Watch`] is dropped.
+    pub fn watch(activity: &Arc<Activity>) -> Watch {
+        activity.watchers.fetch_add(1, Ordering::Relaxed);
+        Watch(activity.clone())
+    }
+
+    /// Whether anything watches it: the audio thread publishes only then (a piano's keys and
+    /// voices walked, the clock read, for no one otherwise).
+    pub fn is_watched(&self) -> bool {
+        self.watchers.load(Ordering::Relaxed) > 0
+    }
+
     /// Publish the state of `piano` (audio thread, after a callback). Never allocates.
     pub fn publish<E: VoicePool>(&self, piano: &Piano<E>) {
         let (mut down, mut sounding) = (KeySet::default(), KeySet::default());
@@ -156,6 +180,17 @@ mod tests {
         let held: Vec<usize> = (0..=90).filter(|&k| s.contains(k)).collect();
         assert_eq!(held, [1, 40, 64, 65, 88]);
         assert_eq!(s.len(), 5);
+    }
+
+    #[test]
+    fn it_is_watched_while_a_watch_lives() {
+        let a = std::sync::Arc::new(Activity::default());
+        assert!(!a.is_watched());
+        let (w1, w2) = (Activity::watch(&a), Activity::watch(&a));
+        drop(w1);
+        assert!(a.is_watched(), "one watch left");
+        drop(w2);
+        assert!(!a.is_watched());
     }
 
     #[test]

@@ -91,6 +91,8 @@ struct RankOne {
     /// Whether no two poles (nearly) coincide, so that the secular equation separates every
     /// mode ([`RankOne::modes_within`]).
     separable: bool,
+    /// `k g^T g`: the highest eigenvalue lies within this of the highest pole.
+    reach: f64,
 }
 
 /// A pole of the secular equation: `d_i`, `g_i^2` and the mode `i` it stands for.
@@ -130,6 +132,7 @@ impl RankOne {
         let separable = poles
             .windows(2)
             .all(|w| w[1].d - w[0].d > 1e-12 * w[1].d.abs());
+        let reach = contact_n_m * poles.iter().map(|p| p.g2).sum::<f64>();
         RankOne {
             d,
             g,
@@ -137,6 +140,7 @@ impl RankOne {
             strings: modes,
             poles,
             separable,
+            reach,
         }
     }
 
@@ -180,11 +184,10 @@ impl RankOne {
             .map(|i| (hz(self.d[i]), is_string(i)))
             .collect();
         let poles = &self.poles;
-        let reach = self.k * poles.iter().map(|p| p.g2).sum::<f64>();
         let secular = |l: f64| 1.0 + self.k * poles.iter().map(|p| p.g2 / (p.d - l)).sum::<f64>();
         for (j, pole) in poles.iter().enumerate() {
             let a = pole.d;
-            let b = poles.get(j + 1).map_or(a + reach, |p| p.d);
+            let b = poles.get(j + 1).map_or(a + self.reach, |p| p.d);
             if b < lo || a > hi {
                 continue;
             }

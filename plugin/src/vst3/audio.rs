@@ -261,7 +261,8 @@ enum Next {
 /// `data` is the host's block as VST3 defines it: its buffers hold `numSamples` samples, its
 /// lists are null or live.
 pub unsafe fn process(inner: &Inner, data: &ProcessData) -> tresult {
-    let started = Instant::now();
+    // The editor's figures are worked out only while an editor shows them.
+    let started = inner.activity.is_watched().then(Instant::now);
     let offline = data.processMode == ProcessModes_::kOffline as int32;
     inner.offline.store(offline, Ordering::Relaxed);
     let frames = usize::try_from(data.numSamples).unwrap_or(0);
@@ -383,13 +384,15 @@ pub unsafe fn process(inner: &Inner, data: &ProcessData) -> tresult {
     }
     // SAFETY: as above.
     unsafe { audio.render(inner, channels, at, frames - at) };
-    if let Some(engine) = &audio.engine {
-        engine.publish(&inner.activity);
+    if let Some(started) = started {
+        if let Some(engine) = &audio.engine {
+            engine.publish(&inner.activity);
+        }
+        let rendered_s = frames as f64 / inner.rate_hz();
+        inner
+            .activity
+            .publish_load(started.elapsed().as_secs_f64(), rendered_s);
     }
-    let rendered_s = frames as f64 / inner.rate_hz();
-    inner
-        .activity
-        .publish_load(started.elapsed().as_secs_f64(), rendered_s);
     kResultOk
 }
 

@@ -69,6 +69,15 @@ impl Inner {
         self.values.played(self.offline.load(Ordering::Relaxed))
     }
 
+    /// What the editor shows and changes.
+    pub fn shown(&self) -> crate::editor::Shown {
+        crate::editor::Shown {
+            values: self.values.clone(),
+            activity: self.activity.clone(),
+            edits: self.edits.clone(),
+        }
+    }
+
     /// The host's component handler, if it gave one.
     pub fn handler(&self) -> Option<ComPtr<IComponentHandler>> {
         lock(&self.handler).clone()

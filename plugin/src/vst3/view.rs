@@ -47,12 +47,12 @@ impl View {
     }
 
     fn physical(&self) -> ViewRect {
-        let (s, (w, h)) = (self.scale.get().max(1.0), self.size.get());
+        let (w, h) = editor::physical(self.size.get(), self.scale.get());
         ViewRect {
             left: 0,
             top: 0,
-            right: (w * s).round() as int32,
-            bottom: (h * s).round() as int32,
+            right: w as int32,
+            bottom: h as int32,
         }
     }
 
@@ -69,9 +69,6 @@ impl Drop for View {
         self.stop_timer();
     }
 }
-
-/// The smallest size (logical pixels).
-const MIN: (f64, f64) = (editor::WIDTH * 0.6, editor::HEIGHT * 0.6);
 
 impl IPlugViewTrait for View {
     unsafe fn isPlatformTypeSupported(&self, r#type: FIDString) -> tresult {
@@ -90,11 +87,7 @@ impl IPlugViewTrait for View {
         if parent.is_null() || unsafe { self.isPlatformTypeSupported(r#type) } != kResultTrue {
             return kResultFalse;
         }
-        let shown = editor::Shown {
-            values: self.inner.values.clone(),
-            activity: self.inner.activity.clone(),
-            edits: self.inner.edits.clone(),
-        };
+        let shown = self.inner.shown();
         let parent = X11Parent(parent as std::ffi::c_ulong);
         let window = match editor::Window::open(shown, Some(&parent), self.scale.get().max(1.0)) {
             Ok(w) => w,
@@ -155,10 +148,11 @@ impl IPlugViewTrait for View {
         let Some(r) = (unsafe { new_size.as_ref() }) else {
             return kInvalidArgument;
         };
-        let s = self.scale.get().max(1.0);
-        let size = (
-            (f64::from(r.right - r.left) / s).max(MIN.0),
-            (f64::from(r.bottom - r.top) / s).max(MIN.1),
+        let physical = |a: int32, b: int32| u32::try_from(b - a).unwrap_or(0);
+        let size = editor::logical(
+            physical(r.left, r.right),
+            physical(r.top, r.bottom),
+            self.scale.get(),
         );
         self.size.set(size);
         if let Some(w) = self.window.borrow().as_ref() {
@@ -186,9 +180,9 @@ impl IPlugViewTrait for View {
         let Some(r) = (unsafe { rect.as_mut() }) else {
             return kInvalidArgument;
         };
-        let s = self.scale.get().max(1.0);
-        r.right = r.right.max(r.left + (MIN.0 * s).ceil() as int32);
-        r.bottom = r.bottom.max(r.top + (MIN.1 * s).ceil() as int32);
+        let (width, height) = editor::smallest(self.scale.get());
+        r.right = r.right.max(r.left + width as int32);
+        r.bottom = r.bottom.max(r.top + height as int32);
         kResultTrue
     }
 }

@@ -3,6 +3,23 @@
 
 use unacorda::engine::VoicePool;
 use unacorda::midi::file::TimedEvent;
+use unacorda::midi::{Event, Pedal};
+use unacorda_clap::params::{PARAMS, SOFT, SOSTENUTO, SUSTAIN};
+
+/// What the piano plays for a host's change of the parameter with id `id` to `value`: a pedal's
+/// depth (the plugin plays it so), or nothing for the other parameters.
+pub fn pedal_of_param(id: u32, value: f64) -> Option<Event> {
+    let pedals = [
+        (SUSTAIN, Pedal::Sustain),
+        (SOSTENUTO, Pedal::Sostenuto),
+        (SOFT, Pedal::Soft),
+    ];
+    let (_, pedal) = pedals.into_iter().find(|&(i, _)| PARAMS[i].id == id)?;
+    Some(Event::Pedal {
+        pedal,
+        depth: value,
+    })
+}
 
 /// The offline render of `events` on the engine `E`, with the pedal's halo or not: both
 /// channels.
